@@ -1,0 +1,648 @@
+"""Dataset conventions of harpx (schema version 1) and :func:`validate`.
+
+Three kinds of :class:`xarray.Dataset` flow through harpx (DESIGN §3). Each carries its kind in
+``ds.attrs["harpx_schema"]``:
+
+``tagged/1``
+    ``image`` (tag, time, z, y, x): SPAMM magnitude or CSPAMM difference images.
+``phase/1``
+    ``phase`` (tag, time, z, y, x) wrapped to [-π, π) and ``magnitude`` (same dims) >= 0.
+``tracked/1``
+    ``points`` (node, axis), ``cells`` (cell, vertex) and ``displacement`` (time, node, axis),
+    plus optional strain and per-frame diagnostics.
+
+Units are mm, ms, rad and kPa; grid coordinates ``z``, ``y``, ``x`` are voxel centres, evenly
+spaced and increasing; every variable and coordinate carries ``long_name`` and (unless it holds
+strings) ``units`` attributes. :func:`standard_attrs` gives the attributes harpx uses, so every
+module labels its output the same way.
+
+:func:`validate` checks a dataset and raises one :class:`~harpx.errors.SchemaError` that lists
+every problem it found (``err.problems``), each naming the variable, dimension or value and how
+to fix it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from harpx.errors import SchemaError
+
+__all__ = [
+    "AXES",
+    "ELEMENT_VERTICES",
+    "GRID_DIMS",
+    "IMAGE_DIMS",
+    "KINDS",
+    "LONG_NAMES",
+    "SCHEMAS",
+    "SEQUENCES",
+    "UNITS",
+    "VarSpec",
+    "standard_attrs",
+    "validate",
+]
+
+SCHEMA_TAGGED = "tagged/1"
+SCHEMA_PHASE = "phase/1"
+SCHEMA_TRACKED = "tracked/1"
+
+#: Short kind name → schema attribute value.
+KINDS: dict[str, str] = {"tagged": SCHEMA_TAGGED, "phase": SCHEMA_PHASE, "tracked": SCHEMA_TRACKED}
+
+#: Physical axes, in the column order of every (n, 3) point array.
+AXES: tuple[str, str, str] = ("x", "y", "z")
+#: Image grid dims (voxel centres, mm).
+GRID_DIMS: tuple[str, str, str] = ("z", "y", "x")
+#: Dims of ``image``, ``phase`` and ``magnitude``.
+IMAGE_DIMS: tuple[str, ...] = ("tag", "time", *GRID_DIMS)
+#: Allowed values of ``attrs["sequence"]``.
+SEQUENCES: frozenset[str] = frozenset({"SPAMM", "CSPAMM"})
+#: ``cells.attrs["element"]`` → vertices per cell (``"points"``: a point cloud without cells).
+ELEMENT_VERTICES: dict[str, int] = {
+    "points": 0,
+    "tri3": 3,
+    "quad4": 4,
+    "tet4": 4,
+    "tet10": 10,
+    "wedge6": 6,
+    "hex8": 8,
+    "hex20": 20,
+    "hex27": 27,
+}
+
+#: Units harpx writes for each standard variable/coordinate ("1": dimensionless).
+UNITS: dict[str, str] = {
+    "x": "mm",
+    "y": "mm",
+    "z": "mm",
+    "time": "ms",
+    "tag": "1",
+    "axis": "1",
+    "tag_direction": "1",
+    "tag_frequency": "1/mm",
+    "slice_axis": "1",
+    "image": "1",
+    "mask": "1",
+    "body": "1",
+    "displacement_true": "mm",
+    "phase": "rad",
+    "magnitude": "1",
+    "points": "mm",
+    "cells": "1",
+    "region": "1",
+    "fiber": "1",
+    "displacement": "mm",
+    "displacement_grid": "mm",
+    "green_strain": "1",
+    "fiber_stretch": "1",
+    "epsilon": "rad",
+    "epsilon_cell": "rad",
+    "penalty": "1",
+    "iterations": "1",
+    "wall_time": "s",
+}
+
+#: Descriptive ``long_name`` of each standard variable/coordinate.
+LONG_NAMES: dict[str, str] = {
+    "x": "x position of voxel centre",
+    "y": "y position of voxel centre",
+    "z": "z position of voxel centre",
+    "time": "time after tagging",
+    "tag": "tag acquisition",
+    "axis": "spatial axis",
+    "tag_direction": "unit tag wave direction",
+    "tag_frequency": "tag spatial frequency (cycles per mm)",
+    "slice_axis": "axis normal to the acquisition slices",
+    "image": "tagged image intensity",
+    "mask": "acquisition has data",
+    "body": "tissue density fraction",
+    "displacement_true": "true Lagrangian displacement",
+    "phase": "harmonic phase",
+    "magnitude": "harmonic image magnitude",
+    "points": "reference position of node",
+    "cells": "cell connectivity",
+    "region": "region label of cell",
+    "fiber": "unit fiber direction",
+    "displacement": "displacement of node",
+    "displacement_grid": "displacement resampled on the image grid",
+    "green_strain": "Green-Lagrange strain",
+    "fiber_stretch": "fiber stretch",
+    "epsilon": "mean absolute wrapped phase residual",
+    "epsilon_cell": "mean absolute wrapped phase residual per cell",
+    "penalty": "tracking penalty relative to stiffness and tag wavenumber",
+    "iterations": "iterations",
+    "wall_time": "wall-clock time",
+}
+
+# Accepted spellings of units for quantities whose unit matters for the numerics.
+_UNIT_ALIASES: dict[str, frozenset[str]] = {
+    "mm": frozenset({"mm", "millimeter", "millimetre", "millimeters", "millimetres"}),
+    "ms": frozenset({"ms", "millisecond", "milliseconds", "msec"}),
+    "rad": frozenset({"rad", "radian", "radians"}),
+    "1/mm": frozenset({"1/mm", "mm-1", "mm^-1", "cycles/mm", "cycle/mm", "1 mm-1"}),
+}
+
+
+def standard_attrs(name: str) -> dict[str, str]:
+    """``units`` and ``long_name`` attributes harpx uses for a standard variable.
+
+    Parameters
+    ----------
+    name : str
+        Variable or coordinate name from DESIGN §3 (e.g. ``"phase"``, ``"x"``).
+
+    Returns
+    -------
+    dict of str to str
+        A fresh ``{"units": ..., "long_name": ...}`` dict (safe to modify).
+
+    Raises
+    ------
+    KeyError
+        If ``name`` is not a standard harpx name.
+
+    Examples
+    --------
+    >>> standard_attrs("tag_frequency")
+    {'units': '1/mm', 'long_name': 'tag spatial frequency (cycles per mm)'}
+    """
+    if name not in UNITS:
+        raise KeyError(f"{name!r} is not a standard harpx variable; known: {sorted(UNITS)}")
+    return {"units": UNITS[name], "long_name": LONG_NAMES[name]}
+
+
+@dataclass(frozen=True)
+class VarSpec:
+    """Expected layout of one variable of a schema.
+
+    Parameters
+    ----------
+    dims : tuple of str
+        Expected dims, in order.
+    required : bool
+        Whether the variable must be present.
+    coord : bool or None
+        True: must be a coordinate; False: must be a data variable; None: either.
+    """
+
+    dims: tuple[str, ...]
+    required: bool = True
+    coord: bool | None = None
+
+
+_COMMON_IMAGE_COORDS: dict[str, VarSpec] = {
+    "tag": VarSpec(("tag",), coord=True),
+    "axis": VarSpec(("axis",), coord=True),
+    "tag_direction": VarSpec(("tag", "axis"), coord=True),
+    "tag_frequency": VarSpec(("tag",), coord=True),
+    "slice_axis": VarSpec(("tag",), coord=True),
+    "time": VarSpec(("time",), coord=True),
+    "z": VarSpec(("z",), coord=True),
+    "y": VarSpec(("y",), coord=True),
+    "x": VarSpec(("x",), coord=True),
+    "mask": VarSpec(("tag", *GRID_DIMS), required=False),
+    "displacement_true": VarSpec(("time", "axis", *GRID_DIMS), required=False),
+    "body": VarSpec(GRID_DIMS, required=False),
+}
+
+#: Variable layout of each schema.
+SCHEMAS: dict[str, dict[str, VarSpec]] = {
+    SCHEMA_TAGGED: {"image": VarSpec(IMAGE_DIMS, coord=False), **_COMMON_IMAGE_COORDS},
+    SCHEMA_PHASE: {
+        "phase": VarSpec(IMAGE_DIMS, coord=False),
+        "magnitude": VarSpec(IMAGE_DIMS, coord=False),
+        **_COMMON_IMAGE_COORDS,
+    },
+    SCHEMA_TRACKED: {
+        "points": VarSpec(("node", "axis")),
+        "cells": VarSpec(("cell", "vertex")),
+        "displacement": VarSpec(("time", "node", "axis"), coord=False),
+        "axis": VarSpec(("axis",), coord=True),
+        "time": VarSpec(("time",), coord=True),
+        "region": VarSpec(("cell",), required=False),
+        "fiber": VarSpec(("cell", "axis"), required=False),
+        "green_strain": VarSpec(("time", "cell", "i", "j"), required=False),
+        "fiber_stretch": VarSpec(("time", "cell"), required=False),
+        "epsilon": VarSpec(("time",), required=False),
+        "epsilon_cell": VarSpec(("time", "cell"), required=False),
+        "penalty": VarSpec(("time",), required=False),
+        "iterations": VarSpec(("time",), required=False),
+        "wall_time": VarSpec(("time",), required=False),
+        "displacement_grid": VarSpec(("time", "axis", *GRID_DIMS), required=False),
+    },
+}
+
+#: Required dataset attributes per schema (besides ``harpx_schema``).
+_REQUIRED_ATTRS: dict[str, tuple[str, ...]] = {
+    SCHEMA_TAGGED: ("sequence",),
+    SCHEMA_PHASE: ("sequence", "upsample", "radius"),
+    SCHEMA_TRACKED: (),
+}
+
+# Relative tolerance on grid spacing (fraction of the mean spacing) and on unit-vector norms.
+_SPACING_RTOL = 1e-3
+_UNIT_NORM_TOL = 1e-6
+
+
+def validate(ds: xr.Dataset, kind: str | None = None) -> None:
+    """Check a dataset against the harpx conventions (DESIGN §3).
+
+    Every problem found is collected; if there is any, one :class:`~harpx.errors.SchemaError`
+    lists them all, one per line (also available as ``err.problems``).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Dataset to check.
+    kind : {"tagged", "phase", "tracked"} or None, default None
+        Schema to check against. None reads it from ``ds.attrs["harpx_schema"]``. The full
+        names ``"tagged/1"`` etc. are accepted too.
+
+    Raises
+    ------
+    SchemaError
+        If the dataset breaks any convention: missing or misordered dims, missing
+        coordinates or ``units``/``long_name`` attributes, unevenly spaced or decreasing
+        ``z``/``y``/``x``, non-finite image or phase values, tag directions that are not unit
+        vectors, tag frequencies above the Nyquist limit of their in-plane sampling, a tag
+        direction along its own ``slice_axis``, a bad ``sequence``, a ``mask`` that is not
+        boolean, phases outside [-π, π) or negative magnitudes.
+    ValueError
+        If ``kind`` is not one of the known kinds.
+
+    Notes
+    -----
+    Value checks (non-finite values, phase range, negative magnitudes, cell indices) run only
+    on variables held in memory as numpy arrays. Dask-backed variables are checked for
+    structure (dims, dtype, attrs) only, so validating a lazy dataset never computes it.
+    Coordinates are always loaded (they are small).
+
+    The Nyquist check requires, for every tag ``t`` and every in-plane axis ``a`` (an axis
+    other than ``slice_axis[t]`` with more than one sample),
+
+    .. math:: f_t \\, |d_{t,a}| \\le \\frac{1}{2 \\Delta_a}.
+
+    Examples
+    --------
+    >>> ds = xr.Dataset(attrs={"harpx_schema": "tagged/1", "sequence": "SPAMM"})
+    >>> try:
+    ...     validate(ds)
+    ... except harpx.SchemaError as err:
+    ...     print(err.problems[0])
+    missing data variable 'image' with dims ('tag', 'time', 'z', 'y', 'x')
+    """
+    schema = _resolve_kind(ds, kind)
+    problems: list[str] = []
+    attr_schema = ds.attrs.get("harpx_schema")
+    if attr_schema is None:
+        problems.append(
+            f"missing dataset attribute 'harpx_schema'; set ds.attrs['harpx_schema'] = {schema!r}"
+        )
+    elif attr_schema != schema:
+        problems.append(
+            f"dataset attribute 'harpx_schema' is {attr_schema!r} but {schema!r} was expected"
+        )
+    for attr in _REQUIRED_ATTRS[schema]:
+        if attr not in ds.attrs:
+            problems.append(f"missing dataset attribute {attr!r} required by {schema!r}")
+    if "sequence" in ds.attrs and ds.attrs["sequence"] not in SEQUENCES:
+        problems.append(
+            f"dataset attribute 'sequence' is {ds.attrs['sequence']!r}; "
+            f"expected one of {sorted(SEQUENCES)}"
+        )
+
+    specs = SCHEMAS[schema]
+    _check_layout(ds, specs, problems)
+    _check_attrs(ds, problems)
+    present = {name for name in specs if name in ds.variables}
+    if "axis" in present:
+        _check_axis(ds, problems)
+    for dim in GRID_DIMS:
+        if dim in ds.coords:
+            _check_grid_coord(ds, dim, problems)
+    if "time" in ds.coords:
+        _check_time(ds, problems)
+    if schema in (SCHEMA_TAGGED, SCHEMA_PHASE):
+        _check_tags(ds, problems)
+        if "mask" in ds.variables and ds["mask"].dtype != bool:
+            problems.append(
+                f"'mask' has dtype {str(ds['mask'].dtype)!r}; expected bool "
+                "(convert with ds['mask'] = ds['mask'].astype(bool))"
+            )
+        value_vars = ("image",) if schema == SCHEMA_TAGGED else ("phase", "magnitude")
+        for name in value_vars:
+            if name in ds.variables:
+                _check_finite(ds, name, problems)
+        if schema == SCHEMA_PHASE:
+            _check_phase_values(ds, problems)
+        if "body" in ds.variables:
+            _check_range(ds, "body", 0.0, 1.0, problems)
+    else:
+        _check_tracked(ds, problems)
+    if problems:
+        raise SchemaError(problems)
+
+
+def _resolve_kind(ds: xr.Dataset, kind: str | None) -> str:
+    if kind is None:
+        attr = ds.attrs.get("harpx_schema")
+        if attr is None:
+            raise SchemaError(
+                "dataset has no attribute 'harpx_schema', so its kind is unknown; pass "
+                "kind='tagged' | 'phase' | 'tracked' or set ds.attrs['harpx_schema'] "
+                "(e.g. 'tagged/1')"
+            )
+        if attr not in SCHEMAS:
+            raise SchemaError(
+                f"dataset attribute 'harpx_schema' is {attr!r}; known schemas: {sorted(SCHEMAS)}"
+            )
+        return str(attr)
+    if kind in KINDS:
+        return KINDS[kind]
+    if kind in SCHEMAS:
+        return kind
+    raise ValueError(f"kind={kind!r} is not a harpx schema; expected one of {sorted(KINDS)}")
+
+
+def _check_layout(ds: xr.Dataset, specs: Mapping[str, VarSpec], problems: list[str]) -> None:
+    for name, spec in specs.items():
+        if name not in ds.variables:
+            if spec.required:
+                what = "coordinate" if spec.coord else "data variable"
+                problems.append(f"missing {what} {name!r} with dims {spec.dims}")
+            continue
+        var = ds.variables[name]
+        if var.dims != spec.dims:
+            missing = [d for d in spec.dims if d not in var.dims]
+            extra = [d for d in var.dims if d not in spec.dims]
+            if missing or extra:
+                hint = f"missing {missing}" if missing else ""
+                hint += ("; " if hint and extra else "") + (f"unexpected {extra}" if extra else "")
+                problems.append(
+                    f"{name!r} has dims {var.dims}; expected {spec.dims} ({hint})"
+                )
+            else:
+                problems.append(
+                    f"{name!r} has dims {var.dims}; expected order {spec.dims}; fix with "
+                    f"ds[{name!r}] = ds[{name!r}].transpose{spec.dims}"
+                )
+        if spec.coord is True and name not in ds.coords:
+            problems.append(
+                f"{name!r} is a data variable but must be a coordinate; fix with "
+                f"ds = ds.set_coords({name!r})"
+            )
+        elif spec.coord is False and name in ds.coords:
+            problems.append(
+                f"{name!r} is a coordinate but must be a data variable; fix with "
+                f"ds = ds.reset_coords({name!r})"
+            )
+
+
+def _check_attrs(ds: xr.Dataset, problems: list[str]) -> None:
+    for name, var in ds.variables.items():
+        fix = _attrs_fix(name)
+        if "long_name" not in var.attrs:
+            problems.append(f"{name!r} has no 'long_name' attribute; {fix}")
+        if var.dtype.kind in "OSU":
+            continue
+        units = var.attrs.get("units")
+        if units is None:
+            problems.append(f"{name!r} has no 'units' attribute; {fix}")
+            continue
+        expected = UNITS.get(str(name))
+        aliases = _UNIT_ALIASES.get(expected or "")
+        if aliases is not None and str(units) not in aliases:
+            problems.append(
+                f"{name!r} has units {units!r}; harpx expects {expected!r} "
+                "(convert the values and set the units attribute)"
+            )
+
+
+def _attrs_fix(name: Hashable) -> str:
+    if str(name) in UNITS:
+        return f"set ds[{name!r}].attrs.update(harpx.schema.standard_attrs({name!r}))"
+    return f"set ds[{name!r}].attrs['units'] and ['long_name']"
+
+
+def _check_axis(ds: xr.Dataset, problems: list[str]) -> None:
+    values = [str(v) for v in np.asarray(ds["axis"].values).ravel()]
+    if tuple(values) != AXES:
+        problems.append(f"coordinate 'axis' is {values!r}; expected {list(AXES)!r}")
+
+
+def _check_grid_coord(ds: xr.Dataset, dim: str, problems: list[str]) -> None:
+    values = np.asarray(ds[dim].values)
+    if values.dtype.kind not in "fiu":
+        problems.append(f"coordinate {dim!r} has dtype {str(values.dtype)!r}; expected float mm")
+        return
+    values = values.astype(np.float64)
+    if not np.all(np.isfinite(values)):
+        problems.append(f"coordinate {dim!r} has non-finite values; expected voxel centres in mm")
+        return
+    if values.size < 2:
+        return
+    steps = np.diff(values)
+    if np.any(steps <= 0):
+        first = int(np.argmax(steps <= 0))
+        problems.append(
+            f"coordinate {dim!r} is not increasing (step {steps[first]:.6g} mm at index "
+            f"{first}); sort with ds.sortby({dim!r}) or flip the axis"
+        )
+        return
+    mean_step = (values[-1] - values[0]) / (values.size - 1)
+    ideal = values[0] + mean_step * np.arange(values.size)
+    deviation = float(np.max(np.abs(values - ideal)))
+    if deviation > _SPACING_RTOL * mean_step:
+        problems.append(
+            f"coordinate {dim!r} is not evenly spaced (max deviation {deviation:.3g} mm > "
+            f"{_SPACING_RTOL:g} of d{dim}={mean_step:.4g} mm); resample with "
+            f"ds.interp({dim}=np.linspace(...))"
+        )
+
+
+def _check_time(ds: xr.Dataset, problems: list[str]) -> None:
+    values = np.asarray(ds["time"].values)
+    if values.dtype.kind not in "fiu":
+        problems.append(
+            f"coordinate 'time' has dtype {str(values.dtype)!r}; expected float ms after tagging"
+        )
+        return
+    if values.size > 1 and np.any(np.diff(values.astype(np.float64)) <= 0):
+        problems.append("coordinate 'time' is not strictly increasing; sort with ds.sortby('time')")
+
+
+def _spacing(ds: xr.Dataset, dim: str) -> float | None:
+    if dim not in ds.coords or ds.sizes.get(dim, 0) < 2:
+        return None
+    values = np.asarray(ds[dim].values, dtype=np.float64)
+    return float((values[-1] - values[0]) / (values.size - 1))
+
+
+def _check_tags(ds: xr.Dataset, problems: list[str]) -> None:
+    if "tag" not in ds.coords:
+        return
+    tags = [str(t) for t in np.asarray(ds["tag"].values).ravel()]
+    if len(set(tags)) != len(tags):
+        problems.append(f"coordinate 'tag' has duplicate labels {tags!r}; labels must be unique")
+    if ds["tag"].dtype.kind not in "OU":
+        problems.append(f"coordinate 'tag' has dtype {str(ds['tag'].dtype)!r}; expected str labels")
+    have_dir = "tag_direction" in ds.coords and ds["tag_direction"].dims == ("tag", "axis")
+    have_dir = have_dir and ds.sizes.get("axis") == 3
+    direction = np.asarray(ds["tag_direction"].values, dtype=np.float64) if have_dir else None
+    freq = None
+    if "tag_frequency" in ds.coords and ds["tag_frequency"].dims == ("tag",):
+        freq = np.asarray(ds["tag_frequency"].values, dtype=np.float64)
+    slice_axes: list[str] | None = None
+    if "slice_axis" in ds.coords and ds["slice_axis"].dims == ("tag",):
+        slice_axes = [str(s) for s in np.asarray(ds["slice_axis"].values).ravel()]
+    for i, tag in enumerate(tags):
+        d = direction[i] if direction is not None else None
+        if d is not None:
+            norm = float(np.linalg.norm(d))
+            if not np.isfinite(norm) or abs(norm - 1.0) > _UNIT_NORM_TOL:
+                problems.append(
+                    f"tag_direction of tag {tag!r} has norm {norm:.6g}; expected a unit vector "
+                    "(divide by its norm)"
+                )
+                d = None
+        f = freq[i] if freq is not None else None
+        if f is not None and not (np.isfinite(f) and f > 0):
+            problems.append(
+                f"tag_frequency of tag {tag!r} is {f!r}; expected a positive frequency in cycles/mm"
+            )
+            f = None
+        s = slice_axes[i] if slice_axes is not None else None
+        if s is not None and s not in AXES:
+            problems.append(
+                f"slice_axis of tag {tag!r} is {s!r}; expected one of {list(AXES)!r}"
+            )
+            s = None
+        if d is not None and s is not None and abs(d[AXES.index(s)]) > 0.5:
+            problems.append(
+                f"tag {tag!r} has direction {np.round(d, 4).tolist()} mostly along its "
+                f"slice_axis {s!r}; tags must lie in the acquisition plane (choose a slice_axis "
+                "normal to the tag direction)"
+            )
+        if d is None or f is None:
+            continue
+        for a, axis in enumerate(AXES):
+            if axis == s:
+                continue
+            step = _spacing(ds, axis)
+            if step is None:
+                continue
+            component = float(f * abs(d[a]))
+            limit = 1.0 / (2.0 * step)
+            if component > limit:
+                problems.append(
+                    f"tag_frequency of tag {tag!r} is above the Nyquist limit along {axis!r}: "
+                    f"{f:.4g} cycles/mm x |d_{axis}|={abs(d[a]):.3g} gives {component:.4g} "
+                    f"cycles/mm > 1/(2 d{axis}) = {limit:.4g} cycles/mm; use a longer tag "
+                    f"period or a finer {axis!r} spacing"
+                )
+
+
+def _numpy_data(var: xr.Variable) -> np.ndarray | None:
+    """The variable's values if held in memory as a numpy array, else None (dask: skip)."""
+    data: Any = var.data
+    if isinstance(data, np.ndarray):
+        return data
+    return None
+
+
+def _check_finite(ds: xr.Dataset, name: str, problems: list[str]) -> None:
+    var = ds.variables[name]
+    data = _numpy_data(var)
+    if data is None or data.dtype.kind not in "fc":
+        return
+    finite = np.isfinite(data)
+    if finite.all():
+        return
+    bad = ~finite
+    first = np.unravel_index(int(np.argmax(bad)), data.shape)
+    where = ", ".join(f"{dim}={int(i)}" for dim, i in zip(var.dims, first, strict=True))
+    problems.append(
+        f"{name!r} has {int(bad.sum())} non-finite values (NaN/inf), first at index "
+        f"{{{where}}}; fill or mask them (e.g. ds[{name!r}].fillna(0)) before processing"
+    )
+
+
+def _check_range(
+    ds: xr.Dataset, name: str, low: float, high: float, problems: list[str]
+) -> None:
+    data = _numpy_data(ds.variables[name])
+    if data is None or data.dtype.kind not in "fiu" or data.size == 0:
+        return
+    finite = data[np.isfinite(data)]
+    if finite.size and (finite.min() < low or finite.max() > high):
+        problems.append(
+            f"{name!r} has values in [{finite.min():.4g}, {finite.max():.4g}]; "
+            f"expected [{low:g}, {high:g}]"
+        )
+
+
+def _check_phase_values(ds: xr.Dataset, problems: list[str]) -> None:
+    if "phase" in ds.variables:
+        data = _numpy_data(ds.variables["phase"])
+        if data is not None and data.size and data.dtype.kind == "f":
+            low, high = np.nanmin(data), np.nanmax(data)
+            if low < -np.pi or high >= np.pi:
+                problems.append(
+                    f"'phase' has values in [{low:.6g}, {high:.6g}]; expected the wrapped range "
+                    "[-pi, pi) (wrap with np.angle(np.exp(1j * phase)) and map pi to -pi)"
+                )
+    if "magnitude" in ds.variables:
+        data = _numpy_data(ds.variables["magnitude"])
+        if data is not None and data.size and data.dtype.kind == "f":
+            low = np.nanmin(data)
+            if low < 0:
+                count = int(np.sum(data < 0))
+                problems.append(
+                    f"'magnitude' has {count} negative values (min {low:.4g}); expected "
+                    "|harmonic image| >= 0"
+                )
+
+
+def _check_tracked(ds: xr.Dataset, problems: list[str]) -> None:
+    if "cells" in ds.variables:
+        cells = ds.variables["cells"]
+        element = cells.attrs.get("element")
+        if element is None:
+            problems.append(
+                "'cells' has no 'element' attribute; set ds['cells'].attrs['element'] "
+                f"to one of {sorted(ELEMENT_VERTICES)}"
+            )
+        elif element not in ELEMENT_VERTICES:
+            problems.append(
+                f"'cells' element {element!r} is unknown; expected one of "
+                f"{sorted(ELEMENT_VERTICES)}"
+            )
+        elif cells.ndim == 2 and cells.shape[1] != ELEMENT_VERTICES[element]:
+            problems.append(
+                f"'cells' has {cells.shape[1]} vertices per cell but element {element!r} "
+                f"needs {ELEMENT_VERTICES[element]}"
+            )
+        if cells.dtype.kind not in "iu":
+            problems.append(f"'cells' has dtype {str(cells.dtype)!r}; expected integer node ids")
+        else:
+            data = _numpy_data(cells)
+            nnode = ds.sizes.get("node")
+            if data is not None and data.size and nnode is not None:
+                if data.min() < 0 or data.max() >= nnode:
+                    problems.append(
+                        f"'cells' refers to node ids in [{data.min()}, {data.max()}] but there "
+                        f"are {nnode} nodes"
+                    )
+    if "points" in ds.variables:
+        _check_finite(ds, "points", problems)
+    if "displacement_grid" in ds.variables:
+        for dim in GRID_DIMS:
+            if dim not in ds.coords:
+                problems.append(
+                    f"'displacement_grid' needs coordinate {dim!r} (voxel centres in mm)"
+                )
