@@ -1,0 +1,1 @@
+"""Hyperelastic finite-element mechanics (bodies, materials, loads, Newton solver)."""

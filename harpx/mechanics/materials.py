@@ -1,0 +1,780 @@
+r"""Hyperelastic, active and growth laws for myocardium-like soft tissue.
+
+All laws are evaluated on batches of deformation gradients ``F`` with shape ``(..., 3, 3)``
+(typically ``(n_cells, n_qp, 3, 3)``) and return the first Piola--Kirchhoff stress
+``P[..., i, J]`` (kPa) and the consistent tangent ``A[..., i, J, k, L] = dP_iJ/dF_kL`` (kPa),
+which is what a total-Lagrangian assembly needs.
+
+Uncoupled split
+---------------
+Both passive laws are *uncoupled* (FEBio's convention): with :math:`J = \det F`,
+:math:`\bar F = J^{-1/3} F`, :math:`\bar C = \bar F^T \bar F = J^{-2/3} C`,
+
+.. math::
+
+    W(F) = \bar W(\bar C) + U(J), \qquad U(J) = \tfrac{\kappa}{2} (\ln J)^2 .
+
+``isochoric_response`` returns the response of :math:`\bar W` only, so that the
+mean-dilatation (u--p--J) assembly can treat :math:`U` with an element-constant ``J``;
+``volumetric(J)`` returns :math:`U, U', U''` with :math:`U' = \kappa \ln J / J` and
+:math:`U'' = \kappa (1 - \ln J) / J^2`.
+
+Derivation of the isochoric response (generic)
+----------------------------------------------
+Write :math:`\bar W` as a function :math:`\Psi(\bar F)` and let
+:math:`\bar P = \partial\Psi/\partial\bar F = \bar F \bar S` (with :math:`\bar S = 2
+\partial\bar W/\partial\bar C`) and :math:`\bar{\mathbb A} = \partial\bar P/\partial\bar F`.
+With :math:`j = J^{-1/3}`, :math:`H = F^{-T}` and the identities
+:math:`\partial j/\partial F = -\tfrac13 j H`,
+:math:`\partial H_{iJ}/\partial F_{kL} = -H_{iL} H_{kJ}`,
+
+.. math::
+
+    \frac{\partial \bar F_{aB}}{\partial F_{kL}} = j\,(\delta_{ak}\delta_{BL}
+    - \tfrac13 F_{aB} H_{kL}), \qquad
+    P = j\,(\bar P - \tfrac13 p\, H), \quad p = \bar P : F .
+
+Differentiating once more, with :math:`\bar H = \bar F^{-T} = H/j`,
+:math:`\bar D = \bar{\mathbb A} : \bar F` (i.e. :math:`\bar D_{iJ} = \bar{\mathbb A}_{iJaB}
+\bar F_{aB}`), :math:`\bar p = \bar P : \bar F` and :math:`\bar{\mathbb A}` major-symmetric,
+
+.. math::
+
+    \mathbb A = j^2 \Big[ \bar{\mathbb A}
+      - \tfrac13 \big( (\bar D + \bar P) \otimes \bar H + \bar H \otimes (\bar D + \bar P) \big)
+      + \tfrac19 \big( \bar F : \bar{\mathbb A} : \bar F + \bar p \big)\, \bar H \otimes \bar H
+      + \tfrac13 \bar p\, \bar H \odot \bar H \Big],
+
+where :math:`(\bar H \odot \bar H)_{iJkL} = \bar H_{iL} \bar H_{kJ}`. This is exact (no
+finite differences) and symmetric in :math:`(iJ) \leftrightarrow (kL)`.
+
+*Neo-Hookean.* :math:`\Psi = C_1 (\bar F : \bar F - 3)`, so :math:`\bar P = 2 C_1 \bar F`,
+:math:`\bar{\mathbb A} = 2 C_1 \delta_{ik}\delta_{JL}`; substituting gives the closed form used
+by :class:`NeoHookean`, with :math:`I_1 = F : F`,
+
+.. math::
+
+    P = 2 C_1 J^{-2/3} \big( F - \tfrac{I_1}{3} H \big), \qquad
+    \mathbb A = 2 C_1 J^{-2/3} \Big[ \delta_{ik}\delta_{JL}
+      - \tfrac23 (F \otimes H + H \otimes F) + \tfrac29 I_1 H \otimes H
+      + \tfrac13 I_1 H \odot H \Big].
+
+*Guccione.* In the local orthonormal fiber basis :math:`R = [f\ s\ n]` (columns), with
+:math:`G = \bar F R` (columns :math:`g_a = \bar F r_a`), :math:`\tilde E = (G^T G - I)/2` the
+local components of :math:`\bar E`, and the symmetric weight matrix :math:`B` with
+:math:`B_{ff} = b_f`, :math:`B_{ss} = B_{nn} = B_{sn} = B_{ns} = b_t`,
+:math:`B_{fs} = B_{sf} = B_{fn} = B_{nf} = b_{fs}`, the exponent is
+:math:`Q = \sum_{ab} B_{ab} \tilde E_{ab}^2`. With :math:`\sigma_{ab} = B_{ab}\tilde E_{ab}`
+and :math:`\psi = C e^Q`,
+
+.. math::
+
+    \bar S = \psi\, R \sigma R^T, \qquad
+    \frac{\partial \tilde S_{ab}}{\partial \tilde E_{cd}} = \psi\,\big( 2 \sigma_{ab}
+    \sigma_{cd} + B_{ab} \tfrac12 (\delta_{ac}\delta_{bd} + \delta_{ad}\delta_{bc}) \big),
+
+and :math:`\bar{\mathbb A}_{iJkL} = \delta_{ik} \bar S_{JL} + \bar F_{iM}
+\bar{\mathbb C}_{MJPL} \bar F_{kP}` becomes a sum of 7 symmetric rank-one terms,
+
+.. math::
+
+    \bar{\mathbb A} = \delta_{ik} \bar S_{JL} + \psi \Big[ 2 Z \otimes Z
+      + \sum_{a} B_{aa} Y_{aa} \otimes Y_{aa} + \sum_{a<b} B_{ab} Y_{ab} \otimes Y_{ab} \Big],
+
+with :math:`Z = G \sigma R^T`, :math:`Y_{aa} = g_a \otimes r_a` and
+:math:`Y_{ab} = (g_a \otimes r_b + g_b \otimes r_a)/\sqrt2`. The generic projection above
+then gives :math:`P, \mathbb A`.
+
+*Active fiber stress.* :math:`S_a = T_a(\lambda) f_0 \otimes f_0` with
+:math:`\lambda = |F f_0|` and :math:`a = F f_0`: :math:`P = T_a\, a \otimes f_0` and, using
+:math:`\partial\lambda/\partial F = a \otimes f_0 / \lambda`,
+
+.. math::
+
+    \mathbb A_{iJkL} = T_a\, \delta_{ik} f_J f_L + \frac{T_a'(\lambda)}{\lambda}
+      (a_i f_J)(a_k f_L) .
+
+For the calcium law :math:`T_a = T_{max}\, e/(e + r^2)` with
+:math:`e = \exp(B(l - l_0)) - 1`, :math:`l = l_r \lambda`, :math:`r = Ca_{0,max}/Ca_0`,
+so :math:`dT_a/d\lambda = T_{max}\, r^2/(e + r^2)^2 \cdot B (e + 1)\, l_r` for
+:math:`l > l_0` and 0 otherwise. The active stress derives from the potential
+:math:`W_a = \int_1^\lambda T_a(\mu)\,\mu\, d\mu`, so :math:`\mathbb A` is symmetric.
+
+*Growth* is composed by the assembly with
+:func:`harpx.mechanics.kinematics.push_growth_response`.
+
+References
+----------
+.. [1] Guccione JM, McCulloch AD, Waldman LK. Passive material properties of intact
+   ventricular myocardium determined from a cylindrical model. J Biomech Eng
+   113:42--55, 1991.
+.. [2] Guccione JM, McCulloch AD. Mechanics of active contraction in cardiac muscle:
+   Part I. J Biomech Eng 115:72--81, 1993.
+.. [3] Maas SA, Rawlins D, Weiss JA, Ateshian GA. FEBio theory manual (uncoupled
+   Mooney--Rivlin, section 5.3; active contraction, section 5.12).
+.. [4] Rodriguez EK, Hoger A, McCulloch AD. Stress-dependent finite growth in soft elastic
+   tissues. J Biomech 27:455--467, 1994.
+.. [5] Holzapfel GA. Nonlinear Solid Mechanics. Wiley, 2000 (section 6.4, uncoupled
+   elasticity tensors).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import ClassVar, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from harpx._typing import FloatArray
+from harpx.mechanics.kinematics import (
+    cofactor,
+    fiber_basis,
+    growth_tensor,
+    unit_fibers,
+)
+
+__all__ = ["ActiveContraction", "FiberGrowth", "Guccione", "NeoHookean"]
+
+
+# --------------------------------------------------------------------------------------
+# helpers
+# --------------------------------------------------------------------------------------
+
+
+def _check(name: str, value: float, *, allow_zero: bool = False) -> None:
+    ok = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool)
+    if ok:
+        v = float(value)
+        ok = math.isfinite(v) and (v >= 0.0 if allow_zero else v > 0.0)
+    if not ok:
+        need = "a finite number >= 0" if allow_zero else "a finite number > 0"
+        raise ValueError(f"parameter {name!r} must be {need}, got {value!r}")
+
+
+def _as_F(F: ArrayLike) -> FloatArray:
+    F = np.asarray(F, dtype=np.float64)
+    if F.ndim < 2 or F.shape[-2:] != (3, 3):
+        raise ValueError(
+            f"'F' must have shape (..., 3, 3), got {F.shape!r}; "
+            "pass one deformation gradient per point in the trailing dimensions"
+        )
+    return F
+
+
+def _det_cof(F: FloatArray) -> tuple[FloatArray, FloatArray]:
+    cof = cofactor(F)
+    J = np.einsum("...j,...j->...", F[..., 0, :], cof[..., 0, :])
+    if not np.all(J > 0.0):
+        bad = int(np.count_nonzero(~(J > 0.0)))
+        raise ValueError(
+            f"'F' has det F <= 0 (or NaN) at {bad} point(s) (min {np.nanmin(J)!r}); "
+            "the material response is only defined for J > 0 -- cut the load step"
+        )
+    return J, cof
+
+
+_SQRT2 = math.sqrt(2.0)
+_SQRT_HALF = math.sqrt(0.5)
+
+
+def _outer(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``a[..., i, J] b[..., k, L]`` as ``(..., 3, 3, 3, 3)``."""
+    return a[..., :, :, None, None] * b[..., None, None, :, :]
+
+
+def _cross_outer(H: FloatArray) -> FloatArray:
+    """``H[..., i, L] H[..., k, J]`` as ``(..., 3, 3, 3, 3)``."""
+    return H[..., :, None, None, :] * np.swapaxes(H, -1, -2)[..., None, :, :, None]
+
+
+def _log_volumetric(kappa: float, J: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+    J = np.asarray(J, dtype=np.float64)
+    lnJ = np.log(J)
+    return 0.5 * kappa * lnJ**2, kappa * lnJ / J, kappa * (1.0 - lnJ) / J**2
+
+
+class _Uncoupled:
+    """Shared volumetric part ``U = kappa/2 (ln J)^2`` and derived quantities."""
+
+    kappa: float
+    needs_fibers: ClassVar[bool]
+
+    def isochoric_energy(self, F: ArrayLike, fiber: ArrayLike | None = None) -> FloatArray:
+        raise NotImplementedError
+
+    def isochoric_response(
+        self, F: ArrayLike, fiber: ArrayLike | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        raise NotImplementedError
+
+    def volumetric(self, J: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Volumetric energy ``U = kappa/2 (ln J)^2`` and its first two derivatives.
+
+        Parameters
+        ----------
+        J : array_like
+            Volume ratio ``det F > 0`` (dimensionless); any shape.
+
+        Returns
+        -------
+        U, dU, d2U : ndarray
+            ``U`` (kPa), ``U' = kappa ln J / J`` (kPa) and
+            ``U'' = kappa (1 - ln J) / J^2`` (kPa), same shape as ``J``.
+        """
+        return _log_volumetric(self.kappa, J)
+
+    def strain_energy(self, F: ArrayLike, fiber: ArrayLike | None = None) -> FloatArray:
+        """Total strain energy density ``W = Wbar(Cbar) + U(J)``.
+
+        Parameters
+        ----------
+        F : array_like, shape (..., 3, 3)
+            Deformation gradients (dimensionless, ``det F > 0``).
+        fiber : array_like, shape (..., 3), optional
+            Unit reference fiber directions (needed when ``needs_fibers``).
+
+        Returns
+        -------
+        ndarray, shape (...)
+            Energy per unit reference volume (kPa, i.e. kJ/m^3).
+        """
+        F = _as_F(F)
+        J, _ = _det_cof(F)
+        return self.isochoric_energy(F, fiber) + self.volumetric(J)[0]
+
+    def cauchy_stress(self, F: ArrayLike, fiber: ArrayLike | None = None) -> FloatArray:
+        """Total Cauchy stress ``sigma = J^{-1} P_iso F^T + U'(J) I`` (pointwise ``J``).
+
+        Parameters
+        ----------
+        F : array_like, shape (..., 3, 3)
+            Deformation gradients (dimensionless, ``det F > 0``).
+        fiber : array_like, shape (..., 3), optional
+            Unit reference fiber directions (needed when ``needs_fibers``).
+
+        Returns
+        -------
+        ndarray, shape (..., 3, 3)
+            Cauchy stress (kPa), symmetric.
+        """
+        F = _as_F(F)
+        J, _ = _det_cof(F)
+        P, _ = self.isochoric_response(F, fiber)
+        sigma = np.matmul(P, np.swapaxes(F, -1, -2)) / J[..., None, None]
+        return sigma + self.volumetric(J)[1][..., None, None] * np.eye(3)
+
+
+# --------------------------------------------------------------------------------------
+# passive laws
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class NeoHookean(_Uncoupled):
+    r"""Uncoupled neo-Hookean solid (FEBio ``Mooney-Rivlin`` with ``c2 = 0``).
+
+    Parameters
+    ----------
+    c1 : float
+        Coefficient of :math:`(\bar I_1 - 3)` in kPa; small-strain shear modulus
+        :math:`\mu = 2 C_1`.
+    kappa : float
+        Bulk modulus :math:`\kappa` in kPa (nearly incompressible: ``kappa / c1 >= 100``).
+
+    Raises
+    ------
+    ValueError
+        If a parameter is not a finite positive number (the message names it).
+
+    Notes
+    -----
+    .. math::
+
+        W = C_1 (\bar I_1 - 3) + \frac{\kappa}{2} (\ln J)^2, \qquad
+        \bar I_1 = J^{-2/3} I_1, \quad I_1 = \operatorname{tr}(F^T F),
+
+    with Cauchy stress :math:`\sigma = 2 C_1 J^{-5/3} (b - \tfrac{I_1}{3} I)
+    + \kappa \tfrac{\ln J}{J} I`. The paper's "C1 = 1.0 kPa, kappa = 120 kPa" is
+    ``NeoHookean(c1=1.0, kappa=120.0)``. The tangent is derived in the module docstring.
+
+    References
+    ----------
+    .. [1] Maas SA et al. FEBio theory manual, section 5.3 (uncoupled Mooney--Rivlin).
+
+    Examples
+    --------
+    >>> from harpx.mechanics.materials import NeoHookean
+    >>> mat = NeoHookean(c1=1.0, kappa=120.0)
+    >>> gamma = 0.5
+    >>> F = np.eye(3) + gamma * np.eye(3)[:, [0]] * np.eye(3)[[1], :]  # simple shear
+    >>> float(mat.cauchy_stress(F)[0, 1])  # 2 C1 gamma
+    1.0
+    """
+
+    c1: float
+    kappa: float
+    needs_fibers: ClassVar[bool] = False
+
+    def __post_init__(self) -> None:
+        _check("c1", self.c1)
+        _check("kappa", self.kappa)
+
+    def isochoric_energy(self, F: ArrayLike, fiber: ArrayLike | None = None) -> FloatArray:
+        """Isochoric energy ``C1 (J^{-2/3} I1 - 3)`` in kPa, shape ``(...)``; ``fiber`` is ignored."""
+        F = _as_F(F)
+        J, _ = _det_cof(F)
+        I1 = np.einsum("...iJ,...iJ->...", F, F)
+        return self.c1 * (J ** (-2.0 / 3.0) * I1 - 3.0)
+
+    def isochoric_response(
+        self, F: ArrayLike, fiber: ArrayLike | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """First Piola--Kirchhoff stress and tangent of the isochoric energy.
+
+        Parameters
+        ----------
+        F : array_like, shape (..., 3, 3)
+            Deformation gradients (dimensionless, ``det F > 0``).
+        fiber : array_like, optional
+            Ignored (isotropic law).
+
+        Returns
+        -------
+        P : ndarray, shape (..., 3, 3)
+            ``dWbar/dF`` (kPa).
+        A : ndarray, shape (..., 3, 3, 3, 3)
+            ``A[..., i, J, k, L] = dP_iJ/dF_kL`` (kPa).
+        """
+        F = _as_F(F)
+        J, cof = _det_cof(F)
+        H = cof / J[..., None, None]
+        I1 = np.einsum("...iJ,...iJ->...", F, F)
+        a = 2.0 * self.c1 * J ** (-2.0 / 3.0)
+        P = a[..., None, None] * (F - (I1 / 3.0)[..., None, None] * H)
+        # rank-two part -2/3 (F(x)H + H(x)F) + 2/9 I1 H(x)H as K^T (M K) with K = [F; H]
+        batch = J.shape
+        K = np.stack([F, H], axis=-3).reshape(batch + (2, 9))
+        MK = np.stack(
+            [(-2.0 / 3.0) * H, (-2.0 / 3.0) * F + ((2.0 / 9.0) * I1)[..., None, None] * H],
+            axis=-3,
+        ).reshape(batch + (2, 9))
+        A = np.matmul(np.swapaxes(K, -1, -2), MK).reshape(batch + (3, 3, 3, 3))
+        A += (I1 / 3.0)[..., None, None, None, None] * _cross_outer(H)
+        for i in range(3):
+            A[..., i, :, i, :] += np.eye(3)
+        A *= a[..., None, None, None, None]
+        return P, A
+
+
+@dataclass(frozen=True)
+class Guccione(_Uncoupled):
+    r"""Transversely isotropic Guccione law for passive myocardium (uncoupled form).
+
+    Parameters
+    ----------
+    c : float
+        Stiffness scale :math:`C` in kPa.
+    bf : float
+        Fiber exponent coefficient :math:`b_f` (dimensionless, >= 0).
+    bt : float
+        Transverse exponent coefficient :math:`b_t` (dimensionless, >= 0).
+    bfs : float
+        Fiber--sheet/normal shear coefficient :math:`b_{fs}` (dimensionless, >= 0).
+    kappa : float
+        Bulk modulus :math:`\kappa` in kPa.
+
+    Raises
+    ------
+    ValueError
+        If a parameter is out of range (the message names it).
+
+    Notes
+    -----
+    .. math::
+
+        W = \frac{C}{2} (e^Q - 1) + \frac{\kappa}{2} (\ln J)^2, \qquad
+        Q = b_f \bar E_{ff}^2 + b_t (\bar E_{ss}^2 + \bar E_{nn}^2 + 2 \bar E_{sn}^2)
+            + 2 b_{fs} (\bar E_{fs}^2 + \bar E_{fn}^2),
+
+    with :math:`\bar E = (\bar C - I)/2`, :math:`\bar C = J^{-2/3} C`, components in the
+    local orthonormal fiber basis ``(f, s, n)`` of
+    :func:`harpx.mechanics.kinematics.fiber_basis` (``Q`` does not depend on the choice of
+    ``s, n`` about ``f``). The law is written *uncoupled* (in :math:`\bar E`, not
+    :math:`E`) so that the mean-dilatation assembly can treat the volumetric part
+    separately. The incompressible closed forms (e.g. REFERENCES section 2.5) therefore
+    hold exactly at ``J = 1``, where :math:`\bar E = E`. Derivation of the tangent: module
+    docstring.
+
+    References
+    ----------
+    .. [1] Guccione JM, McCulloch AD, Waldman LK. J Biomech Eng 113:42--55, 1991.
+    .. [2] Maas SA et al. FEBio theory manual (uncoupled Guccione/Fung-type materials).
+
+    Examples
+    --------
+    >>> from harpx.mechanics.materials import Guccione
+    >>> mat = Guccione(c=2.0, bf=8.0, bt=2.0, bfs=4.0, kappa=200.0)
+    >>> float(mat.strain_energy(np.eye(3), fiber=[1.0, 0.0, 0.0]))
+    0.0
+    """
+
+    c: float
+    bf: float
+    bt: float
+    bfs: float
+    kappa: float
+    needs_fibers: ClassVar[bool] = True
+
+    def __post_init__(self) -> None:
+        _check("c", self.c)
+        _check("bf", self.bf, allow_zero=True)
+        _check("bt", self.bt, allow_zero=True)
+        _check("bfs", self.bfs, allow_zero=True)
+        _check("kappa", self.kappa)
+
+    def _weights(self) -> FloatArray:
+        bf, bt, bfs = float(self.bf), float(self.bt), float(self.bfs)
+        return np.array([[bf, bfs, bfs], [bfs, bt, bt], [bfs, bt, bt]])
+
+    def _local(
+        self, F: FloatArray, fiber: ArrayLike | None
+    ) -> tuple[
+        FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray
+    ]:
+        if fiber is None:
+            raise ValueError(
+                "Guccione needs fiber directions: pass 'fiber' with shape (..., 3) "
+                "(unit reference vectors per cell or quadrature point)"
+            )
+        f, s, n = fiber_basis(fiber)
+        R = np.stack([f, s, n], axis=-1)  # columns are the local basis vectors
+        batch = np.broadcast_shapes(F.shape[:-2], R.shape[:-2])
+        F = np.broadcast_to(F, batch + (3, 3))
+        R = np.broadcast_to(R, batch + (3, 3))
+        J, cof = _det_cof(F)
+        j = J ** (-1.0 / 3.0)
+        G = np.matmul(j[..., None, None] * F, R)  # columns g_a = Fbar r_a
+        Ct = np.matmul(np.swapaxes(G, -1, -2), G)  # local components of Cbar
+        Et = 0.5 * (Ct - np.eye(3))
+        Q = np.einsum("...ab,...ab->...", self._weights() * Et, Et)
+        return F, J, cof, R, G, Ct, Q
+
+    def isochoric_energy(self, F: ArrayLike, fiber: ArrayLike | None = None) -> FloatArray:
+        """Isochoric energy ``C/2 (exp Q - 1)`` in kPa, shape ``(...)``."""
+        F = _as_F(F)
+        *_, Q = self._local(F, fiber)
+        return 0.5 * self.c * np.expm1(Q)
+
+    def isochoric_response(
+        self, F: ArrayLike, fiber: ArrayLike | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """First Piola--Kirchhoff stress and tangent of the isochoric energy.
+
+        Parameters
+        ----------
+        F : array_like, shape (..., 3, 3)
+            Deformation gradients (dimensionless, ``det F > 0``).
+        fiber : array_like, shape (..., 3)
+            Unit reference fiber directions, broadcast against the batch of ``F``.
+
+        Returns
+        -------
+        P : ndarray, shape (..., 3, 3)
+            ``dWbar/dF`` (kPa).
+        A : ndarray, shape (..., 3, 3, 3, 3)
+            ``A[..., i, J, k, L] = dP_iJ/dF_kL`` (kPa).
+
+        Raises
+        ------
+        ValueError
+            If ``fiber`` is None.
+        """
+        F = _as_F(F)
+        F, J, cof, R, G, Ct, Q = self._local(F, fiber)
+        batch = J.shape
+        B = self._weights()
+        sig = 0.5 * B * (Ct - np.eye(3))
+        j = J ** (-1.0 / 3.0)
+        psi = self.c * np.exp(Q)
+        Hbar = cof / (J * j)[..., None, None]
+        RT = np.swapaxes(R, -1, -2)
+        Pbar = psi[..., None, None] * np.matmul(np.matmul(G, sig), RT)
+        Sbar = psi[..., None, None] * np.matmul(np.matmul(R, sig), RT)
+        pbar = psi * np.einsum("...ab,...ab->...", Ct, sig)  # Pbar : Fbar
+        P = j[..., None, None] * (Pbar - (pbar / 3.0)[..., None, None] * Hbar)
+        # low-rank form of the tangent (module docstring): A = j^2 [K^T M K + ...]
+        X = np.swapaxes(G, -1, -2)[..., :, None, :, None] * RT[..., None, :, None, :]
+        K = np.empty(batch + (9, 3, 3))
+        MK = np.empty(batch + (9, 3, 3))
+        third = (1.0 / 3.0) * Hbar
+        for k, (a, b) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+            if a == b:
+                K[..., k, :, :] = X[..., a, a, :, :] - Ct[..., a, a, None, None] * third
+            else:
+                K[..., k, :, :] = (X[..., a, b, :, :] + X[..., b, a, :, :]) * _SQRT_HALF - (
+                    _SQRT2 * Ct[..., a, b, None, None]
+                ) * third
+            MK[..., k, :, :] = (B[a, b] * psi)[..., None, None] * K[..., k, :, :]
+        K[..., 6, :, :] = P / (j * psi)[..., None, None]
+        MK[..., 6, :, :] = (2.0 * psi)[..., None, None] * K[..., 6, :, :]
+        K[..., 7, :, :] = Pbar
+        K[..., 8, :, :] = Hbar
+        MK[..., 7, :, :] = (-2.0 / 3.0) * Hbar
+        MK[..., 8, :, :] = (-2.0 / 3.0) * Pbar + ((2.0 / 9.0) * pbar)[..., None, None] * Hbar
+        K = K.reshape(batch + (9, 9))
+        MK = MK.reshape(batch + (9, 9))
+        A = np.matmul(np.swapaxes(K, -1, -2), MK).reshape(batch + (3, 3, 3, 3))
+        A += (pbar / 3.0)[..., None, None, None, None] * _cross_outer(Hbar)
+        for i in range(3):
+            A[..., i, :, i, :] += Sbar
+        A *= (j * j)[..., None, None, None, None]
+        return P, A
+
+
+# --------------------------------------------------------------------------------------
+# active stress
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ActiveContraction:
+    r"""Active fiber stress of Guccione--McCulloch type (second Piola--Kirchhoff form).
+
+    Parameters
+    ----------
+    t_max : float, default 135.7
+        Maximum isometric tension :math:`T_{max}` in kPa (>= 0).
+    law : {"prescribed", "calcium"}, default "calcium"
+        ``"prescribed"``: :math:`T_a = T_{max}` (FEBio ``prescribed fiber active
+        contraction``); ``"calcium"``: the length-dependent calcium law below.
+    ca0 : float, default 4.35
+        Peak intracellular calcium :math:`Ca_0` in uM.
+    ca0_max : float, default 4.35
+        Maximum peak calcium :math:`(Ca_0)_{max}` in uM.
+    beta : float, default 4.75
+        Shape coefficient :math:`B` in 1/um.
+    l0 : float, default 1.58
+        Sarcomere length without active tension :math:`l_0` in um.
+    lr : float, default 2.04
+        Stress-free sarcomere length :math:`l_r` in um.
+
+    Raises
+    ------
+    ValueError
+        If a parameter is out of range (the message names it).
+
+    Notes
+    -----
+    .. math::
+
+        S_a = T_a\, f_0 \otimes f_0, \qquad
+        T_a = T_{max} \frac{Ca_0^2}{Ca_0^2 + ECa_{50}^2}, \qquad
+        ECa_{50} = \frac{(Ca_0)_{max}}{\sqrt{\exp(B (l - l_0)) - 1}},
+
+    with :math:`l = l_r \lambda`, :math:`\lambda = \sqrt{2 E_{ff} + 1} = |F f_0|`, and
+    :math:`T_a = 0` for :math:`l \le l_0`. Defaults are FEBio's "typical" values
+    (Guccione & McCulloch 1993). Unlike FEBio's uncoupled variant, which uses the
+    deviatoric stretch :math:`J^{-1/3}|F f_0|`, the total stretch is used; they agree at
+    :math:`J = 1`. With the defaults, :math:`T_a(\lambda = 1) = 120.4368` kPa. The
+    consistent tangent is derived in the module docstring.
+
+    References
+    ----------
+    .. [1] Guccione JM, McCulloch AD. J Biomech Eng 115:72--81, 1993.
+    .. [2] Maas SA et al. FEBio theory manual, section 5.12 (active contraction).
+
+    Examples
+    --------
+    >>> from harpx.mechanics.materials import ActiveContraction
+    >>> act = ActiveContraction()
+    >>> round(float(act.tension(1.0)), 4)
+    120.4368
+    """
+
+    t_max: float = 135.7
+    law: Literal["prescribed", "calcium"] = "calcium"
+    ca0: float = 4.35
+    ca0_max: float = 4.35
+    beta: float = 4.75
+    l0: float = 1.58
+    lr: float = 2.04
+
+    def __post_init__(self) -> None:
+        _check("t_max", self.t_max, allow_zero=True)
+        if self.law not in ("prescribed", "calcium"):
+            raise ValueError(
+                f"parameter 'law' must be 'prescribed' or 'calcium', got {self.law!r}"
+            )
+        for name in ("ca0", "ca0_max", "beta", "l0", "lr"):
+            _check(name, getattr(self, name))
+
+    def _g_dg(self, stretch: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        lam = np.asarray(stretch, dtype=np.float64)
+        if self.law == "prescribed":
+            return np.ones_like(lam), np.zeros_like(lam)
+        r2 = (self.ca0_max / self.ca0) ** 2
+        dl = self.lr * lam - self.l0
+        on = dl > 0.0
+        # clip the exponent on the inactive side so exp never overflows nor warns
+        x = np.where(on, self.beta * dl, 0.0)
+        with np.errstate(over="ignore"):
+            e = np.expm1(x)
+        g = np.where(on, e / (e + r2), 0.0)
+        dg = np.where(on, r2 / (e + r2) ** 2 * self.beta * (e + 1.0) * self.lr, 0.0)
+        # NaN stretch propagates; large stretch saturates (e = inf -> g = 1, dg = 0)
+        big = np.isinf(e)
+        g = np.where(big, 1.0, g)
+        dg = np.where(big, 0.0, dg)
+        nan = np.isnan(lam)
+        return np.where(nan, np.nan, g), np.where(nan, np.nan, dg)
+
+    def activation_factor(self, stretch: ArrayLike) -> FloatArray:
+        """Length dependence ``g(lambda)`` with ``T_a = t_max g``.
+
+        Parameters
+        ----------
+        stretch : array_like
+            Fiber stretch :math:`\\lambda` (dimensionless).
+
+        Returns
+        -------
+        ndarray
+            ``g`` in [0, 1] (dimensionless); 1 for the prescribed law, 0 where
+            :math:`l_r \\lambda \\le l_0` for the calcium law.
+        """
+        return self._g_dg(stretch)[0]
+
+    def tension(self, stretch: ArrayLike, t_max: ArrayLike | None = None) -> FloatArray:
+        """Active fiber tension ``T_a = t_max g(lambda)``.
+
+        Parameters
+        ----------
+        stretch : array_like
+            Fiber stretch (dimensionless).
+        t_max : array_like, optional
+            Maximum tension in kPa, broadcasting against ``stretch``; default ``self.t_max``.
+
+        Returns
+        -------
+        ndarray
+            ``T_a`` in kPa (second Piola--Kirchhoff fiber component).
+        """
+        t = self.t_max if t_max is None else np.asarray(t_max, dtype=np.float64)
+        return t * self.activation_factor(stretch)
+
+    def t_max_for_tension(self, stretch: ArrayLike, tension: ArrayLike) -> FloatArray:
+        """Invert the law for ``t_max``: ``t_max = tension / g(lambda)``.
+
+        Parameters
+        ----------
+        stretch : array_like
+            Fiber stretch (dimensionless).
+        tension : array_like
+            Active tension ``T_a`` in kPa, broadcasting against ``stretch``.
+
+        Returns
+        -------
+        ndarray
+            ``t_max`` in kPa. NaN where ``g(lambda) = 0`` (the calcium law is inactive for
+            :math:`l_r \\lambda \\le l_0`, so any ``t_max`` fits) and where an input is NaN.
+            No warnings are emitted.
+        """
+        g = self.activation_factor(stretch)
+        T = np.asarray(tension, dtype=np.float64)
+        g, T = np.broadcast_arrays(g, T)
+        out = np.full(g.shape, np.nan)
+        np.divide(T, g, out=out, where=g > 0.0)
+        return out
+
+    def response(
+        self, F: ArrayLike, fiber: ArrayLike, t_max: ArrayLike | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """First Piola--Kirchhoff active stress and its consistent tangent.
+
+        Parameters
+        ----------
+        F : array_like, shape (..., 3, 3)
+            Deformation gradients (dimensionless).
+        fiber : array_like, shape (..., 3)
+            Unit reference fiber directions, broadcast against the batch of ``F``.
+        t_max : array_like, optional
+            Maximum tension in kPa broadcasting over the batch (e.g. ``(n_cells, 1)`` per
+            cell); default ``self.t_max``.
+
+        Returns
+        -------
+        P : ndarray, shape (..., 3, 3)
+            ``P = F S_a = T_a (F f0) (x) f0`` (kPa).
+        A : ndarray, shape (..., 3, 3, 3, 3)
+            ``A[..., i, J, k, L] = dP_iJ/dF_kL`` (kPa), including ``dT_a/dlambda``.
+        """
+        F = _as_F(F)
+        f = unit_fibers(fiber)
+        a = np.einsum("...iJ,...J->...i", F, f)
+        lam = np.sqrt(np.einsum("...i,...i->...", a, a))
+        g, dg = self._g_dg(lam)
+        t = self.t_max if t_max is None else np.asarray(t_max, dtype=np.float64)
+        T = t * g
+        dT = t * dg
+        batch = np.broadcast_shapes(F.shape[:-2], f.shape[:-1], np.shape(T))
+        af = np.broadcast_to(a[..., :, None] * f[..., None, :], batch + (3, 3))
+        T = np.broadcast_to(T, batch)
+        P = T[..., None, None] * af
+        ff = f[..., :, None] * f[..., None, :]
+        A = (np.broadcast_to(dT / lam, batch)[..., None, None, None, None]) * _outer(af, af)
+        for i in range(3):
+            A[..., i, :, i, :] += T[..., None, None] * ff
+        return P, A
+
+
+# --------------------------------------------------------------------------------------
+# growth
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class FiberGrowth:
+    r"""Multiplicative growth (prestretch) along the fibers.
+
+    Parameters
+    ----------
+    stretch : float
+        Growth stretch :math:`\vartheta > 0` along the fibers (dimensionless); > 1 lengthens
+        the stress-free fibers, so a body held at ``F = I`` is compressed along them.
+
+    Raises
+    ------
+    ValueError
+        If ``stretch`` is not a finite positive number.
+
+    Notes
+    -----
+    .. math::
+
+        F = F_e F_g, \qquad F_g = I + (\vartheta - 1) f_0 \otimes f_0, \qquad
+        W(F) = \det(F_g)\, W_e(F F_g^{-1}).
+
+    The assembly composes a passive response at :math:`F_e` with
+    :func:`harpx.mechanics.kinematics.push_growth_response`.
+
+    References
+    ----------
+    .. [1] Rodriguez EK, Hoger A, McCulloch AD. J Biomech 27:455--467, 1994.
+
+    Examples
+    --------
+    >>> from harpx.mechanics.materials import FiberGrowth
+    >>> np.diag(FiberGrowth(1.1).tensor([1.0, 0.0, 0.0])).tolist()
+    [1.1, 1.0, 1.0]
+    """
+
+    stretch: float
+
+    def __post_init__(self) -> None:
+        _check("stretch", self.stretch)
+
+    def tensor(self, fiber: ArrayLike) -> FloatArray:
+        """Growth tensor ``Fg`` (dimensionless), shape ``(..., 3, 3)`` for ``fiber (..., 3)``."""
+        return growth_tensor(fiber, self.stretch)
