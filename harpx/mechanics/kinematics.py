@@ -22,8 +22,9 @@ and with :math:`G = F_g^{-1}` the chain rule gives
 
 which :func:`push_growth_response` evaluates.
 
-For a volumetric energy :math:`U(J)`, :math:`\partial J/\partial F = J F^{-T} = \operatorname{cof} F`
-and :math:`\partial H_{iJ}/\partial F_{kL} = -H_{iL} H_{kJ}` for :math:`H = F^{-T}`, so
+For a volumetric energy :math:`U(J)`,
+:math:`\partial J/\partial F = J F^{-T} = \operatorname{cof} F` and
+:math:`\partial H_{iJ}/\partial F_{kL} = -H_{iL} H_{kJ}` for :math:`H = F^{-T}`, so
 
 .. math::
 

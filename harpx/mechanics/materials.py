@@ -82,8 +82,28 @@ and :math:`\bar{\mathbb A}_{iJkL} = \delta_{ik} \bar S_{JL} + \bar F_{iM}
       + \sum_{a} B_{aa} Y_{aa} \otimes Y_{aa} + \sum_{a<b} B_{ab} Y_{ab} \otimes Y_{ab} \Big],
 
 with :math:`Z = G \sigma R^T`, :math:`Y_{aa} = g_a \otimes r_a` and
-:math:`Y_{ab} = (g_a \otimes r_b + g_b \otimes r_a)/\sqrt2`. The generic projection above
-then gives :math:`P, \mathbb A`.
+:math:`Y_{ab} = (g_a \otimes r_b + g_b \otimes r_a)/\sqrt2`.
+
+*Low-rank evaluation.* Write :math:`\bar{\mathbb A} = \sum_k \omega_k Y_k \otimes Y_k
++ \delta_{ik} \bar S_{JL}` and note :math:`(\delta \otimes \bar S) : \bar F = \bar F \bar S
+= \bar P`. The first three terms of the generic formula are then
+:math:`\mathcal P^T \bar{\mathbb A}_Y \mathcal P = \sum_k \omega_k \hat Y_k \otimes \hat Y_k`
+with :math:`\mathcal P = \mathbb I - \tfrac13 \bar F \otimes \bar H` (so
+:math:`\partial \bar F/\partial F = j \mathcal P`), weights :math:`\omega = \psi B_{ab}` for
+the :math:`Y_{ab}` and :math:`2\psi` for :math:`Z`, projected factors
+:math:`\hat Y = \mathcal P^T Y = Y - \tfrac13 (Y : \bar F) \bar H`, and
+
+.. math::
+
+    \mathbb A = j^2 \Big[ \sum_k \omega_k \hat Y_k \otimes \hat Y_k
+      + \delta_{ik} \bar S_{JL}
+      - \tfrac23 (\bar P \otimes \bar H + \bar H \otimes \bar P)
+      + \tfrac29 \bar p\, \bar H \otimes \bar H + \tfrac13 \bar p\, \bar H \odot \bar H \Big].
+
+Here :math:`Y_{ab} : \bar F = g_a \cdot g_b = \tilde C_{ab}` (times :math:`\sqrt2` for
+:math:`a \ne b`) and :math:`\hat Z = P / (j \psi)`. The rank-one and rank-two parts are
+evaluated as one batched product :math:`K^T (M K)` of ``(9, 9)`` matrices per point, which
+keeps the tangent at ~0.3 s for 115k points.
 
 *Active fiber stress.* :math:`S_a = T_a(\lambda) f_0 \otimes f_0` with
 :math:`\lambda = |F f_0|` and :math:`a = F f_0`: :math:`P = T_a\, a \otimes f_0` and, using
@@ -322,7 +342,7 @@ class NeoHookean(_Uncoupled):
         _check("kappa", self.kappa)
 
     def isochoric_energy(self, F: ArrayLike, fiber: ArrayLike | None = None) -> FloatArray:
-        """Isochoric energy ``C1 (J^{-2/3} I1 - 3)`` in kPa, shape ``(...)``; ``fiber`` is ignored."""
+        """Isochoric energy ``C1 (J^{-2/3} I1 - 3)`` in kPa, shape ``(...)``; no fibers used."""
         F = _as_F(F)
         J, _ = _det_cof(F)
         I1 = np.einsum("...iJ,...iJ->...", F, F)
@@ -613,18 +633,19 @@ class ActiveContraction:
     def _g_dg(self, stretch: ArrayLike) -> tuple[FloatArray, FloatArray]:
         lam = np.asarray(stretch, dtype=np.float64)
         if self.law == "prescribed":
-            return np.ones_like(lam), np.zeros_like(lam)
+            nan = np.isnan(lam)
+            return np.where(nan, np.nan, 1.0), np.where(nan, np.nan, 0.0)
         r2 = (self.ca0_max / self.ca0) ** 2
         dl = self.lr * lam - self.l0
         on = dl > 0.0
-        # clip the exponent on the inactive side so exp never overflows nor warns
         x = np.where(on, self.beta * dl, 0.0)
-        with np.errstate(over="ignore"):
+        # huge stretches overflow e to inf; the law saturates there (g = 1, dg = 0)
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
             e = np.expm1(x)
-        g = np.where(on, e / (e + r2), 0.0)
-        dg = np.where(on, r2 / (e + r2) ** 2 * self.beta * (e + 1.0) * self.lr, 0.0)
-        # NaN stretch propagates; large stretch saturates (e = inf -> g = 1, dg = 0)
-        big = np.isinf(e)
+            big = np.isinf(e)
+            e = np.where(big, 1.0, e)
+            g = np.where(on, e / (e + r2), 0.0)
+            dg = np.where(on, r2 / (e + r2) ** 2 * self.beta * (e + 1.0) * self.lr, 0.0)
         g = np.where(big, 1.0, g)
         dg = np.where(big, 0.0, dg)
         nan = np.isnan(lam)

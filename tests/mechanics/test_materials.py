@@ -214,6 +214,45 @@ def test_neo_hookean_equibiaxial(lam):
     np.testing.assert_allclose(s[0, 0], 1.5 * dU, rtol=CLOSED_FORM)
 
 
+@pytest.mark.parametrize(
+    ("lam", "sigma_table"),
+    [
+        pytest.param(1.05, 1.018183, id="1.05"),
+        pytest.param(1.1, 2.420691, id="1.1"),
+        pytest.param(1.2, 8.096521, id="1.2"),
+    ],
+)
+def test_guccione_fiber_uniaxial_at_unit_jacobian(rng, lam, sigma_table):
+    """F = diag(lam, lam^-1/2, lam^-1/2) in the fiber basis (f, s, n), J = 1 (REFERENCES 2.5).
+
+    The incompressible table value is sigma_ff = sigma~_ff - p with the pressure p fixed by
+    the free lateral faces, sigma_ss = sigma~_ss - p = 0, i.e. sigma_ff = sigma~_ff - sigma~_ss
+    with sigma~ = F S~ F^T, S~ = dW/dE. Our uncoupled response is
+    sigma_iso = J^-1 dev(Fbar Sbar Fbar^T) (+ U'(J) I, zero at J = 1); at J = 1, Fbar = F and
+    Ebar = E, so sigma~ = Fbar Sbar Fbar^T and dev only shifts the diagonal by a multiple of I.
+    Hence sigma_ff - sigma_ss of our (deviatoric) stress equals the table's sigma_ff, and in
+    closed form C e^Q (bf E_ff lam^2 - bt E_ss / lam) with Q = bf E_ff^2 + 2 bt E_ss^2.
+    A random fiber and a random transverse pair (s, n) also check that Q does not depend on
+    the choice of s and n.
+    """
+    mat = Guccione(c=2.0, bf=8.0, bt=2.0, bfs=4.0, kappa=100.0)  # bfs does not enter
+    f = _random_fibers(rng, 1)[0]
+    s = np.cross(f, rng.standard_normal(3))
+    s /= np.linalg.norm(s)
+    n = np.cross(f, s)
+    Qb = np.stack([f, s, n], axis=-1)
+    F = Qb @ np.diag([lam, lam**-0.5, lam**-0.5]) @ Qb.T
+    sigma = mat.cauchy_stress(F, f)
+    diff = f @ sigma @ f - s @ sigma @ s
+    E_ff, E_ss = (lam**2 - 1) / 2, (1 / lam - 1) / 2
+    Q = mat.bf * E_ff**2 + 2 * mat.bt * E_ss**2
+    closed = mat.c * np.exp(Q) * (mat.bf * E_ff * lam**2 - mat.bt * E_ss / lam)
+    np.testing.assert_allclose(diff, sigma_table, rtol=1e-5)  # table: 7 significant digits
+    np.testing.assert_allclose(diff, closed, rtol=EXACT)  # same formula, round-off only
+    # lateral faces carry the same stress by transverse isotropy
+    np.testing.assert_allclose(n @ sigma @ n, s @ sigma @ s, rtol=EXACT, atol=EXACT)
+
+
 # --------------------------------------------------------------------------------------
 # objectivity
 # --------------------------------------------------------------------------------------
@@ -284,3 +323,230 @@ def test_inverted_element_raises():
     F = np.diag([1.0, 1.0, -1.0])
     with pytest.raises(ValueError, match=r"det F <= 0 \(or NaN\) at 1 point"):
         NH.isochoric_response(F)
+
+
+# --------------------------------------------------------------------------------------
+# active contraction
+# --------------------------------------------------------------------------------------
+
+ACTIVE_LAWS = [pytest.param("prescribed", id="prescribed"), pytest.param("calcium", id="calcium")]
+
+
+@pytest.mark.parametrize(
+    ("lam", "expected"),
+    [(0.8, 29.6992), (0.9, 95.4767), (1.0, 120.4368), (1.1, 129.9082), (1.2, 133.5022)],
+)
+def test_calcium_law_reproduces_reference_table(lam, expected):
+    # REFERENCES 4.2 table, FEBio "typical" parameters; 4 decimals -> 1e-4 kPa
+    act = ActiveContraction()
+    assert act.t_max == 135.7
+    np.testing.assert_allclose(act.tension(lam), expected, atol=1e-4)
+
+
+def test_calcium_law_is_inactive_below_threshold():
+    act = ActiveContraction()
+    lam = np.array([0.5, 0.7, act.l0 / act.lr, 0.775])
+    np.testing.assert_array_equal(act.tension(lam)[:3], 0.0)
+    assert act.tension(lam)[3] > 0.0
+
+
+def test_prescribed_law_is_constant():
+    act = ActiveContraction(t_max=50.0, law="prescribed")
+    np.testing.assert_array_equal(act.tension([0.5, 1.0, 1.7]), 50.0)
+    np.testing.assert_array_equal(act.activation_factor([0.5, 1.0]), 1.0)
+
+
+@pytest.mark.parametrize("law", ACTIVE_LAWS)
+def test_t_max_for_tension_inverts_the_law(rng, law):
+    act = ActiveContraction(law=law)
+    lam = rng.uniform(0.8, 1.3, 50)
+    t_max = rng.uniform(10.0, 200.0, 50)
+    T = act.tension(lam, t_max=t_max)
+    # tension / g undoes t_max * g: one rounding each way
+    np.testing.assert_allclose(act.t_max_for_tension(lam, T), t_max, rtol=EXACT)
+
+
+def test_t_max_for_tension_is_nan_where_inactive_without_warnings():
+    import warnings
+
+    act = ActiveContraction()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = act.t_max_for_tension([0.7, np.nan, 1.0, np.inf], [10.0, 10.0, np.nan, 10.0])
+    assert np.isnan(out[:3]).all()
+    # infinite stretch saturates the law (g = 1)
+    np.testing.assert_allclose(out[3], 10.0, rtol=EXACT)
+
+
+def _active_sample(rng, act, n, scale):
+    """Random (F, fiber) with stretch >= 0.8, away from the calcium-law kink at 0.7745."""
+    F = _random_F(rng, 4 * n, scale)
+    f = _random_fibers(rng, 4 * n)
+    lam = np.linalg.norm(np.einsum("nij,nj->ni", F, f), axis=-1)
+    keep = lam >= 0.8
+    assert keep.sum() >= n
+    return F[keep][:n], f[keep][:n]
+
+
+@pytest.mark.parametrize("scale", SCALES)
+@pytest.mark.parametrize("law", ACTIVE_LAWS)
+def test_active_tangent_matches_finite_differences(rng, law, scale):
+    act = ActiveContraction(law=law)
+    F, f = _active_sample(rng, act, 30, scale)
+    t_max = rng.uniform(50.0, 150.0, 30)  # per-point values also exercise broadcasting
+    err = _check_tangent(lambda G: act.response(G, f, t_max=t_max), F, rng)
+    assert err <= FD_RTOL_A, f"A vs dP/dF: relative error {err:.2e}"
+
+
+@pytest.mark.parametrize("law", ACTIVE_LAWS)
+def test_active_stress_derives_from_fiber_potential(rng, law):
+    """P = dW_a/dF with W_a(F) = int_1^lambda T_a(mu) mu dmu, lambda = |F f0|.
+
+    The central difference of W_a is the integral between the two perturbed stretches,
+    evaluated by adaptive quadrature (error ~1e-14 of an O(h) integral).
+    """
+    from scipy.integrate import quad
+
+    act = ActiveContraction(law=law)
+    F, f = _active_sample(rng, act, 4, 0.2)
+    P, _ = act.response(F, f)
+
+    def stretch(G):
+        return np.linalg.norm(np.einsum("nij,nj->ni", G, f), axis=-1)
+
+    P_fd = np.zeros_like(P)
+    for i in range(3):
+        for j in range(3):
+            d = np.zeros((3, 3))
+            d[i, j] = FD_H
+            lo, hi = stretch(F - d), stretch(F + d)
+            for p in range(len(F)):
+                val, _ = quad(lambda m: float(act.tension(m)) * m, lo[p], hi[p],
+                              epsabs=0.0, epsrel=1e-13)
+                P_fd[p, i, j] = val / (2 * FD_H)
+    err = _rel(P, P_fd)
+    assert err <= FD_RTOL_P, f"P vs dW_a/dF: relative error {err:.2e}"
+
+
+def test_active_stress_is_second_piola_kirchhoff_fiber_tension(rng):
+    act = ActiveContraction()
+    F = _random_F(rng, 5, 0.2)
+    f = _random_fibers(rng, 5)
+    P, _ = act.response(F, f)
+    S = np.linalg.solve(F, P)  # S = F^-1 P
+    lam = np.linalg.norm(np.einsum("nij,nj->ni", F, f), axis=-1)
+    expected = act.tension(lam)[:, None, None] * f[:, :, None] * f[:, None, :]
+    np.testing.assert_allclose(S, expected, atol=EXACT * 200.0)  # |S| ~ 100 kPa
+
+
+def test_active_response_broadcasts_per_cell_t_max(rng):
+    act = ActiveContraction()
+    F = _random_F(rng, 12, 0.1).reshape(4, 3, 3, 3)  # (cells, qp, 3, 3)
+    f = _random_fibers(rng, 4)[:, None, :]
+    t_max = np.array([10.0, 20.0, 30.0, 40.0])[:, None]  # per cell
+    P, A = act.response(F, f, t_max=t_max)
+    assert P.shape == (4, 3, 3, 3) and A.shape == (4, 3, 3, 3, 3, 3)
+    P1, A1 = act.response(F[2, 1], f[2, 0], t_max=30.0)
+    np.testing.assert_allclose(P[2, 1], P1, rtol=EXACT, atol=EXACT)
+    np.testing.assert_allclose(A[2, 1], A1, rtol=EXACT, atol=EXACT)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "name"),
+    [
+        pytest.param({"t_max": -1.0}, "t_max", id="t_max"),
+        pytest.param({"ca0": 0.0}, "ca0", id="ca0"),
+        pytest.param({"ca0_max": -4.0}, "ca0_max", id="ca0_max"),
+        pytest.param({"beta": 0.0}, "beta", id="beta"),
+        pytest.param({"l0": -1.0}, "l0", id="l0"),
+        pytest.param({"lr": float("nan")}, "lr", id="lr"),
+    ],
+)
+def test_active_bad_parameters_name_the_parameter(kwargs, name):
+    with pytest.raises(ValueError, match=f"parameter '{name}' must be"):
+        ActiveContraction(**kwargs)
+
+
+def test_active_bad_law():
+    with pytest.raises(ValueError, match="parameter 'law' must be 'prescribed' or 'calcium'"):
+        ActiveContraction(law="hill")  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------------------
+# growth
+# --------------------------------------------------------------------------------------
+
+
+def _total_response(mat, fiber):
+    """Total (isochoric + volumetric, pointwise J) response of an uncoupled material."""
+    from harpx.mechanics.kinematics import volumetric_response
+
+    def response(Fe):
+        P, A = mat.isochoric_response(Fe, fiber)
+        _, dU, d2U = mat.volumetric(np.linalg.det(Fe))
+        Pv, Av = volumetric_response(Fe, dU, d2U)
+        return P + Pv, A + Av
+
+    return response
+
+
+def _grown(mat, growth, fiber):
+    Fg = growth.tensor(fiber)
+    Jg = np.linalg.det(Fg)
+    elastic = _total_response(mat, fiber)
+
+    def energy(F):
+        return Jg * mat.strain_energy(split_growth(F, Fg), fiber)
+
+    def response(F):
+        return push_growth_response(*elastic(split_growth(F, Fg)), Fg)
+
+    return energy, response
+
+
+@pytest.mark.parametrize("scale", SCALES)
+@pytest.mark.parametrize("theta", [0.85, 1.2])
+@pytest.mark.parametrize("mat", [pytest.param(NH, id="neo-hookean"),
+                                 pytest.param(GUCCIONE, id="guccione")])
+def test_growth_composed_response_matches_finite_differences(rng, mat, theta, scale):
+    n = 20
+    F = _random_F(rng, n, scale)
+    fiber = _random_fibers(rng, n)
+    energy, response = _grown(mat, FiberGrowth(theta), fiber)
+    P, _ = response(F)
+    err_P = _rel(P, _fd_gradient(energy, F))
+    assert err_P <= FD_RTOL_P, f"P vs dW/dF: relative error {err_P:.2e}"
+    err_A = _check_tangent(response, F, rng)
+    assert err_A <= FD_RTOL_A, f"A vs dP/dF: relative error {err_A:.2e}"
+
+
+@pytest.mark.parametrize("mat", [pytest.param(NH, id="neo-hookean"),
+                                 pytest.param(GUCCIONE, id="guccione")])
+def test_pure_growth_is_stress_free(rng, mat):
+    fiber = _random_fibers(rng, 6)
+    growth = FiberGrowth(1.15)
+    _, response = _grown(mat, growth, fiber)
+    P, _ = response(growth.tensor(fiber))
+    # Fe = I up to one rounding: stresses ~1e-13 kPa against moduli ~1e2 kPa
+    np.testing.assert_allclose(P, 0.0, atol=EXACT * mat.kappa)
+
+
+@pytest.mark.parametrize("mat", [pytest.param(NH, id="neo-hookean"),
+                                 pytest.param(GUCCIONE, id="guccione")])
+def test_growth_held_at_reference_compresses_fibers(rng, mat):
+    fiber = _random_fibers(rng, 6)
+    _, response = _grown(mat, FiberGrowth(1.15), fiber)
+    P, _ = response(np.broadcast_to(np.eye(3), (6, 3, 3)))
+    P_ff = np.einsum("ni,nij,nj->n", fiber, P, fiber)
+    assert np.all(P_ff < 0.0), f"P_ff = {P_ff}"
+
+
+def test_fiber_growth_tensor_matches_kinematics(rng):
+    fiber = _random_fibers(rng, 4)
+    np.testing.assert_array_equal(FiberGrowth(1.1).tensor(fiber), growth_tensor(fiber, 1.1))
+
+
+@pytest.mark.parametrize("stretch", [0.0, -1.0, float("nan")])
+def test_fiber_growth_bad_stretch(stretch):
+    with pytest.raises(ValueError, match="parameter 'stretch' must be a finite number > 0"):
+        FiberGrowth(stretch)
