@@ -620,6 +620,7 @@ class ActiveContraction:
     beta: float = 4.75
     l0: float = 1.58
     lr: float = 2.04
+    needs_fibers: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         _check("t_max", self.t_max, allow_zero=True)
@@ -792,6 +793,7 @@ class FiberGrowth:
     """
 
     stretch: float
+    needs_fibers: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         _check("stretch", self.stretch)
