@@ -1,0 +1,429 @@
+"""Wrap-safe interpolation of harmonic phase and its gradient at arbitrary points.
+
+Wrapped phase cannot be interpolated directly: across the jump from π to -π a spline or a
+linear interpolant produces values anywhere in between. :class:`PhaseSampler` interpolates
+the complex harmonic image instead, after removing the known tag carrier, so everything it
+interpolates is smooth:
+
+1. Per tag ``t`` with wave vector :math:`k_t = 2\\pi f_t d_t` (rad/mm), form the harmonic image
+   :math:`H = |H| e^{i\\varphi}` from ``magnitude`` and ``phase`` and demodulate it,
+   :math:`D = H e^{-i k_t \\cdot x}`. At the reference frame :math:`D \\approx |H|`; later
+   :math:`D \\approx |H| e^{-i k_t \\cdot u}` varies as slowly as the displacement ``u``.
+2. Prefilter the real and imaginary parts of ``D`` once per frame into cubic B-spline
+   coefficients (:func:`scipy.ndimage.spline_filter`, mirror boundaries).
+3. At the points, evaluate the spline and its exact derivative with one shared set of tap
+   weights for all tags, and remodulate:
+
+   .. math::
+
+       \\varphi = W(\\arg D + k_t \\cdot x), \\qquad
+       \\nabla \\varphi = k_t + \\frac{\\operatorname{Im}(\\bar D \\, \\nabla D)}{|D|^2}
+       = \\frac{\\operatorname{Im}(\\bar H \\, \\nabla H)}{|H|^2},
+
+   with :math:`W(a) = \\operatorname{angle}(e^{ia}) \\in [-\\pi, \\pi)` (REFERENCES §4.3).
+
+No wrapped difference ever enters the interpolation, so points straddling a phase wrap are
+as accurate as any other. Everything is vectorised over points; the Python loop runs over
+chunks of a few thousand points, sorted by voxel for memory locality.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from numpy.lib.stride_tricks import as_strided
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+
+from harpx.errors import SchemaError
+from harpx.schema import AXES, GRID_DIMS
+
+__all__ = ["PhaseSampler", "reference_phase", "wrap"]
+
+_TWO_PI = 2.0 * np.pi
+# Points this close (in voxels) beyond the first/last voxel centre still count as inside.
+_FOV_TOL = 1e-9
+# Voxels of smooth extension beyond the field of view before cubic prefiltering.
+_EDGE = 4
+
+
+def wrap(a: ArrayLike) -> NDArray[np.float64]:
+    """Wrap angles to [-π, π): :math:`W(a) = \\operatorname{angle}(e^{ia})`.
+
+    Parameters
+    ----------
+    a : array_like
+        Angles in rad.
+
+    Returns
+    -------
+    numpy.ndarray
+        Wrapped angles in rad, in [-π, π) (π itself maps to -π).
+
+    Examples
+    --------
+    >>> wrap([np.pi, -np.pi, 3 * np.pi / 2]).tolist() == [-np.pi, -np.pi, -np.pi / 2]
+    True
+    """
+    out = np.mod(np.asarray(a, dtype=np.float64) + np.pi, _TWO_PI) - np.pi
+    # np.mod of a tiny negative number can round up to exactly 2π
+    return np.where(out >= np.pi, out - _TWO_PI, out)
+
+
+class PhaseSampler:
+    """Phase, phase gradient and magnitude of one frame of a ``phase/1`` dataset at points.
+
+    Parameters
+    ----------
+    phase_ds : xarray.Dataset
+        A ``phase/1`` dataset (``phase``, ``magnitude`` (tag, time, z, y, x), coordinates
+        ``tag_direction``, ``tag_frequency``, ``z``, ``y``, ``x``; optional ``mask``). Only
+        its structure is checked here (cheaply); run :func:`harpx.schema.validate` once
+        upstream. The selected frame is loaded into memory (computed if dask-backed).
+    time_index : int
+        Frame to sample (index along ``time``; negative values count from the end).
+    order : {3, 1}, default 3
+        B-spline order: 3 (cubic, default) or 1 (trilinear).
+    magnitude_floor : float, default 0.05
+        A point is valid only where every tag's harmonic magnitude is at least this fraction
+        of that tag's robust maximum (99th percentile over the frame, inside the mask if
+        there is one). Dimensionless.
+    chunk_size : int, default 4096
+        Points evaluated per vectorised batch (memory ~ 2 kB per point).
+
+    Raises
+    ------
+    SchemaError
+        If the dataset lacks a variable or coordinate the sampler needs.
+    IndexError
+        If ``time_index`` is out of range.
+    ValueError
+        If ``order`` is not 1 or 3.
+
+    Notes
+    -----
+    The field of view is the box spanned by the first and last voxel centres along every
+    grid axis with more than one sample. A grid axis with a single sample (a single slice)
+    is treated as invariant: the coordinate of a point along it is ignored, and so is the
+    tag wave vector's component along it (the phase gradient component there is 0).
+
+    Cost: one spline prefilter per tag at construction; per point ``(order+1)**d`` taps
+    shared by all tags (``d`` grid axes with more than one sample). Measured on a 2-core
+    machine for 10**6 random points: about 2.3 s for 3 tags on a 13 × 320 × 320 grid
+    (construction 1.4 s) and about 0.7 s for 2 tags on one 320 × 320 slice.
+
+    Examples
+    --------
+    >>> x = np.arange(16.0)
+    >>> ds = xr.Dataset(
+    ...     {"phase": (("tag", "time", "z", "y", "x"),
+    ...                wrap(2 * np.pi / 8 * x)[None, None, None, None, :].repeat(16, 3)),
+    ...      "magnitude": (("tag", "time", "z", "y", "x"), np.ones((1, 1, 1, 16, 16)))},
+    ...     coords={"tag": ["x"], "axis": ["x", "y", "z"], "x": x, "y": x, "z": [0.0],
+    ...             "tag_direction": (("tag", "axis"), [[1.0, 0.0, 0.0]]),
+    ...             "tag_frequency": ("tag", [1 / 8])})
+    >>> phi, grad, valid = PhaseSampler(ds, 0).sample(np.array([[7.9, 5.0, 0.0]]))
+    >>> round(float(phi[0, 0]), 6) == round(float(wrap(2 * np.pi / 8 * 7.9)[()]), 6)
+    True
+    >>> np.round(grad[0, 0], 6).tolist(), bool(valid[0])
+    ([0.785398, 0.0, 0.0], True)
+    """
+
+    def __init__(
+        self,
+        phase_ds: xr.Dataset,
+        time_index: int,
+        *,
+        order: int = 3,
+        magnitude_floor: float = 0.05,
+        chunk_size: int = 4096,
+    ) -> None:
+        if order not in (1, 3):
+            raise ValueError(f"order={order!r} is not supported; use 3 (cubic) or 1 (linear)")
+        _check_structure(phase_ds)
+        ntime = phase_ds.sizes["time"]
+        if not -ntime <= int(time_index) < ntime:
+            raise IndexError(f"time_index={time_index!r} is out of range for {ntime} frames")
+        self.order = order
+        self.chunk_size = int(chunk_size)
+        self.time_index = int(time_index) % ntime
+        self.tags: list[str] = [str(t) for t in phase_ds["tag"].values]
+        direction = np.asarray(phase_ds["tag_direction"].transpose("tag", "axis").values, float)
+        frequency = np.asarray(phase_ds["tag_frequency"].values, float)
+        #: Tag wave vectors k_t = 2π f_t d_t, shape (ntag, 3), columns (x, y, z), rad/mm.
+        self.wavevectors: NDArray[np.float64] = _TWO_PI * frequency[:, None] * direction
+
+        frame = phase_ds.isel(time=self.time_index)
+        phase = np.asarray(frame["phase"].transpose("tag", *GRID_DIMS).values, np.float64)
+        magnitude = np.asarray(frame["magnitude"].transpose("tag", *GRID_DIMS).values, np.float64)
+        grid = [np.asarray(phase_ds[d].values, np.float64) for d in GRID_DIMS]
+        shape = phase.shape[1:]
+        # grid axes (0=z, 1=y, 2=x) that vary; the others are invariant (single slice)
+        self._active = [a for a in range(3) if shape[a] > 1]
+        if not self._active:
+            raise SchemaError("the phase grid has a single voxel; cannot interpolate")
+        self._origin = np.array([grid[a][0] for a in self._active])
+        self._spacing = np.array(
+            [(grid[a][-1] - grid[a][0]) / (shape[a] - 1) for a in self._active]
+        )
+        self._shape = np.array([shape[a] for a in self._active])
+        # point columns (x, y, z) of the active grid axes
+        self._columns = np.array([AXES.index(GRID_DIMS[a]) for a in self._active])
+        #: Names of the axes along which the field varies, in point-column names.
+        self.active_axes: tuple[str, ...] = tuple(GRID_DIMS[a] for a in self._active)
+        self._k_active = self.wavevectors[:, self._columns]  # (ntag, d)
+        # remodulation uses the slice position along invariant axes
+        self._fixed = np.zeros(3)
+        for a in range(3):
+            if a not in self._active:
+                self._fixed[AXES.index(GRID_DIMS[a])] = grid[a][0]
+
+        carrier = sum(
+            self.wavevectors[:, AXES.index(d), None, None, None]
+            * grid[g].reshape([-1 if i == g else 1 for i in range(3)])
+            for g, d in enumerate(GRID_DIMS)
+        )
+        demod = magnitude * np.exp(1j * (phase - carrier))
+        squeeze = tuple(a + 1 for a in range(3) if a not in self._active)
+        demod = demod.squeeze(axis=squeeze) if squeeze else demod
+        # Extend D by odd reflection (2 D[0] - D[k]), which keeps value and slope continuous
+        # at the border, before prefiltering: the spline's own mirror boundary (a slope
+        # discontinuity) then sits `edge` voxels outside the field of view, where its error
+        # has decayed by 0.268**edge.
+        edge = _EDGE if order == 3 else 0
+        self._edge = np.minimum(edge, self._shape - 1)
+        demod = np.pad(
+            demod,
+            [(0, 0)] + [(int(e), int(e)) for e in self._edge],
+            mode="reflect",
+            reflect_type="odd",
+        )
+        coefficients = [
+            ndimage.spline_filter(image, order=3, mode="mirror", output=np.complex128)
+            if order == 3
+            else image
+            for image in demod
+        ]
+        ntag = len(self.tags)
+        stacked = np.stack([c.real for c in coefficients] + [c.imag for c in coefficients], -1)
+        pad = [(1, 1)] * len(self._active) + [(0, 0)]
+        self._padded = np.ascontiguousarray(np.pad(stacked, pad, mode="reflect"))
+        self._ntag = ntag
+
+        mask = None
+        if "mask" in phase_ds.variables:
+            mask = np.asarray(phase_ds["mask"].transpose("tag", *GRID_DIMS).values, bool)
+            mask = mask.squeeze(axis=squeeze) if squeeze else mask
+        self._mask = mask
+        self._floor = np.zeros(ntag)
+        for t in range(ntag):
+            mag = magnitude[t].squeeze(axis=tuple(a - 1 for a in squeeze))
+            values = mag[mask[t]] if mask is not None and mask[t].any() else mag.ravel()
+            self._floor[t] = magnitude_floor * np.percentile(values, 99) if values.size else 0.0
+
+    # ------------------------------------------------------------------------------------
+    def sample(
+        self, points: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+        """Phase and phase gradient of every tag at physical points.
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            Positions in mm, columns (x, y, z).
+
+        Returns
+        -------
+        phi : numpy.ndarray, shape (n, ntag)
+            Wrapped harmonic phase in rad, in [-π, π).
+        grad : numpy.ndarray, shape (n, ntag, 3)
+            Spatial phase gradient in rad/mm, columns (x, y, z).
+        valid : numpy.ndarray of bool, shape (n,)
+            Inside the field of view, inside every tag's mask (if any) and above the
+            magnitude floor for every tag. Invalid points get ``phi = 0`` and ``grad = 0``.
+        """
+        pts = _as_points(points)
+        demod, deriv, valid = self._evaluate(pts, derivatives=True)
+        phi = self._remodulate(pts, demod)
+        grad = np.zeros((pts.shape[0], self._ntag, 3))
+        power = np.abs(demod) ** 2
+        safe = np.where(power > 0, power, 1.0)
+        for j, column in enumerate(self._columns):
+            grad[:, :, column] = self._k_active[:, j] + (
+                np.imag(np.conj(demod) * deriv[:, j]) / safe
+            )
+        phi[~valid] = 0.0
+        grad[~valid] = 0.0
+        return phi, grad, valid
+
+    def phase(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """Phase only (cheaper than :meth:`sample`): ``(phi (n, ntag), valid (n,))``."""
+        pts = _as_points(points)
+        demod, _, valid = self._evaluate(pts, derivatives=False)
+        phi = self._remodulate(pts, demod)
+        phi[~valid] = 0.0
+        return phi, valid
+
+    def magnitude(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """Harmonic magnitude ``|H|`` of every tag: ``(magnitude (n, ntag), valid (n,))``.
+
+        Unlike :meth:`sample`, points below the magnitude floor keep their magnitude (they
+        are still reported invalid); points outside the field of view get 0.
+        """
+        pts = _as_points(points)
+        demod, _, valid = self._evaluate(pts, derivatives=False)
+        return np.abs(demod), valid
+
+    # ------------------------------------------------------------------------------------
+    def _remodulate(self, pts: NDArray[np.float64], demod: NDArray[np.complex128]) -> Any:
+        position = pts.copy()
+        invariant = [c for c in range(3) if c not in self._columns]
+        position[:, invariant] = self._fixed[invariant]
+        return wrap(np.angle(demod) + position @ self.wavevectors.T)
+
+    def _evaluate(
+        self, pts: NDArray[np.float64], *, derivatives: bool
+    ) -> tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.bool_]]:
+        n = pts.shape[0]
+        d = len(self._active)
+        ntag = self._ntag
+        u = (pts[:, self._columns] - self._origin) / self._spacing  # (n, d) in voxels
+        inside = np.all(np.isfinite(u), axis=1)
+        inside &= np.all((u >= -_FOV_TOL) & (u <= self._shape - 1 + _FOV_TOL), axis=1)
+        u = np.clip(np.where(inside[:, None], u, 0.0), 0.0, self._shape - 1)
+        if self._mask is not None and inside.any():
+            nearest = tuple(np.rint(u[inside]).astype(np.int64).T)
+            inside[inside] = np.all(self._mask[(slice(None), *nearest)], axis=0)
+        nq = 1 + d if derivatives else 1
+        if inside.all():
+            values = self._spline(u, nq)
+        else:
+            values = np.zeros((n, nq, 2 * ntag))
+            index = np.flatnonzero(inside)
+            if index.size:
+                values[index] = self._spline(u[index], nq)
+        demod = values[:, 0, :ntag] + 1j * values[:, 0, ntag:]
+        deriv = (values[:, 1:, :ntag] + 1j * values[:, 1:, ntag:]) / self._spacing[: nq - 1, None]
+        size = np.abs(demod)
+        valid = inside & np.all((size >= self._floor) & (size > 0), axis=1)
+        return demod, deriv, valid
+
+    def _spline(self, u: NDArray[np.float64], nq: int) -> NDArray[np.float64]:
+        """Spline value (q=0) and derivatives along each active axis (q=1..d) at ``u``."""
+        taps = self.order + 1
+        d = u.shape[1]
+        padded = self._padded
+        pshape = padded.shape[:-1]
+        nf = padded.shape[-1]
+        flat = padded.reshape(-1, nf)
+        # rows of `taps` consecutive samples along the last (contiguous) axis: one gather
+        # fetches a whole run of taps for all tags
+        runs = as_strided(
+            flat,
+            shape=(flat.shape[0] - taps + 1, taps, nf),
+            strides=(flat.strides[0], flat.strides[0], flat.strides[1]),
+            writeable=False,
+        )
+        strides = np.cumprod((*pshape[1:], 1)[::-1])[::-1]  # element strides of the grid
+        offsets = np.zeros(1, dtype=np.int64)
+        for a in range(d - 1):
+            offsets = (offsets[:, None] + strides[a] * np.arange(taps)).ravel()
+        # padded index of the first tap: cubic taps i-1..i+2, linear taps i..i+1 (pad of 1)
+        start = 0 if self.order == 3 else 1
+        u = u + self._edge  # index in the extended grid
+        base_index = np.clip(np.floor(u).astype(np.int64), 0, self._shape + 2 * self._edge - 2)
+        frac = u - base_index
+        # sort by voxel so gathers walk memory in order
+        linear = (base_index + start) @ strides[:d]
+        order = np.argsort(linear, kind="stable")
+        out = np.empty((u.shape[0], nq, nf))
+        for s in range(0, u.shape[0], self.chunk_size):
+            chunk = order[s : s + self.chunk_size]
+            weights = [_weights(frac[chunk, a], self.order) for a in range(d)]  # (m, 2, taps)
+            gathered = runs[linear[chunk, None] + offsets]  # (m, taps**(d-1), taps, nf)
+            gathered = gathered.reshape(chunk.size, taps**d, nf)
+            tensor = _tensor_weights(weights, nq)  # (m, nq, taps**d)
+            out[chunk] = tensor @ gathered
+        return out
+
+
+def _weights(t: NDArray[np.float64], order: int) -> NDArray[np.float64]:
+    """B-spline tap weights (row 0) and their derivatives (row 1) at fractions ``t``."""
+    if order == 1:
+        one = np.ones_like(t)
+        return np.stack([np.stack([1 - t, t], -1), np.stack([-one, one], -1)], 1)
+    t2 = t * t
+    t3 = t2 * t
+    s = 1.0 - t
+    value = np.stack(
+        [s**3 / 6, (3 * t3 - 6 * t2 + 4) / 6, (-3 * t3 + 3 * t2 + 3 * t + 1) / 6, t3 / 6], -1
+    )
+    slope = np.stack([-(s * s) / 2, (3 * t2 - 4 * t) / 2, (-3 * t2 + 2 * t + 1) / 2, t2 / 2], -1)
+    return np.stack([value, slope], 1)
+
+
+def _tensor_weights(weights: list[NDArray[np.float64]], nq: int) -> NDArray[np.float64]:
+    """Tensor-product weights (m, nq, taps**d): q=0 value, q=j derivative along axis j-1."""
+    m = weights[0].shape[0]
+    tensor: NDArray[np.float64] | None = None
+    for a, w in enumerate(weights):
+        # per output q: derivative weights along axis a when q == a + 1, else value weights
+        select = np.array([1 if q == a + 1 else 0 for q in range(nq)])
+        factor = w[:, select]  # (m, nq, taps)
+        if tensor is None:
+            tensor = factor
+        else:
+            tensor = (tensor[..., :, None] @ factor[..., None, :]).reshape(m, nq, -1)
+    assert tensor is not None
+    return tensor
+
+
+def _as_points(points: ArrayLike) -> NDArray[np.float64]:
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"points must have shape (n, 3) with columns (x, y, z); got {pts.shape}")
+    return pts
+
+
+def _check_structure(ds: xr.Dataset) -> None:
+    problems = []
+    for name in ("phase", "magnitude"):
+        if name not in ds.variables:
+            problems.append(
+                f"missing data variable {name!r}; PhaseSampler needs a phase/1 dataset"
+            )
+        elif set(ds[name].dims) != {"tag", "time", *GRID_DIMS}:
+            problems.append(
+                f"{name!r} has dims {ds[name].dims}; expected ('tag', 'time', 'z', 'y', 'x')"
+            )
+    for name in ("tag_direction", "tag_frequency", *GRID_DIMS):
+        if name not in ds.variables:
+            problems.append(f"missing coordinate {name!r}; PhaseSampler needs a phase/1 dataset")
+    if problems:
+        raise SchemaError(problems)
+
+
+def reference_phase(
+    phase_ds: xr.Dataset, points: ArrayLike, **kwargs: Any
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Phase of every tag at reference positions (time index 0): φ0(X).
+
+    Parameters
+    ----------
+    phase_ds : xarray.Dataset
+        A ``phase/1`` dataset.
+    points : array_like, shape (n, 3)
+        Reference positions X in mm, columns (x, y, z).
+    **kwargs
+        Passed to :class:`PhaseSampler` (``order``, ``magnitude_floor``, ``chunk_size``).
+
+    Returns
+    -------
+    phi0 : numpy.ndarray, shape (n, ntag)
+        Wrapped phase in rad (0 where invalid).
+    valid : numpy.ndarray of bool, shape (n,)
+        See :meth:`PhaseSampler.sample`.
+    """
+    return PhaseSampler(phase_ds, 0, **kwargs).phase(points)
