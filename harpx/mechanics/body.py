@@ -1,0 +1,496 @@
+"""A deformable body: mesh, element, material, fibres, regions and quadrature data.
+
+:class:`Body` ties a scikit-fem hexahedral mesh to a material and precomputes everything the
+vectorised assembly (:mod:`harpx.mechanics.assembly`) needs: reference gradients of the shape
+functions at every quadrature point, quadrature weights, element-to-dof maps, per-point fibre
+directions, active-stress levels and growth tensors.
+
+Degrees of freedom: scalar dof ``n`` of the scalar element (mesh vertices first, then, for
+hex20, one node per mesh edge) carries the displacement components ``3n, 3n+1, 3n+2``
+(x, y, z). This is the ordering of ``skfem.ElementVector`` on the same mesh (``body.basis``).
+Units: mm, kPa.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Mapping, Sequence
+from typing import Any, Literal
+
+import meshio
+import numpy as np
+import skfem
+from numpy.typing import ArrayLike
+from scipy import sparse
+from skfem.io.meshio import HEX_MAPPING
+
+from harpx._typing import FloatArray, IntArray
+from harpx.mechanics import kinematics
+from harpx.mechanics.mesh import MeshSpec
+
+__all__ = ["Body", "ELEMENTS"]
+
+#: element name -> (scalar skfem element factory, quadrature order giving the Gauss rule)
+ELEMENTS: dict[str, tuple[Any, int, int]] = {
+    "hex8": (skfem.ElementHex1, 3, 8),  # 2x2x2 Gauss
+    "hex20": (skfem.ElementHexS2, 5, 27),  # 3x3x3 Gauss
+}
+
+# VTK hexahedron20 edges as pairs of VTK corner ids.
+_VTK_EDGES = np.array(
+    [[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4],
+     [0, 4], [1, 5], [2, 6], [3, 7]]
+)  # fmt: skip
+
+
+def _read_mesh(path: str | os.PathLike[str]) -> tuple[skfem.MeshHex1, FloatArray | None]:
+    """Read a hexahedral mesh (meshio ``hexahedron`` or ``hexahedron20``) and cell fibres."""
+    m = meshio.read(path)
+    kinds = m.cells_dict
+    if "hexahedron" not in kinds and "hexahedron20" not in kinds:
+        raise ValueError(
+            f"mesh file {os.fspath(path)!r} has cells {sorted(kinds)!r}; "
+            "expected 'hexahedron' or 'hexahedron20' cells"
+        )
+    fibers = None
+    if "hexahedron20" in kinds and "hexahedron" not in kinds:
+        # straight-edged geometry from the corners; the edge nodes become element dofs again
+        k = [i for i, c in enumerate(m.cells) if c.type == "hexahedron20"][0]
+        corners = m.cells[k].data[:, :8]
+        used, inv = np.unique(corners, return_inverse=True)
+        cell_data = {name: [np.asarray(v[k])] for name, v in m.cell_data.items()}
+        m = meshio.Mesh(m.points[used], [("hexahedron", inv.reshape(-1, 8))], cell_data=cell_data)
+    if "fiber" in m.cell_data:
+        k = [i for i, c in enumerate(m.cells) if c.type == "hexahedron"][0]
+        fibers = np.asarray(m.cell_data["fiber"][k], dtype=np.float64)
+    mesh = skfem.io.meshio.from_meshio(m)
+    return mesh, fibers
+
+
+class Body:
+    """A hyperelastic body discretised with hexahedral finite elements.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshHex1, MeshSpec or path
+        The reference configuration (mm): a scikit-fem hexahedral mesh, a
+        :class:`~harpx.mechanics.mesh.MeshSpec` from the builders in
+        :mod:`harpx.mechanics.mesh`, or a file meshio can read (``hexahedron`` or
+        ``hexahedron20`` cells; cell data ``fiber`` becomes the fibres).
+    material : object
+        Material with ``isochoric_response(F, fiber)``, ``volumetric(J)``, ``kappa`` and
+        ``needs_fibers`` (e.g. :class:`~harpx.mechanics.materials.NeoHookean`).
+    fibers : array_like, shape (ncell, 3) or (ncell, nqp, 3), optional
+        Reference fibre directions, normalised here. Needed by fibre materials, active
+        contraction and fibre growth.
+    regions : dict of str to array of int, optional
+        Named cell sets. Defaults to the mesh's regions/subdomains or ``{"body": all}``.
+    element : {"hex8", "hex20"}, default "hex8"
+        Trilinear hexahedron with 2x2x2 Gauss points, or 20-node serendipity hexahedron
+        with 3x3x3 Gauss points.
+    active : ActiveContraction, optional
+        Active fibre stress law (``response(F, fiber, t_max)``).
+    t_max : float or dict of str to float, optional
+        Activation level in kPa: a scalar, or per region (cells outside every named
+        region get 0). Defaults to ``active.t_max``.
+    growth : FiberGrowth or array_like of shape (ncell,), optional
+        Growth along the fibres, ``F = Fe Fg`` with ``Fg = I + (θ - 1) f0 ⊗ f0``: a uniform
+        law or one stretch θ per cell (dimensionless).
+    boundaries : dict of str to array of int, optional
+        Named facet sets (columns of ``mesh.facets``). Defaults to the mesh's boundaries.
+    volumetric : {"mean-dilatation", "pointwise"}, default "mean-dilatation"
+        Treatment of the volumetric energy: element-constant dilatation and pressure
+        (three-field, locking-free) or pointwise (plain displacement formulation; locks for
+        nearly incompressible materials).
+
+    Attributes
+    ----------
+    ndof : int
+        Number of displacement dofs (3 per dof node).
+    ncell, nqp : int
+        Number of cells and of quadrature points per cell (8 for hex8, 27 for hex20).
+    nodes : ndarray, shape (nvertex, 3)
+        Mesh vertices, mm.
+    dof_points : ndarray, shape (n_dof_nodes, 3)
+        Positions of all dof nodes (vertices, then edge midpoints for hex20), mm.
+    node_dofs : ndarray, shape (n_dof_nodes, 3)
+        Dof ids of the x, y, z displacement of each dof node.
+    cells : ndarray, shape (ncell, 8) or (ncell, 20)
+        Dof-node ids per cell in VTK/meshio ``hexahedron``/``hexahedron20`` order.
+    element_dofs : ndarray, shape (ncell, nbasis, 3)
+        Dof ids per cell, basis function and component (assembly order).
+    grad_N : ndarray, shape (ncell, nqp, nbasis, 3)
+        Reference gradients ``dN_a/dX_J`` (1/mm).
+    dV : ndarray, shape (ncell, nqp)
+        Reference volume of each quadrature point, mm³.
+    cell_volume : ndarray, shape (ncell,)
+        Reference cell volumes, mm³.
+    fibers_qp : ndarray, shape (ncell, nqp, 3) or None
+        Unit fibres at the quadrature points.
+    t_max : ndarray, shape (ncell,) or None
+        Active-stress level per cell, kPa.
+    growth_tensor : ndarray, shape (ncell, nqp, 3, 3) or None
+        ``Fg`` at the quadrature points.
+    growth_jacobian : ndarray, shape (ncell,) or None
+        Volume average of ``det Fg`` per cell.
+
+    Examples
+    --------
+    >>> from harpx.mechanics.body import Body
+    >>> from harpx.mechanics.mesh import box
+    >>> from harpx.mechanics.materials import NeoHookean
+    >>> body = Body(box((1.0, 1.0, 1.0), (2, 2, 2)), NeoHookean(c1=1.0, kappa=120.0))
+    >>> body.ndof, body.nqp, float(body.cell_volume.sum())
+    (81, 8, 1.0)
+    """
+
+    def __init__(
+        self,
+        mesh: Any,
+        material: Any,
+        *,
+        fibers: ArrayLike | None = None,
+        regions: Mapping[str, ArrayLike] | None = None,
+        element: Literal["hex8", "hex20"] = "hex8",
+        active: Any = None,
+        t_max: float | Mapping[str, float] | None = None,
+        growth: Any = None,
+        boundaries: Mapping[str, ArrayLike] | None = None,
+        volumetric: Literal["mean-dilatation", "pointwise"] = "mean-dilatation",
+    ) -> None:
+        spec_regions: Mapping[str, ArrayLike] = {}
+        spec_boundaries: Mapping[str, ArrayLike] = {}
+        if isinstance(mesh, MeshSpec):
+            spec_regions, spec_boundaries = mesh.regions, mesh.boundaries
+            if fibers is None:
+                fibers = mesh.fibers
+            mesh = mesh.mesh
+        elif isinstance(mesh, str | os.PathLike):
+            mesh, file_fibers = _read_mesh(mesh)
+            if fibers is None:
+                fibers = file_fibers
+        if not isinstance(mesh, skfem.MeshHex1):
+            raise TypeError(
+                f"mesh must be a skfem.MeshHex1, a MeshSpec or a mesh file path, got "
+                f"{type(mesh).__name__!r}; build one with harpx.mechanics.mesh.box/cylinder"
+            )
+        if element not in ELEMENTS:
+            raise ValueError(f"element={element!r} is not one of {sorted(ELEMENTS)!r}")
+        if volumetric not in ("mean-dilatation", "pointwise"):
+            raise ValueError(
+                f"volumetric={volumetric!r} must be 'mean-dilatation' or 'pointwise'"
+            )
+        self.mesh = mesh
+        self.material = material
+        self.element = element
+        self.volumetric = volumetric
+        self.active = active
+        self.ncell = int(mesh.nelements)
+
+        factory, intorder, nqp = ELEMENTS[element]
+        self._scalar_element = factory()
+        self._intorder = intorder
+        sb = skfem.CellBasis(mesh, self._scalar_element, intorder=intorder)
+        if sb.X.shape[1] != nqp:  # pragma: no cover - guards the Gauss rule choice
+            raise RuntimeError(f"expected {nqp} quadrature points, skfem gave {sb.X.shape[1]}")
+        self.scalar_basis = sb
+        self.nqp = nqp
+        self.nbasis = int(sb.Nbfun)
+        grads = np.stack([sb.basis[j][0].grad for j in range(self.nbasis)])  # (nb,3,nel,nq)
+        self.grad_N: FloatArray = np.ascontiguousarray(grads.transpose(2, 3, 0, 1))
+        self.dV: FloatArray = np.ascontiguousarray(sb.dx)
+        self.cell_volume: FloatArray = self.dV.sum(axis=1)
+        self._N_values = np.stack([np.asarray(sb.basis[j][0])[0] for j in range(self.nbasis)])  # (nb,nq)
+        cell_sdofs = np.ascontiguousarray(sb.element_dofs.T.astype(np.int64))  # (nel, nb)
+        self.cell_scalar_dofs: IntArray = cell_sdofs
+        self.element_dofs: IntArray = 3 * cell_sdofs[:, :, None] + np.arange(3)
+        self.n_dof_nodes = int(sb.N)
+        self.ndof = 3 * self.n_dof_nodes
+        self.nodes: FloatArray = np.ascontiguousarray(mesh.p.T)
+        self.dof_points: FloatArray = np.ascontiguousarray(sb.doflocs.T)
+        self.node_dofs: IntArray = 3 * np.arange(self.n_dof_nodes)[:, None] + np.arange(3)
+        self.cells: IntArray = self._vtk_cells()
+
+        # regions and boundaries
+        if regions is None:
+            regions = spec_regions or (mesh.subdomains or {})
+        self.regions: dict[str, IntArray] = {
+            k: np.asarray(v, dtype=np.int64) for k, v in regions.items()
+        } or {"body": np.arange(self.ncell)}
+        for name, ids in self.regions.items():
+            if ids.size and (ids.min() < 0 or ids.max() >= self.ncell):
+                raise ValueError(
+                    f"region {name!r} has cell ids outside [0, {self.ncell}); check the mesh"
+                )
+        if boundaries is None:
+            boundaries = spec_boundaries or (mesh.boundaries or {})
+        self.boundaries: dict[str, IntArray] = {
+            k: np.asarray(v, dtype=np.int64) for k, v in boundaries.items()
+        }
+
+        # fibres
+        self.fibers: FloatArray | None = None
+        self.fibers_qp: FloatArray | None = None
+        if fibers is not None:
+            f = kinematics.unit_fibers(fibers)
+            if f.shape == (self.ncell, 3):
+                fq = np.broadcast_to(f[:, None, :], (self.ncell, nqp, 3))
+            elif f.shape == (self.ncell, nqp, 3):
+                fq = f
+            else:
+                raise ValueError(
+                    f"fibers has shape {f.shape!r}; expected ({self.ncell}, 3) per cell or "
+                    f"({self.ncell}, {nqp}, 3) per quadrature point"
+                )
+            self.fibers = f
+            self.fibers_qp = np.ascontiguousarray(fq)
+        needs = bool(getattr(material, "needs_fibers", False))
+        for what, needed in (
+            (f"material {type(material).__name__}", needs),
+            ("active contraction", active is not None),
+            ("fibre growth", growth is not None),
+        ):
+            if needed and self.fibers_qp is None:
+                raise ValueError(
+                    f"{what} needs 'fibers' but none were given; pass fibers=(ncell, 3) "
+                    "unit vectors (or use a mesh builder that provides them)"
+                )
+
+        # active stress level per cell
+        self.t_max: FloatArray | None = None
+        if active is not None:
+            self.set_t_max(getattr(active, "t_max", 0.0) if t_max is None else t_max)
+        elif t_max is not None:
+            raise ValueError("t_max was given without an active contraction law (active=None)")
+
+        # growth
+        self.growth = growth
+        self.growth_tensor: FloatArray | None = None
+        self.growth_jacobian: FloatArray | None = None
+        if growth is not None:
+            assert self.fibers_qp is not None
+            if hasattr(growth, "tensor"):
+                Fg = np.asarray(growth.tensor(self.fibers_qp), dtype=np.float64)
+                Fg = np.broadcast_to(Fg, (self.ncell, nqp, 3, 3))
+            else:
+                theta = np.asarray(growth, dtype=np.float64)
+                if theta.shape != (self.ncell,) or np.any(theta <= 0):
+                    raise ValueError(
+                        f"growth stretch array has shape {theta.shape!r}; expected "
+                        f"({self.ncell},) positive values, or a FiberGrowth"
+                    )
+                Fg = kinematics.growth_tensor(self.fibers_qp, theta[:, None])
+            self.growth_tensor = np.ascontiguousarray(Fg)
+            Jg = np.linalg.det(self.growth_tensor)
+            self.growth_jacobian = (Jg * self.dV).sum(axis=1) / self.cell_volume
+
+    # ------------------------------------------------------------------ set-up helpers
+    def set_t_max(self, t_max: float | Mapping[str, float] | ArrayLike) -> None:
+        """Set the active-stress level.
+
+        Parameters
+        ----------
+        t_max : float, dict of str to float, or array_like of shape (ncell,)
+            Activation in kPa: uniform, per region (other cells 0), or per cell.
+        """
+        if self.active is None:
+            raise ValueError("this body has no active contraction law; pass active=... to Body")
+        if isinstance(t_max, Mapping):
+            values = np.zeros(self.ncell)
+            for name, value in t_max.items():
+                if name not in self.regions:
+                    raise ValueError(
+                        f"t_max names region {name!r}, which is not one of "
+                        f"{sorted(self.regions)!r}"
+                    )
+                values[self.regions[name]] = float(value)
+        else:
+            values = np.broadcast_to(np.asarray(t_max, dtype=np.float64), (self.ncell,)).copy()
+        self.t_max = values
+
+    def _vtk_cells(self) -> IntArray:
+        corners = self.mesh.t.T[:, HEX_MAPPING[:8]].astype(np.int64)  # VTK corner order
+        if self.element == "hex8":
+            return corners
+        # match each VTK edge midpoint to the element's edge dofs by position
+        edge_dofs = self.cell_scalar_dofs[:, 8:]  # (nel, 12)
+        pos = self.dof_points[edge_dofs]  # (nel, 12, 3)
+        mid = 0.5 * (self.nodes[corners[:, _VTK_EDGES[:, 0]]] + self.nodes[corners[:, _VTK_EDGES[:, 1]]])
+        d = np.linalg.norm(mid[:, :, None, :] - pos[:, None, :, :], axis=-1)
+        order = np.argmin(d, axis=2)
+        edges = np.take_along_axis(edge_dofs, order, axis=1)
+        return np.concatenate([corners, edges], axis=1)
+
+    @functools.cached_property
+    def basis(self) -> skfem.CellBasis:
+        """``skfem.CellBasis`` of ``ElementVector`` on the body's Gauss rule (built on demand)."""
+        return skfem.CellBasis(
+            self.mesh, skfem.ElementVector(self._scalar_element), intorder=self._intorder
+        )
+
+    @property
+    def quadrature_points(self) -> FloatArray:
+        """Reference positions of the quadrature points, shape (ncell, nqp, 3), mm."""
+        return np.ascontiguousarray(np.asarray(self.scalar_basis.global_coordinates()).transpose(1, 2, 0))
+
+    # ------------------------------------------------------------------ field helpers
+    def _check_u(self, u: ArrayLike) -> FloatArray:
+        u = np.asarray(u, dtype=np.float64)
+        if u.shape != (self.ndof,):
+            raise ValueError(f"u has shape {u.shape!r}; expected ({self.ndof},) dofs")
+        return u
+
+    def nodal_displacement(self, u: ArrayLike) -> FloatArray:
+        """Displacement of every dof node, shape (n_dof_nodes, 3), mm."""
+        return self._check_u(u).reshape(-1, 3)
+
+    def facet_dofs(
+        self, name: str | ArrayLike, components: Sequence[int] = (0, 1, 2)
+    ) -> IntArray:
+        """Dof ids on a named boundary (or on given facet ids).
+
+        Parameters
+        ----------
+        name : str or array_like of int
+            Boundary name from ``body.boundaries`` or facet ids.
+        components : sequence of int, default (0, 1, 2)
+            Displacement components (0 = x, 1 = y, 2 = z).
+
+        Returns
+        -------
+        ndarray of int
+            Sorted dof ids.
+        """
+        facets = self.facets(name)
+        sd = np.unique(self.scalar_basis.get_dofs(facets=facets).all())
+        comps = np.asarray(components, dtype=np.int64)
+        if comps.size == 0 or comps.min() < 0 or comps.max() > 2:
+            raise ValueError(f"components={components!r} must be a non-empty subset of (0, 1, 2)")
+        return np.sort((3 * sd[:, None] + comps[None, :]).ravel())
+
+    def facets(self, name: str | ArrayLike) -> IntArray:
+        """Facet ids of a named boundary (or the given ids, checked)."""
+        if isinstance(name, str):
+            if name not in self.boundaries:
+                raise KeyError(
+                    f"no boundary named {name!r}; this body has {sorted(self.boundaries)!r}"
+                )
+            return self.boundaries[name]
+        ids = np.asarray(name, dtype=np.int64)
+        if ids.ndim != 1 or (ids.size and (ids.min() < 0 or ids.max() >= self.mesh.facets.shape[1])):
+            raise ValueError("facet ids must be a 1-D array of valid mesh facet indices")
+        return ids
+
+    def element_displacement(self, u: ArrayLike) -> FloatArray:
+        """Displacement of each cell's dof nodes, shape (ncell, nbasis, 3), mm."""
+        return self._check_u(u)[self.element_dofs]
+
+    def deformation_gradient(self, u: ArrayLike) -> FloatArray:
+        """``F = I + Grad u`` at every quadrature point, shape (ncell, nqp, 3, 3)."""
+        ue = self.element_displacement(u)
+        F = np.einsum("eai,eqaJ->eqiJ", ue, self.grad_N, optimize=True)
+        F += np.eye(3)
+        return F
+
+    def jacobian(self, u: ArrayLike) -> FloatArray:
+        """``J = det F`` at every quadrature point, shape (ncell, nqp)."""
+        return np.linalg.det(self.deformation_gradient(u))
+
+    def _cell_average(self, q: FloatArray) -> FloatArray:
+        w = self.dV / self.cell_volume[:, None]
+        return np.einsum("eq,eq...->e...", w, q)
+
+    def green_strain(self, u: ArrayLike) -> FloatArray:
+        """Volume-averaged Green--Lagrange strain per cell, shape (ncell, 3, 3)."""
+        return self._cell_average(kinematics.green_strain(self.deformation_gradient(u)))
+
+    def fiber_stretch(self, u: ArrayLike) -> FloatArray:
+        """Volume-averaged fibre stretch ``|F f0|`` per cell, shape (ncell,)."""
+        if self.fibers_qp is None:
+            raise ValueError("fiber_stretch needs 'fibers'; pass fibers=... to Body")
+        lam = kinematics.fiber_stretch(self.deformation_gradient(u), self.fibers_qp)
+        return self._cell_average(lam)
+
+    def interpolation_operator(
+        self, intorder: int
+    ) -> tuple[FloatArray, FloatArray, sparse.csr_matrix]:
+        """Quadrature points, weights and the displacement interpolation matrix.
+
+        Parameters
+        ----------
+        intorder : int
+            skfem integration order (polynomial degree integrated exactly); Gauss rules
+            with ``n`` points per direction have order ``2n - 1``.
+
+        Returns
+        -------
+        X_q : ndarray, shape (nq, 3)
+            Reference positions of the points, cell-major (all points of cell 0 first), mm.
+        w_q : ndarray, shape (nq,)
+            Reference volume of each point, mm³ (sums to the body volume).
+        N : scipy.sparse.csr_matrix, shape (3 nq, ndof)
+            ``(N @ u).reshape(nq, 3)`` is the displacement at ``X_q``, mm.
+        """
+        b = skfem.CellBasis(self.mesh, self._scalar_element, intorder=int(intorder))
+        npt = b.X.shape[1]
+        X_q = np.asarray(b.global_coordinates()).transpose(1, 2, 0).reshape(-1, 3)
+        w_q = np.asarray(b.dx, dtype=np.float64).ravel()
+        phi = np.stack([np.asarray(b.basis[j][0]) for j in range(self.nbasis)], axis=-1)  # (nel,nq,nb)
+        nq = self.ncell * npt
+        rows = 3 * np.arange(nq).reshape(self.ncell, npt)[:, :, None, None] + np.arange(3)[
+            None, None, None, :
+        ]
+        cols = 3 * self.cell_scalar_dofs[:, None, :, None] + np.arange(3)[None, None, None, :]
+        rows, cols = np.broadcast_arrays(rows, cols)
+        vals = np.broadcast_to(phi[..., None], rows.shape)
+        N = sparse.csr_matrix(
+            (vals.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * nq, self.ndof)
+        )
+        return np.ascontiguousarray(X_q), w_q, N
+
+    # ------------------------------------------------------------------ I/O
+    def to_meshio(
+        self, u: ArrayLike | None = None, *, point_data: Mapping[str, ArrayLike] | None = None
+    ) -> meshio.Mesh:
+        """The mesh (hexahedron cells) as a :class:`meshio.Mesh`.
+
+        Parameters
+        ----------
+        u : array_like, shape (ndof,), optional
+            Displacement (mm), written as point data ``"displacement"`` at the vertices.
+        point_data : dict, optional
+            Extra point data (one row per vertex).
+
+        Returns
+        -------
+        meshio.Mesh
+            Named boundaries and regions are encoded as skfem cell data; fibres (per cell) as
+            cell data ``"fiber"``.
+        """
+        pdata = dict(point_data or {})
+        if u is not None:
+            pdata["displacement"] = self.nodal_displacement(u)[: self.nodes.shape[0]]
+        cdata: dict[str, list[Any]] = {}
+        if self.fibers is not None and self.fibers.shape == (self.ncell, 3):
+            cdata["fiber"] = [self.fibers]
+        mesh = self.mesh
+        if self.regions or self.boundaries:
+            mesh = skfem.MeshHex1(
+                mesh.p,
+                mesh.t,
+                _boundaries={k: v.astype(np.int32) for k, v in self.boundaries.items()} or None,
+                _subdomains={k: v.astype(np.int32) for k, v in self.regions.items()} or None,
+            )
+        return skfem.io.meshio.to_meshio(mesh, point_data=pdata or None, cell_data=cdata)
+
+    @classmethod
+    def from_meshio(cls, path: str | os.PathLike[str], material: Any, **kwargs: Any) -> Body:
+        """Build a body from a mesh file (see the ``mesh`` parameter of :class:`Body`)."""
+        return cls(path, material, **kwargs)
+
+    def __repr__(self) -> str:
+        return (
+            f"Body({self.element}, ncell={self.ncell}, ndof={self.ndof}, "
+            f"material={type(self.material).__name__}, volumetric={self.volumetric!r})"
+        )

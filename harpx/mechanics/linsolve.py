@@ -1,0 +1,330 @@
+"""Sparse linear solvers for the Newton iterations, with symbolic-analysis reuse.
+
+``method``:
+
+* ``"auto"`` — PARDISO through pypardiso when it imports and solves a tiny system, else
+  SciPy's SuperLU (the pure-SciPy fallback).
+* ``"pardiso"`` — MKL PARDISO (pypardiso). Symmetric tangents use the symmetric indefinite
+  mode on the upper triangle; the symbolic analysis (ordering) is done once per sparsity
+  pattern and reused: later factorisations run PARDISO phase 23 only.
+* ``"superlu"`` — SuperLU with ``MMD_AT_PLUS_A`` ordering and symmetric mode for symmetric
+  tangents (COLAMD for non-symmetric ones).
+* ``"superlu-colamd"`` — SuperLU with its default COLAMD ordering (reference).
+* ``"umfpack"`` — UMFPACK via scikit-umfpack, if installed.
+* ``"amg-cg"`` — pyamg smoothed aggregation with the six rigid-body modes as
+  near-nullspace, as a preconditioner of CG (GMRES for non-symmetric tangents).
+"""
+
+from __future__ import annotations
+
+import copy
+import functools
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import sparse
+from scipy.sparse import linalg as spla
+
+from harpx._typing import FloatArray
+from harpx.errors import ConvergenceError
+
+__all__ = ["LinearSolver", "METHODS", "available_methods", "rigid_body_modes"]
+
+METHODS = ("auto", "pardiso", "superlu", "superlu-colamd", "umfpack", "amg-cg")
+Method = Literal["auto", "pardiso", "superlu", "superlu-colamd", "umfpack", "amg-cg"]
+
+
+@functools.cache
+def _pardiso_template() -> Any:
+    """One PyPardisoSolver per process: finding the MKL library is slow (~0.3 s)."""
+    import pypardiso
+
+    return pypardiso.PyPardisoSolver()
+
+
+def _new_pardiso(mtype: int) -> Any:
+    solver = copy.copy(_pardiso_template())
+    solver.pt = np.zeros(64, dtype=solver._pt_type[1])
+    solver.iparm = np.zeros(64, dtype=np.int32)
+    solver.perm = np.zeros(0, dtype=np.int32)
+    solver.mtype = mtype
+    return solver
+
+
+@functools.cache
+def _pardiso_works() -> bool:
+    try:
+        A = sparse.csr_matrix(np.array([[4.0, 1.0], [1.0, 3.0]]))
+        solver = _new_pardiso(11)
+        x = solver.solve(A, np.array([1.0, 2.0]))
+        solver.free_memory(everything=True)
+        return bool(np.allclose(A @ x, [1.0, 2.0]))
+    except Exception:  # noqa: BLE001 - any failure means "not usable here"
+        return False
+
+
+@functools.cache
+def _umfpack_works() -> bool:
+    try:
+        import scikits.umfpack  # noqa: F401
+    except Exception:  # noqa: BLE001
+        return False
+    return True
+
+
+def available_methods() -> list[str]:
+    """Solver methods usable on this machine."""
+    out = ["superlu", "superlu-colamd"]
+    if _pardiso_works():
+        out.insert(0, "pardiso")
+    if _umfpack_works():
+        out.append("umfpack")
+    try:
+        import pyamg  # noqa: F401
+
+        out.append("amg-cg")
+    except ImportError:  # pragma: no cover
+        pass
+    return out
+
+
+def rigid_body_modes(points: FloatArray) -> FloatArray:
+    """The six rigid-body modes at dof nodes, shape (3 n, 6) (dof order 3 n + component).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        Node positions, mm.
+    """
+    n = len(points)
+    x = points - points.mean(axis=0)
+    B = np.zeros((n, 3, 6))
+    B[:, 0, 0] = B[:, 1, 1] = B[:, 2, 2] = 1.0
+    B[:, 0, 3], B[:, 1, 3] = -x[:, 1], x[:, 0]  # about z
+    B[:, 1, 4], B[:, 2, 4] = -x[:, 2], x[:, 1]  # about x
+    B[:, 0, 5], B[:, 2, 5] = x[:, 2], -x[:, 0]  # about y
+    return B.reshape(3 * n, 6)
+
+
+class LinearSolver:
+    """Solve ``K x = b`` repeatedly for matrices on a fixed sparsity pattern.
+
+    Parameters
+    ----------
+    method : str, default "auto"
+        One of ``METHODS`` (see the module docstring).
+    rtol : float, default 1e-10
+        Relative residual tolerance of the iterative method (``"amg-cg"``).
+    maxiter : int, default 500
+        Iteration limit of the iterative method.
+
+    Attributes
+    ----------
+    method : str
+        The resolved method (``"auto"`` replaced by the choice made).
+    analyses : int
+        Number of symbolic analyses (orderings) computed so far.
+    factorizations : int
+        Number of numerical factorisations computed so far.
+    """
+
+    def __init__(self, method: str = "auto", *, rtol: float = 1e-10, maxiter: int = 500) -> None:
+        if method not in METHODS:
+            raise ValueError(f"linear_solver={method!r} is not one of {METHODS!r}")
+        if method == "auto":
+            method = "pardiso" if _pardiso_works() else "superlu"
+        elif method == "pardiso" and not _pardiso_works():
+            raise ValueError(
+                "linear_solver='pardiso' needs pypardiso with a working MKL; "
+                "install it with `pip install pypardiso` or use 'superlu'"
+            )
+        elif method == "umfpack" and not _umfpack_works():
+            raise ValueError(
+                "linear_solver='umfpack' needs scikit-umfpack; install it with "
+                "`pip install scikit-umfpack` or use 'superlu'"
+            )
+        self.method = method
+        self.rtol = float(rtol)
+        self.maxiter = int(maxiter)
+        self.analyses = 0
+        self.factorizations = 0
+        self._pardiso: Any = None
+        self._pattern_key: tuple[Any, ...] | None = None
+        self._upper: NDArray[np.int64] | None = None
+        self._upper_indptr: NDArray[np.int32] | None = None
+        self._upper_indices: NDArray[np.int32] | None = None
+        self.last_iterations = 0
+
+    # ------------------------------------------------------------------ pardiso
+    def _same_pattern(self, K: sparse.csr_matrix, symmetric: bool) -> bool:
+        if self._pattern_key is None:
+            return False
+        indptr, indices, sym = self._pattern_key
+        if sym != symmetric or indptr.shape != K.indptr.shape or indices.shape != K.indices.shape:
+            return False
+        if indptr is K.indptr and indices is K.indices:
+            return True
+        return bool(np.array_equal(indptr, K.indptr) and np.array_equal(indices, K.indices))
+
+    def close(self) -> None:
+        """Release PARDISO's internal memory (also done on garbage collection)."""
+        if getattr(self, "_pardiso", None) is not None:
+            try:
+                self._pardiso.free_memory(everything=True)
+            except Exception:  # noqa: BLE001 - best effort at shutdown
+                pass
+            self._pardiso = None
+            self._pattern_key = None
+
+    def __del__(self) -> None:
+        self.close()
+
+    def _pardiso_solve(self, K: sparse.csr_matrix, b: FloatArray, symmetric: bool) -> FloatArray:
+        mtype = -2 if symmetric else 11
+        new_pattern = not self._same_pattern(K, symmetric)
+        if new_pattern:
+            self.close()
+            self._pardiso = _new_pardiso(mtype)
+            self._pardiso.set_iparm(1, 1)  # supply iparm
+            self._pardiso.set_iparm(2, 2)  # nested-dissection ordering (METIS)
+            self._pardiso.set_iparm(8, 2)  # iterative refinement steps
+            self._pardiso.set_iparm(10, 8 if symmetric else 13)  # pivot perturbation 1e-8 / 1e-13
+            self._pardiso.set_iparm(11, 0 if symmetric else 1)  # scaling (non-symmetric)
+            self._pardiso.set_iparm(13, 0 if symmetric else 1)  # weighted matching
+            self._pardiso.set_iparm(28, 0)
+            self._pardiso.set_iparm(35, 1)  # zero-based indexing
+            if symmetric:
+                rows = np.repeat(np.arange(K.shape[0]), np.diff(K.indptr))
+                upper = np.nonzero(K.indices >= rows)[0]
+                self._upper = upper
+                self._upper_indices = K.indices[upper].astype(np.int32)
+                counts = np.bincount(rows[upper], minlength=K.shape[0])
+                ip = np.zeros(K.shape[0] + 1, dtype=np.int32)
+                np.cumsum(counts, out=ip[1:])
+                self._upper_indptr = ip
+            self._pattern_key = (K.indptr, K.indices, symmetric)
+        if symmetric:
+            assert self._upper is not None
+            data = np.ascontiguousarray(K.data[self._upper])
+            indptr, indices = self._upper_indptr, self._upper_indices
+        else:
+            data = np.ascontiguousarray(K.data)
+            indptr, indices = K.indptr.astype(np.int32), K.indices.astype(np.int32)
+        solver = self._pardiso
+        solver.set_phase(13 if new_pattern else 23)
+        if new_pattern:
+            self.analyses += 1
+        self.factorizations += 1
+        x = self._call(solver, data, indptr, indices, np.asfortranarray(b, dtype=np.float64))
+        return x
+
+    @staticmethod
+    def _call(solver: Any, data: FloatArray, indptr: Any, indices: Any, b: FloatArray) -> FloatArray:
+        import ctypes
+
+        x = np.zeros_like(b)
+        err = ctypes.c_int32(0)
+        i32 = ctypes.POINTER(ctypes.c_int32)
+        f64 = ctypes.POINTER(ctypes.c_double)
+        n = len(indptr) - 1
+        solver._mkl_pardiso(
+            solver.pt.ctypes.data_as(ctypes.POINTER(solver._pt_type[0])),
+            ctypes.byref(ctypes.c_int32(1)),
+            ctypes.byref(ctypes.c_int32(1)),
+            ctypes.byref(ctypes.c_int32(solver.mtype)),
+            ctypes.byref(ctypes.c_int32(solver.phase)),
+            ctypes.byref(ctypes.c_int32(n)),
+            data.ctypes.data_as(f64),
+            indptr.ctypes.data_as(i32),
+            indices.ctypes.data_as(i32),
+            solver.perm.ctypes.data_as(i32),
+            ctypes.byref(ctypes.c_int32(1)),
+            solver.iparm.ctypes.data_as(i32),
+            ctypes.byref(ctypes.c_int32(0)),
+            b.ctypes.data_as(f64),
+            x.ctypes.data_as(f64),
+            ctypes.byref(err),
+        )
+        if err.value != 0:
+            raise ConvergenceError(
+                f"PARDISO failed with error {err.value} (e.g. -4: zero pivot, the tangent is "
+                "singular); check the Dirichlet conditions remove all rigid-body modes"
+            )
+        return np.ascontiguousarray(x)
+
+    # ------------------------------------------------------------------ public
+    def solve(
+        self,
+        K: sparse.csr_matrix,
+        b: FloatArray,
+        *,
+        symmetric: bool = True,
+        near_nullspace: FloatArray | None = None,
+    ) -> FloatArray:
+        """Solve ``K x = b``.
+
+        Parameters
+        ----------
+        K : scipy.sparse.csr_matrix, shape (n, n)
+            Sorted CSR matrix; for ``symmetric=True`` only its upper triangle is read by
+            PARDISO.
+        b : ndarray, shape (n,)
+            Right-hand side.
+        symmetric : bool, default True
+            Whether ``K`` is symmetric.
+        near_nullspace : ndarray, shape (n, m), optional
+            Near-nullspace vectors for AMG (the rigid-body modes).
+
+        Returns
+        -------
+        ndarray, shape (n,)
+
+        Raises
+        ------
+        ConvergenceError
+            If the factorisation fails or the iterative method does not converge.
+        """
+        if self.method == "pardiso":
+            return self._pardiso_solve(K, b, symmetric)
+        self.factorizations += 1
+        if self.method in ("superlu", "superlu-colamd"):
+            if self.method == "superlu" and symmetric:
+                lu = spla.splu(
+                    K.tocsc(),
+                    permc_spec="MMD_AT_PLUS_A",
+                    diag_pivot_thresh=0.0,
+                    options={"SymmetricMode": True},
+                )
+            else:
+                lu = spla.splu(K.tocsc())
+            self.analyses += 1
+            return lu.solve(b)
+        if self.method == "umfpack":
+            return spla.spsolve(K.tocsc(), b, use_umfpack=True)
+        # amg-cg
+        import pyamg
+
+        ml = pyamg.smoothed_aggregation_solver(
+            K,
+            B=near_nullspace,
+            symmetry="symmetric" if symmetric else "nonsymmetric",
+            strength=("symmetric", {"theta": 0.0}),
+            smooth="jacobi",
+            max_coarse=500,
+        )
+        self.analyses += 1
+        residuals: list[float] = []
+        accel = "cg" if symmetric else "gmres"
+        x = ml.solve(b, tol=self.rtol, accel=accel, maxiter=self.maxiter, residuals=residuals)
+        self.last_iterations = len(residuals) - 1
+        bn = float(np.linalg.norm(b))
+        rn = float(np.linalg.norm(b - K @ x))
+        if not np.isfinite(rn) or rn > 1e3 * self.rtol * max(bn, 1e-300):
+            raise ConvergenceError(
+                f"AMG-{accel.upper()} did not converge in {self.maxiter} iterations "
+                f"(relative residual {rn / max(bn, 1e-300):.2e}); use linear_solver='pardiso' "
+                "or 'superlu'",
+                residuals,
+            )
+        return x

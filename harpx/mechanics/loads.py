@@ -1,0 +1,278 @@
+r"""Boundary conditions and loads, and the protocol for additional residual terms.
+
+Two kinds of objects go into the ``loads`` list of :func:`harpx.mechanics.newton.solve`:
+
+* **Dirichlet conditions** (:class:`Fixed`, :class:`Prescribed`) provide
+  ``dofs(body) -> ndarray of int`` and ``values(body, s) -> ndarray`` (mm) at load factor
+  ``s`` in [0, 1]. The solver applies them by elimination on the fixed sparsity pattern
+  (rows and columns zeroed, unit diagonal), moving the prescribed values incrementally.
+* **Residual terms** follow :class:`ResidualTerm`: any object with
+  ``residual_tangent(body, u, s) -> (r, K)`` where ``r`` (ndof,) is the term's contribution
+  to the residual :math:`R(u) = f_{int}(u) - f_{ext}(u)` — i.e. *minus* the external force,
+  in mN (kPa·mm²) — and ``K = ∂r/∂u`` is a ``scipy.sparse`` matrix (ndof, ndof) or None
+  (dead loads). A term whose tangent lies in the body's stiffness pattern should build it
+  with ``harpx.mechanics.assembly.sparsity(body).matrix(data)`` (positions from
+  ``sparsity(body).positions(rows, cols)``): the solver then adds it in place, without a
+  sparse-matrix merge and without a new symbolic factorisation. The tracking constraint
+  plugs in through exactly this protocol.
+
+Follower pressure
+-----------------
+On a facet with reference outward normal :math:`N`, Nanson's formula gives the deformed
+area vector :math:`n\, da = \operatorname{cof}F\, N\, dA`. A pressure :math:`p` (kPa, > 0
+pushes against the outward normal) contributes
+
+.. math::
+
+    r_{ai} = p \int_\Gamma N_a (\operatorname{cof}F)_{iJ} N_J\, dA, \qquad
+    K_{ai,bk} = p \int_\Gamma N_a\, \epsilon_{ikm}\, (F_{m\cdot} \times N)_L\,
+    \partial_L N_b\, dA ,
+
+using :math:`\partial(\operatorname{cof}F)_{iJ}/\partial F_{kL} = \epsilon_{ikm}
+\epsilon_{JLM} F_{mM}`; :math:`\operatorname{cof}F\,N` involves only tangential derivatives,
+so traces of the cell gradients are exact. The tangent is not symmetric (follower load).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+import skfem
+from numpy.typing import ArrayLike
+from scipy import sparse
+
+from harpx._typing import FloatArray, IntArray
+from harpx.mechanics import kinematics
+from harpx.mechanics.assembly import sparsity
+
+__all__ = [
+    "BodyForce",
+    "Dirichlet",
+    "Fixed",
+    "Prescribed",
+    "Pressure",
+    "ResidualTerm",
+]
+
+_EPS = np.zeros((3, 3, 3))
+_EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
+_EPS[0, 2, 1] = _EPS[2, 1, 0] = _EPS[1, 0, 2] = -1.0
+
+
+@runtime_checkable
+class ResidualTerm(Protocol):
+    """Protocol of an additional residual term (pressure, body force, tracking, ...)."""
+
+    def residual_tangent(
+        self, body: Any, u: FloatArray, s: float
+    ) -> tuple[FloatArray, sparse.spmatrix | None]:
+        """Contribution ``r`` (ndof,) to ``R = f_int - f_ext`` (mN) and ``K = ∂r/∂u``."""
+        ...
+
+
+@runtime_checkable
+class Dirichlet(Protocol):
+    """Protocol of a Dirichlet condition."""
+
+    def dofs(self, body: Any) -> IntArray:
+        """Constrained dof ids."""
+        ...
+
+    def values(self, body: Any, s: float) -> FloatArray:
+        """Prescribed displacement (mm) of ``dofs(body)`` at load factor ``s``."""
+        ...
+
+
+def _components(components: Sequence[int]) -> tuple[int, ...]:
+    comps = tuple(int(c) for c in components)
+    if not comps or any(c not in (0, 1, 2) for c in comps) or len(set(comps)) != len(comps):
+        raise ValueError(f"components={components!r} must be distinct values from (0, 1, 2)")
+    return comps
+
+
+@dataclass(frozen=True)
+class Fixed:
+    """Zero displacement of some components on a boundary.
+
+    Parameters
+    ----------
+    facet : str or array_like of int
+        Boundary name (``body.boundaries``) or facet ids.
+    components : sequence of int, default (0, 1, 2)
+        Constrained components (0 = x, 1 = y, 2 = z).
+    """
+
+    facet: Any
+    components: tuple[int, ...] = (0, 1, 2)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "components", _components(self.components))
+
+    def dofs(self, body: Any) -> IntArray:
+        """Constrained dof ids."""
+        return body.facet_dofs(self.facet, self.components)
+
+    def values(self, body: Any, s: float) -> FloatArray:
+        """Zeros (mm)."""
+        return np.zeros(self.dofs(body).size)
+
+
+@dataclass(frozen=True)
+class Prescribed:
+    """Prescribed displacement on a boundary.
+
+    Parameters
+    ----------
+    facet : str or array_like of int
+        Boundary name or facet ids.
+    displacement : callable
+        ``displacement(X, s) -> (n, 3)`` in mm for reference points ``X`` (n, 3) in mm and
+        load factor ``s`` in [0, 1]; it should vanish at ``s = 0`` when starting from rest.
+    components : sequence of int, default (0, 1, 2)
+        Components taken from ``displacement``.
+
+    Examples
+    --------
+    >>> from harpx.mechanics.loads import Prescribed
+    >>> pull = Prescribed("right", lambda X, s: np.column_stack(
+    ...     [0.1 * s * np.ones(len(X)), 0 * X[:, 1], 0 * X[:, 2]]), components=(0,))
+    """
+
+    facet: Any
+    displacement: Callable[[FloatArray, float], ArrayLike]
+    components: tuple[int, ...] = (0, 1, 2)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "components", _components(self.components))
+
+    def dofs(self, body: Any) -> IntArray:
+        """Constrained dof ids."""
+        return body.facet_dofs(self.facet, self.components)
+
+    def values(self, body: Any, s: float) -> FloatArray:
+        """Prescribed values (mm) of ``dofs(body)``."""
+        dofs = self.dofs(body)
+        nodes = dofs // 3
+        X = body.dof_points[nodes]
+        d = np.asarray(self.displacement(X, float(s)), dtype=np.float64)
+        if d.shape != (len(X), 3):
+            raise ValueError(
+                f"Prescribed displacement returned shape {d.shape!r}; expected ({len(X)}, 3) mm"
+            )
+        return d[np.arange(len(X)), dofs % 3]
+
+
+@dataclass(frozen=True)
+class _FacetQuadrature:
+    phi: FloatArray  # (nf, nq, nb)
+    grad: FloatArray  # (nf, nq, nb, 3)
+    normal: FloatArray  # (nf, nq, 3) reference outward unit normal
+    dA: FloatArray  # (nf, nq) reference area weights, mm²
+    dofs: IntArray  # (nf, nb, 3)
+    positions: IntArray  # (nf, nb, 3, 3, nb) CSR positions in the body pattern
+
+
+def _facet_quadrature(body: Any, facet: Any) -> _FacetQuadrature:
+    cache = body.__dict__.setdefault("_facet_quadrature", {})
+    facets = body.facets(facet)
+    key = facets.tobytes()
+    if key in cache:
+        return cache[key]
+    order = 3 if body.element == "hex8" else 5
+    fb = skfem.FacetBasis(
+        body.mesh, body._scalar_element, facets=facets.astype(np.int32), intorder=order
+    )
+    nb = body.nbasis
+    phi = np.stack([np.asarray(fb.basis[j][0]) for j in range(nb)], axis=-1)
+    grad = np.stack([fb.basis[j][0].grad for j in range(nb)]).transpose(2, 3, 0, 1)
+    normal = np.asarray(fb.normals).transpose(1, 2, 0)
+    sd = fb.element_dofs.T.astype(np.int64)  # (nf, nb)
+    dofs = 3 * sd[:, :, None] + np.arange(3)
+    rows = np.broadcast_to(dofs[:, :, :, None, None], dofs.shape + (3, nb))
+    cols = np.broadcast_to(dofs.transpose(0, 2, 1)[:, None, None, :, :], rows.shape)
+    pos = sparsity(body).positions(rows, cols)
+    q = _FacetQuadrature(
+        np.ascontiguousarray(phi),
+        np.ascontiguousarray(grad),
+        np.ascontiguousarray(normal),
+        np.asarray(fb.dx),
+        dofs,
+        pos,
+    )
+    cache[key] = q
+    return q
+
+
+@dataclass(frozen=True)
+class Pressure:
+    """Follower pressure on a boundary (acts on the deformed surface).
+
+    Parameters
+    ----------
+    facet : str or array_like of int
+        Boundary name or facet ids.
+    pressure : float or callable
+        Pressure in kPa at full load (positive pushes against the outward normal, i.e.
+        into the body), scaled by the load factor ``s``; or ``pressure(s) -> kPa``.
+    """
+
+    facet: Any
+    pressure: float | Callable[[float], float]
+
+    def value(self, s: float) -> float:
+        """Pressure (kPa) at load factor ``s``."""
+        if callable(self.pressure):
+            return float(self.pressure(s))
+        return float(s) * float(self.pressure)
+
+    def residual_tangent(
+        self, body: Any, u: FloatArray, s: float
+    ) -> tuple[FloatArray, sparse.csr_matrix]:
+        """Residual contribution (mN) and consistent (non-symmetric) tangent."""
+        q = _facet_quadrature(body, self.facet)
+        p = self.value(s)
+        ue = np.asarray(u)[q.dofs]  # (nf, nb, 3)
+        F = np.einsum("fai,fqaJ->fqiJ", ue, q.grad) + np.eye(3)
+        cof = kinematics.cofactor(F)
+        t = np.einsum("fqiJ,fqJ->fqi", cof, q.normal) * (p * q.dA)[..., None]
+        re = np.einsum("fqa,fqi->fai", q.phi, t)
+        r = np.bincount(q.dofs.ravel(), weights=re.ravel(), minlength=body.ndof)
+        w = np.cross(F, q.normal[:, :, None, :])  # (nf, nq, m, L) = F_m x N
+        T = np.einsum("ikm,fqmL->fqikL", _EPS, w)
+        C = np.einsum("fqikL,fqbL->fqikb", T, q.grad)
+        Ke = np.einsum("fqa,fqikb->faikb", q.phi * (p * q.dA)[..., None], C)
+        pat = sparsity(body)
+        data = np.bincount(q.positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz)
+        return r, pat.matrix(data)
+
+
+@dataclass(frozen=True)
+class BodyForce:
+    """Dead body force per unit reference volume.
+
+    Parameters
+    ----------
+    force : array_like of shape (3,) or callable
+        Force density in mN/mm³ (= kPa/mm) at full load, scaled by ``s``; or
+        ``force(X, s) -> (n, 3)`` for reference points ``X`` (n, 3) in mm.
+    """
+
+    force: Any = field(default_factory=lambda: np.zeros(3))
+
+    def residual_tangent(self, body: Any, u: FloatArray, s: float) -> tuple[FloatArray, None]:
+        """Residual contribution ``-∫ N_a b dV`` (mN); the tangent is zero (None)."""
+        cache = body.__dict__.setdefault("_body_force_quadrature", {})
+        if "X" not in cache:
+            cache["X"] = body.quadrature_points
+        X = cache["X"]
+        if callable(self.force):
+            b = np.asarray(self.force(X.reshape(-1, 3), float(s)), dtype=np.float64)
+            b = b.reshape(X.shape)
+        else:
+            b = float(s) * np.broadcast_to(np.asarray(self.force, dtype=np.float64), X.shape)
+        re = np.einsum("qa,eqi,eq->eai", body._N_values.T, b, body.dV)
+        r = -np.bincount(body.element_dofs.ravel(), weights=re.ravel(), minlength=body.ndof)
+        return r, None

@@ -1,0 +1,418 @@
+"""Hexahedral mesh builders with named boundary facets and cell regions.
+
+Every builder returns a :class:`MeshSpec`: a scikit-fem :class:`skfem.MeshHex1` plus named
+cell regions, optional per-cell fibre directions and named boundary facets. The skfem mesh
+carries the same names (``mesh.boundaries`` / ``mesh.subdomains``) so that
+``skfem.io.meshio`` round trips keep them.
+
+Hexahedra are built in VTK/meshio vertex order (bottom quad counter-clockwise seen from +z,
+then the top quad) and converted to scikit-fem's local order, so every element has a
+positive Jacobian. Units: mm.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import skfem
+from numpy.typing import NDArray
+from skfem.io.meshio import HEX_MAPPING
+
+__all__ = ["MeshSpec", "box", "cylinder", "tube", "hex_mesh", "facets_where"]
+
+#: skfem local vertex k of a hexahedron is VTK vertex ``_VTK_TO_SKFEM[k]``.
+_VTK_TO_SKFEM = np.array([HEX_MAPPING[:8].index(i) for i in range(8)])
+
+
+@dataclass(frozen=True)
+class MeshSpec:
+    """A hexahedral mesh with named regions, boundaries and optional fibres.
+
+    Attributes
+    ----------
+    mesh : skfem.MeshHex1
+        Vertex coordinates in mm.
+    regions : dict of str to ndarray of int
+        Cell ids of each named region.
+    fibers : ndarray, shape (ncell, 3), or None
+        Unit fibre direction per cell.
+    boundaries : dict of str to ndarray of int
+        Facet ids (``mesh.facets`` columns) of each named boundary.
+    """
+
+    mesh: Any
+    regions: dict[str, NDArray[np.int64]] = field(default_factory=dict)
+    fibers: NDArray[np.float64] | None = None
+    boundaries: dict[str, NDArray[np.int64]] = field(default_factory=dict)
+
+    def __iter__(self):  # allows ``mesh, regions, fibers, boundaries = box(...)``
+        return iter((self.mesh, self.regions, self.fibers, self.boundaries))
+
+
+def hex_mesh(points: NDArray[np.float64], cells_vtk: NDArray[np.int64]) -> skfem.MeshHex1:
+    """Build a :class:`skfem.MeshHex1` from VTK-ordered hexahedra.
+
+    Parameters
+    ----------
+    points : ndarray, shape (npoint, 3)
+        Vertex coordinates in mm.
+    cells_vtk : ndarray, shape (ncell, 8)
+        Vertex ids per cell in VTK (meshio ``hexahedron``) order.
+
+    Returns
+    -------
+    skfem.MeshHex1
+    """
+    p = np.ascontiguousarray(np.asarray(points, dtype=np.float64).T)
+    t = np.ascontiguousarray(np.asarray(cells_vtk)[:, _VTK_TO_SKFEM].T.astype(np.int32))
+    return skfem.MeshHex1(p, t)
+
+
+def facets_where(
+    mesh: skfem.Mesh,
+    predicate: Callable[[NDArray[np.float64]], NDArray[np.bool_]],
+    *,
+    boundary_only: bool = True,
+) -> NDArray[np.int64]:
+    """Facets whose vertices all satisfy ``predicate``.
+
+    Parameters
+    ----------
+    mesh : skfem.Mesh
+        The mesh.
+    predicate : callable
+        Maps points (n, 3) in mm to a boolean array (n,).
+    boundary_only : bool, default True
+        Restrict to facets on the boundary of the mesh.
+
+    Returns
+    -------
+    ndarray of int
+        Facet ids, sorted.
+    """
+    candidates = mesh.boundary_facets() if boundary_only else np.arange(mesh.facets.shape[1])
+    ok = np.asarray(predicate(mesh.p.T), dtype=bool)
+    keep = np.all(ok[mesh.facets[:, candidates]], axis=0)
+    return np.sort(candidates[keep]).astype(np.int64)
+
+
+def _finish(
+    points: NDArray[np.float64],
+    cells_vtk: NDArray[np.int64],
+    regions: Mapping[str, NDArray[np.int64]],
+    boundary_tests: Mapping[str, tuple[Callable[[NDArray[np.float64]], NDArray[np.bool_]], bool]],
+) -> MeshSpec:
+    mesh = hex_mesh(points, cells_vtk)
+    boundaries = {
+        name: facets_where(mesh, test, boundary_only=only)
+        for name, (test, only) in boundary_tests.items()
+    }
+    regions = {k: np.asarray(v, dtype=np.int64) for k, v in regions.items()}
+    mesh = skfem.MeshHex1(
+        mesh.p,
+        mesh.t,
+        _boundaries={k: v.astype(np.int32) for k, v in boundaries.items()},
+        _subdomains={k: v.astype(np.int32) for k, v in regions.items()} or None,
+    )
+    return MeshSpec(mesh=mesh, regions=regions, fibers=None, boundaries=boundaries)
+
+
+def _extrude(
+    points2d: NDArray[np.float64], quads: NDArray[np.int64], z: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Extrude counter-clockwise quads along z into VTK-ordered hexahedra (layer-major)."""
+    n2 = len(points2d)
+    nz = len(z)
+    pts = np.empty((nz, n2, 3))
+    pts[:, :, :2] = points2d[None]
+    pts[:, :, 2] = z[:, None]
+    layer = np.arange(nz - 1)[:, None, None] * n2
+    cells = np.concatenate([quads[None] + layer, quads[None] + layer + n2], axis=2)
+    return pts.reshape(-1, 3), cells.reshape(-1, 8)
+
+
+def box(
+    lengths: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    divisions: tuple[int, int, int] = (2, 2, 2),
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> MeshSpec:
+    """A rectangular box of hexahedra.
+
+    Parameters
+    ----------
+    lengths : tuple of 3 float, default (1, 1, 1)
+        Edge lengths (Lx, Ly, Lz) in mm.
+    divisions : tuple of 3 int, default (2, 2, 2)
+        Number of elements along x, y, z.
+    origin : tuple of 3 float, default (0, 0, 0)
+        Corner with the smallest coordinates, mm.
+
+    Returns
+    -------
+    MeshSpec
+        Region ``"body"`` (all cells); facets ``left``/``right`` (x = min/max),
+        ``front``/``back`` (y = min/max), ``bottom``/``top`` (z = min/max).
+
+    Examples
+    --------
+    >>> from harpx.mechanics.mesh import box
+    >>> spec = box((2.0, 1.0, 1.0), (2, 1, 1))
+    >>> spec.mesh.nelements, sorted(spec.boundaries)[:2], len(spec.boundaries["left"])
+    (2, ['back', 'bottom'], 1)
+    """
+    nx, ny, nz = (int(d) for d in divisions)
+    if min(nx, ny, nz) < 1:
+        raise ValueError(f"divisions={divisions!r} must all be >= 1")
+    L = np.asarray(lengths, dtype=np.float64)
+    o = np.asarray(origin, dtype=np.float64)
+    if L.shape != (3,) or np.any(L <= 0):
+        raise ValueError(f"lengths={lengths!r} must be 3 positive numbers (mm)")
+    x = o[0] + np.linspace(0.0, L[0], nx + 1)
+    y = o[1] + np.linspace(0.0, L[1], ny + 1)
+    z = o[2] + np.linspace(0.0, L[2], nz + 1)
+    X, Y = np.meshgrid(x, y, indexing="xy")  # (ny+1, nx+1)
+    pts2 = np.column_stack([X.ravel(), Y.ravel()])
+    idx = np.arange((ny + 1) * (nx + 1)).reshape(ny + 1, nx + 1)
+    quads = np.column_stack(
+        [idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()]
+    )
+    points, cells = _extrude(pts2, quads, z)
+    tol = 1e-9 * float(L.max())
+    hi = o + L
+
+    def near(d: int, v: float) -> Callable[[NDArray[np.float64]], NDArray[np.bool_]]:
+        return lambda p: np.abs(p[:, d] - v) < tol
+
+    tests = {
+        "left": (near(0, o[0]), True),
+        "right": (near(0, hi[0]), True),
+        "front": (near(1, o[1]), True),
+        "back": (near(1, hi[1]), True),
+        "bottom": (near(2, o[2]), True),
+        "top": (near(2, hi[2]), True),
+    }
+    return _finish(points, cells, {"body": np.arange(len(cells))}, tests)
+
+
+def _ogrid_2d(
+    radius: float, n_radial: int, n_circumferential: int, rings: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
+    """2-D O-grid: square core plus rings; returns points, ccw quads and ring index per quad.
+
+    ``rings`` are the radii of extra rings outside ``radius`` (for the container wall).
+    """
+    m = n_circumferential // 4
+    a = 0.5 * radius / np.sqrt(2.0) * 1.2  # core half-width: corners at 0.6 R
+    s = np.linspace(-1.0, 1.0, m + 1)
+    # core nodes, slightly rounded towards a circle for better-shaped ring elements
+    SX, SY = np.meshgrid(s, s, indexing="xy")
+    core = a * np.stack([SX, SY], axis=-1)
+    cidx = np.arange((m + 1) ** 2).reshape(m + 1, m + 1)
+    cquads = np.column_stack(
+        [cidx[:-1, :-1].ravel(), cidx[:-1, 1:].ravel(), cidx[1:, 1:].ravel(), cidx[1:, :-1].ravel()]
+    )
+    # square boundary, counter-clockwise, starting at the corner (a, -a)
+    right = cidx[:, m]  # x = +a, y from -a to +a
+    top = cidx[m, ::-1]  # y = +a, x from +a to -a
+    left = cidx[::-1, 0]  # x = -a, y from +a to -a
+    bottom = cidx[0, :]  # y = -a, x from -a to +a
+    loop = np.concatenate([right[:-1], top[:-1], left[:-1], bottom[:-1]])  # 4m ids
+    nc = 4 * m
+    theta = -0.25 * np.pi + 2.0 * np.pi * np.arange(nc) / nc
+    circle = np.column_stack([np.cos(theta), np.sin(theta)])
+    sq = core.reshape(-1, 2)[loop]
+    radii = np.concatenate([[radius], rings])
+    pts = [core.reshape(-1, 2)]
+    ring_ids = [loop]
+    nxt = (m + 1) ** 2
+    for k in range(1, n_radial + 1):  # rings from the square to the circle
+        t = k / n_radial
+        pts.append((1.0 - t) * sq + t * radius * circle)
+        ring_ids.append(nxt + np.arange(nc))
+        nxt += nc
+    for r in radii[1:]:
+        pts.append(r * circle)
+        ring_ids.append(nxt + np.arange(nc))
+        nxt += nc
+    quads = [cquads]
+    layer = [np.zeros(len(cquads), dtype=np.int64)]
+    j = np.arange(nc)
+    for k in range(1, len(ring_ids)):
+        inner, outer = ring_ids[k - 1], ring_ids[k]
+        quads.append(np.column_stack([inner[j], outer[j], outer[(j + 1) % nc], inner[(j + 1) % nc]]))
+        layer.append(np.full(nc, k, dtype=np.int64))
+    return np.concatenate(pts), np.concatenate(quads), np.concatenate(layer)
+
+
+def cylinder(
+    radius: float,
+    height: float,
+    *,
+    n_radial: int = 2,
+    n_circumferential: int = 8,
+    n_axial: int = 2,
+    center: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    wall_thickness: float | None = None,
+    n_wall: int = 1,
+) -> MeshSpec:
+    """A solid circular cylinder along z as an O-grid (square core plus rings).
+
+    Parameters
+    ----------
+    radius : float
+        Cylinder radius, mm.
+    height : float
+        Length along z, mm; the cylinder spans ``center[2]`` to ``center[2] + height``.
+    n_radial : int, default 2
+        Element rings between the square core and the circle.
+    n_circumferential : int, default 8
+        Elements around the circumference; a multiple of 4 (the core has
+        ``n_circumferential/4`` elements per side).
+    n_axial : int, default 2
+        Elements along z.
+    center : tuple of 3 float, default (0, 0, 0)
+        Centre of the bottom face, mm.
+    wall_thickness : float, optional
+        If given, adds a container wall of this thickness (mm) outside ``radius``: region
+        ``"wall"``, facet ``"wall_outer"``; ``"outer"`` is then the (interior) interface.
+    n_wall : int, default 1
+        Element rings across the wall.
+
+    Returns
+    -------
+    MeshSpec
+        Regions ``"tissue"`` (inside ``radius``) and, with a wall, ``"wall"``; facets
+        ``"outer"`` (r = radius), ``"bottom"``, ``"top"`` (and ``"wall_outer"``).
+
+    Examples
+    --------
+    >>> from harpx.mechanics.mesh import cylinder
+    >>> spec = cylinder(1.0, 2.0, n_radial=1, n_circumferential=8, n_axial=1)
+    >>> spec.mesh.nelements, len(spec.boundaries["outer"])
+    (12, 8)
+    """
+    if n_circumferential % 4 or n_circumferential < 4:
+        raise ValueError(f"n_circumferential={n_circumferential!r} must be a multiple of 4")
+    if radius <= 0 or height <= 0:
+        raise ValueError(f"radius={radius!r} and height={height!r} must be positive (mm)")
+    rings = np.array([], dtype=np.float64)
+    if wall_thickness is not None:
+        if wall_thickness <= 0:
+            raise ValueError(f"wall_thickness={wall_thickness!r} must be positive (mm)")
+        rings = radius + wall_thickness * np.arange(1, n_wall + 1) / n_wall
+    pts2, quads, layer = _ogrid_2d(radius, int(n_radial), int(n_circumferential), rings)
+    c = np.asarray(center, dtype=np.float64)
+    pts2 = pts2 + c[:2]
+    z = c[2] + np.linspace(0.0, height, int(n_axial) + 1)
+    points, cells = _extrude(pts2, quads, z)
+    cell_layer = np.tile(layer, int(n_axial))
+    n_inner = int(n_radial)
+    regions = {"tissue": np.nonzero(cell_layer <= n_inner)[0]}
+    tol = 1e-9 * max(radius, height)
+
+    def r_of(p: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.hypot(p[:, 0] - c[0], p[:, 1] - c[1])
+
+    tests: dict[str, tuple[Callable[[NDArray[np.float64]], NDArray[np.bool_]], bool]] = {
+        "outer": (lambda p: np.abs(r_of(p) - radius) < tol * 10, wall_thickness is None),
+        "bottom": (lambda p: np.abs(p[:, 2] - z[0]) < tol, True),
+        "top": (lambda p: np.abs(p[:, 2] - z[-1]) < tol, True),
+    }
+    if wall_thickness is not None:
+        regions["wall"] = np.nonzero(cell_layer > n_inner)[0]
+        r_out = radius + wall_thickness
+        tests["wall_outer"] = (lambda p: np.abs(r_of(p) - r_out) < tol * 10, True)
+    return _finish(points, cells, regions, tests)
+
+
+def tube(
+    inner_radius: float,
+    outer_radius: float,
+    height: float,
+    *,
+    n_radial: int = 2,
+    n_circumferential: int = 8,
+    n_axial: int = 1,
+    angle: float = 2.0 * np.pi,
+    center: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> MeshSpec:
+    """A thick-walled tube (or a sector of it) along z, structured in (r, θ, z).
+
+    Parameters
+    ----------
+    inner_radius, outer_radius : float
+        Radii A < B, mm.
+    height : float
+        Length along z, mm.
+    n_radial, n_circumferential, n_axial : int
+        Elements across the wall, around the sector and along z.
+    angle : float, default 2π
+        Opening angle of the sector in rad, starting at θ = 0 (the +x axis).
+    center : tuple of 3 float, default (0, 0, 0)
+        Centre of the bottom face, mm.
+
+    Returns
+    -------
+    MeshSpec
+        Region ``"tissue"``; facets ``"inner"``, ``"outer"``, ``"bottom"``, ``"top"`` and,
+        for a sector (angle < 2π), ``"start"`` (θ = 0) and ``"end"`` (θ = angle).
+
+    Examples
+    --------
+    >>> from harpx.mechanics.mesh import tube
+    >>> spec = tube(1.0, 2.0, 0.5, n_radial=2, n_circumferential=4, angle=np.pi / 2)
+    >>> spec.mesh.nelements, len(spec.boundaries["start"])
+    (8, 2)
+    """
+    if not 0 < inner_radius < outer_radius:
+        raise ValueError(
+            f"need 0 < inner_radius < outer_radius, got {inner_radius!r}, {outer_radius!r} (mm)"
+        )
+    closed = angle >= 2.0 * np.pi - 1e-12
+    nr, nt = int(n_radial), int(n_circumferential)
+    r = np.linspace(inner_radius, outer_radius, nr + 1)
+    ntheta = nt if closed else nt + 1
+    th = angle * np.arange(ntheta) / nt
+    R, TH = np.meshgrid(r, th, indexing="xy")  # (ntheta, nr+1)
+    c = np.asarray(center, dtype=np.float64)
+    pts2 = np.column_stack([R.ravel() * np.cos(TH.ravel()), R.ravel() * np.sin(TH.ravel())]) + c[:2]
+    idx = np.arange(ntheta * (nr + 1)).reshape(ntheta, nr + 1)
+    j = np.arange(nt)
+    jn = (j + 1) % ntheta
+    i = np.arange(nr)
+    J, I_ = np.meshgrid(j, i, indexing="ij")
+    JN = jn[J]
+    # counter-clockwise in (x, y): (r_i, θ_j) → (r_i+1, θ_j) → (r_i+1, θ_j+1) → (r_i, θ_j+1)
+    quads = np.column_stack(
+        [idx[J, I_].ravel(), idx[J, I_ + 1].ravel(), idx[JN, I_ + 1].ravel(), idx[JN, I_].ravel()]
+    )
+    z = c[2] + np.linspace(0.0, height, int(n_axial) + 1)
+    points, cells = _extrude(pts2, quads, z)
+    tol = 1e-9 * max(outer_radius, height)
+
+    def r_of(p: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.hypot(p[:, 0] - c[0], p[:, 1] - c[1])
+
+    tests: dict[str, tuple[Callable[[NDArray[np.float64]], NDArray[np.bool_]], bool]] = {
+        "inner": (lambda p: np.abs(r_of(p) - inner_radius) < 10 * tol, True),
+        "outer": (lambda p: np.abs(r_of(p) - outer_radius) < 10 * tol, True),
+        "bottom": (lambda p: np.abs(p[:, 2] - z[0]) < tol, True),
+        "top": (lambda p: np.abs(p[:, 2] - z[-1]) < tol, True),
+    }
+    if not closed:
+        n_end = np.array([-np.sin(angle), np.cos(angle)])
+        t_end = np.array([np.cos(angle), np.sin(angle)])
+
+        def on_start(p: NDArray[np.float64]) -> NDArray[np.bool_]:
+            return (np.abs(p[:, 1] - c[1]) < 10 * tol) & (p[:, 0] - c[0] > 0)
+
+        def on_end(p: NDArray[np.float64]) -> NDArray[np.bool_]:
+            q = p[:, :2] - c[:2]
+            return (np.abs(q @ n_end) < 10 * tol) & (q @ t_end > 0)
+
+        tests["start"] = (on_start, True)
+        tests["end"] = (on_end, True)
+    return _finish(points, cells, {"tissue": np.arange(len(cells))}, tests)

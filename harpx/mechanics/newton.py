@@ -1,0 +1,540 @@
+r"""Total-Lagrangian Newton--Raphson with line search and automatic step cut-back.
+
+:func:`solve` ramps the loads with a load factor :math:`s = 1/n, 2/n, \dots, 1` and calls
+:func:`equilibrate` at each factor; :func:`equilibrate` runs Newton at one fixed factor
+from a given displacement (the tracking loop calls it repeatedly with changing constraint
+penalties).
+
+At each iterate :math:`u_k` the residual :math:`R = f_{int} - f_{ext}` and the consistent
+tangent :math:`K = \partial R/\partial u` are assembled (``assembly.internal_forces`` plus
+every load term's ``residual_tangent``). Dirichlet dofs :math:`D` are eliminated on the fixed
+sparsity pattern (rows and columns zeroed, a diagonal of typical size): with the remaining
+prescribed increment :math:`\Delta g = g(s) - u_D`,
+
+.. math::
+
+    K_{FF}\, x_F = -R_F - K_{FD}\, \Delta g, \qquad \delta u = x + \Delta g ,
+
+so the first iteration of a step is the consistent linearised predictor and the boundary
+moves with it. The step :math:`u_{k+1} = u_k + \alpha\,\delta u` is damped by backtracking
+(:math:`\alpha = 1, 1/2, \dots`) until :math:`\|R_F\|` decreases by the Armijo factor
+:math:`1 - 10^{-4}\alpha` (a step that moves the boundary is only required to keep every
+:math:`\det F > 0`). Convergence: the boundary values are reached and
+:math:`\|R_F\| \le \max(\mathrm{tol}\cdot\rho, \mathrm{atol})`, with the force scale
+:math:`\rho` = the larger of the free residual at the start and the reaction norm
+:math:`\|R_D\|`. A step that diverges, stalls (``max_iterations``), produces NaN or inverts an
+element is retried with half the load increment, at most ``max_cutbacks`` times in a row.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy import sparse
+
+from harpx._typing import FloatArray, IntArray
+from harpx.errors import ConvergenceError, ElementInversionError
+from harpx.mechanics.assembly import Pattern, internal_forces, sparsity
+from harpx.mechanics.linsolve import LinearSolver, rigid_body_modes
+
+__all__ = ["SolveResult", "equilibrate", "solve", "split_loads"]
+
+
+@dataclass
+class SolveResult:
+    """Outcome of :func:`solve` or :func:`equilibrate`.
+
+    Attributes
+    ----------
+    u : ndarray, shape (ndof,)
+        Displacement (mm) of the last converged state.
+    converged : bool
+        Whether the full load (factor 1, or the requested factor) was reached.
+    iterations : int
+        Newton iterations (linear solves) over all attempts, including failed ones.
+    step_iterations : list of int
+        Newton iterations of each accepted load step.
+    residual_history : list of list of float
+        ``‖R_F‖`` (mN) at every iterate of each accepted load step.
+    cutbacks : int
+        Number of halved load increments.
+    min_jacobian : float
+        Smallest ``det F`` at the Gauss points of ``u``.
+    time_assembly, time_solve : float
+        Wall time (s) spent assembling and in linear solves.
+    load_factors : list of float
+        Load factor of each accepted step.
+    line_search_steps : int
+        Backtracking reductions over all iterations.
+    message : str
+        Why it stopped, when it did not converge.
+    """
+
+    u: FloatArray
+    converged: bool
+    iterations: int = 0
+    step_iterations: list[int] = field(default_factory=list)
+    residual_history: list[list[float]] = field(default_factory=list)
+    cutbacks: int = 0
+    min_jacobian: float = float("nan")
+    time_assembly: float = 0.0
+    time_solve: float = 0.0
+    load_factors: list[float] = field(default_factory=list)
+    line_search_steps: int = 0
+    message: str = ""
+
+
+def split_loads(loads: Iterable[Any]) -> tuple[list[Any], list[Any]]:
+    """Split a loads list into Dirichlet conditions and residual terms.
+
+    Parameters
+    ----------
+    loads : iterable
+        Objects with ``dofs``/``values`` (Dirichlet) or ``residual_tangent`` (terms).
+
+    Returns
+    -------
+    dirichlet, terms : list
+    """
+    dirichlet, terms = [], []
+    for load in loads:
+        if hasattr(load, "residual_tangent"):
+            terms.append(load)
+        elif hasattr(load, "dofs") and hasattr(load, "values"):
+            dirichlet.append(load)
+        else:
+            raise TypeError(
+                f"load {load!r} is neither a Dirichlet condition (dofs/values) nor a residual "
+                "term (residual_tangent(body, u, s)); see harpx.mechanics.loads"
+            )
+    return dirichlet, terms
+
+
+@dataclass
+class _Assembled:
+    R: FloatArray | None
+    data: FloatArray | None
+    symmetric: bool
+    min_jacobian: float
+    inverted: IntArray
+
+
+@dataclass
+class _Outcome:
+    ok: bool
+    u: FloatArray
+    history: list[float]
+    iterations: int
+    reason: str = ""
+    cells: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    min_jacobian: float = float("nan")
+
+
+class _Newton:
+    """Newton iterations for one body and load set (caches Dirichlet data and solver)."""
+
+    def __init__(
+        self,
+        body: Any,
+        loads: Iterable[Any],
+        *,
+        tol: float,
+        atol: float | None,
+        max_iterations: int,
+        line_search: bool,
+        linear_solver: str | LinearSolver,
+        max_backtracks: int = 5,
+    ) -> None:
+        self.body = body
+        self.dirichlet, self.terms = split_loads(loads)
+        self.tol = float(tol)
+        if atol is None:
+            # force of a 1e-12 volumetric strain on the body's cross-section (mN)
+            atol = 1e-12 * float(body.material.kappa) * float(body.cell_volume.sum()) ** (2 / 3)
+        self.atol = float(atol)
+        self.max_iterations = int(max_iterations)
+        self.line_search = bool(line_search)
+        self.max_backtracks = int(max_backtracks)
+        self.solver = (
+            linear_solver if isinstance(linear_solver, LinearSolver) else LinearSolver(linear_solver)
+        )
+        self.pattern: Pattern = sparsity(body)
+        self.time_assembly = 0.0
+        self.time_solve = 0.0
+        self.line_search_steps = 0
+        self.iterations = 0
+        dofs = [np.asarray(d.dofs(body), dtype=np.int64) for d in self.dirichlet]
+        alld = np.concatenate(dofs) if dofs else np.zeros(0, dtype=np.int64)
+        self.D = np.unique(alld)
+        is_d = np.zeros(body.ndof, dtype=bool)
+        is_d[self.D] = True
+        self.is_d = is_d
+        pat = self.pattern
+        self.zero_mask = np.nonzero(is_d[pat.row_of_entry] | is_d[pat.indices])[0]
+        self.diag_D = pat.diagonal[self.D]
+        self._sym_cache: dict[int, bool] = {}
+
+    def boundary_values(self, s: float) -> FloatArray:
+        """Prescribed values on ``self.D`` at load factor ``s`` (later conditions win)."""
+        g = np.zeros(self.body.ndof)
+        for d in self.dirichlet:
+            g[np.asarray(d.dofs(self.body), dtype=np.int64)] = d.values(self.body, s)
+        return g[self.D]
+
+    def _term_symmetric(self, term: Any, K: sparse.spmatrix) -> bool:
+        flag = getattr(term, "symmetric_tangent", None)
+        if flag is not None:
+            return bool(flag)
+        key = id(term)
+        if key not in self._sym_cache:
+            diff = abs(K - K.T).max() if K.nnz else 0.0
+            self._sym_cache[key] = bool(diff <= 1e-12 * max(abs(K).max(), 1e-300))
+        return self._sym_cache[key]
+
+    def assemble(self, u: FloatArray, s: float) -> _Assembled:
+        t0 = time.perf_counter()
+        internal = internal_forces(self.body, u, tangent=True)
+        if internal.r is None or internal.K is None:
+            self.time_assembly += time.perf_counter() - t0
+            return _Assembled(None, None, True, internal.min_jacobian, internal.inverted_cells)
+        R = internal.r
+        data = internal.K.data
+        symmetric = True
+        pat = self.pattern
+        for term in self.terms:
+            r_t, K_t = term.residual_tangent(self.body, u, s)
+            R = R + np.asarray(r_t, dtype=np.float64)
+            if K_t is None:
+                continue
+            K_t = K_t.tocsr() if not sparse.isspmatrix_csr(K_t) else K_t
+            symmetric &= self._term_symmetric(term, K_t)
+            if K_t.indptr is pat.indptr and K_t.indices is pat.indices:
+                data += K_t.data
+            else:
+                coo = K_t.tocoo()
+                try:
+                    pos = pat.positions(coo.row, coo.col)
+                except ValueError:
+                    raise ValueError(
+                        f"the tangent of {type(term).__name__} couples dofs outside the body's "
+                        "stiffness pattern (dofs of one cell); build it on "
+                        "harpx.mechanics.assembly.sparsity(body)"
+                    ) from None
+                data += np.bincount(pos, weights=coo.data, minlength=pat.nnz)
+        self.time_assembly += time.perf_counter() - t0
+        return _Assembled(R, data, symmetric, internal.min_jacobian, internal.inverted_cells)
+
+    def run(self, u0: FloatArray, s: float) -> _Outcome:
+        body = self.body
+        u = np.array(u0, dtype=np.float64, copy=True)
+        g = self.boundary_values(s)
+        history: list[float] = []
+        scale = 0.0
+        asm = self.assemble(u, s)
+        for it in range(self.max_iterations + 1):
+            if asm.R is None or asm.data is None:
+                return _Outcome(False, u, history, it, "inverted", asm.inverted, asm.min_jacobian)
+            dg = np.zeros(body.ndof)
+            dg[self.D] = g - u[self.D]
+            pending = bool(np.any(dg[self.D] != 0.0))
+            R = asm.R
+            RF = R.copy()
+            RF[self.D] = 0.0
+            rn = float(np.linalg.norm(RF))
+            history.append(rn)
+            if not np.isfinite(rn):
+                return _Outcome(False, u, history, it, "nan", min_jacobian=asm.min_jacobian)
+            if it == 0:
+                scale = rn
+            scale = max(scale, float(np.linalg.norm(R[self.D])))
+            if not pending and (rn <= self.tol * scale or rn <= self.atol):
+                return _Outcome(True, u, history, it, min_jacobian=asm.min_jacobian)
+            if it == self.max_iterations:
+                return _Outcome(False, u, history, it, "max_iterations", min_jacobian=asm.min_jacobian)
+            if it > 2 and rn > 1e8 * max(scale, self.atol):
+                return _Outcome(False, u, history, it, "diverged", min_jacobian=asm.min_jacobian)
+            # linear system with Dirichlet elimination on the fixed pattern
+            data = asm.data
+            K = self.pattern.matrix(data)
+            rhs = -RF
+            if pending:
+                rhs -= K @ dg
+            rhs[self.D] = 0.0
+            diag = np.abs(data[self.pattern.diagonal])
+            dscale = float(diag[~self.is_d].mean()) if np.any(~self.is_d) else 1.0
+            data[self.zero_mask] = 0.0
+            data[self.diag_D] = dscale if dscale > 0 else 1.0
+            t0 = time.perf_counter()
+            nullspace = None
+            if self.solver.method == "amg-cg":
+                nullspace = rigid_body_modes(body.dof_points + u.reshape(-1, 3))
+            x = self.solver.solve(K, rhs, symmetric=asm.symmetric, near_nullspace=nullspace)
+            self.time_solve += time.perf_counter() - t0
+            self.iterations += 1
+            if not np.all(np.isfinite(x)):
+                return _Outcome(False, u, history, it + 1, "nan", min_jacobian=asm.min_jacobian)
+            step = x
+            step[self.D] = dg[self.D]
+            # backtracking line search
+            alpha = 1.0
+            best: tuple[float, FloatArray, _Assembled] | None = None
+            last_bad = asm.inverted
+            accepted = None
+            for _ in range(self.max_backtracks + 1):
+                ut = u + alpha * step
+                trial = self.assemble(ut, s)
+                if trial.R is None:
+                    last_bad = trial.inverted
+                else:
+                    tf = trial.R.copy()
+                    tf[self.D] = 0.0
+                    tn = float(np.linalg.norm(tf))
+                    if np.isfinite(tn):
+                        if pending or not self.line_search or tn <= (1.0 - 1e-4 * alpha) * rn:
+                            accepted = (ut, trial)
+                            break
+                        if best is None or tn < best[0]:
+                            best = (tn, ut, trial)
+                if not self.line_search and trial.R is not None:
+                    break
+                alpha *= 0.5
+                self.line_search_steps += 1
+            if accepted is None and best is not None:
+                accepted = (best[1], best[2])
+            if accepted is None:
+                return _Outcome(False, u, history, it + 1, "inverted", last_bad, asm.min_jacobian)
+            u, asm = accepted
+        raise AssertionError("unreachable")  # pragma: no cover
+
+
+def _check_u0(body: Any, u0: ArrayLike | None) -> FloatArray:
+    if u0 is None:
+        return np.zeros(body.ndof)
+    u = np.asarray(u0, dtype=np.float64)
+    if u.shape != (body.ndof,):
+        raise ValueError(f"u0 has shape {u.shape!r}; expected ({body.ndof},) dofs")
+    return u.copy()
+
+
+def _failure(reason: str, cells: IntArray, s: float, history: list[float], tries: int) -> Exception:
+    if reason == "inverted":
+        shown = ", ".join(str(c) for c in cells[:12]) + (" ..." if len(cells) > 12 else "")
+        return ElementInversionError(
+            f"cells [{shown}] ({len(cells)} in all) invert (det F <= 0) at load factor "
+            f"s={s:.6g} after {tries} step cut-back(s); reduce the load, use more steps "
+            "or refine the mesh there",
+            cells,
+            history,
+        )
+    return ConvergenceError(
+        f"Newton failed ({reason}) at load factor s={s:.6g} after {tries} step cut-back(s); "
+        f"residual history {[f'{h:.3e}' for h in history]}; use more steps, check the "
+        "loads and boundary conditions",
+        history,
+    )
+
+
+def equilibrate(
+    body: Any,
+    loads: Iterable[Any],
+    u0: ArrayLike | None = None,
+    s: float = 1.0,
+    *,
+    tol: float = 1e-8,
+    atol: float | None = None,
+    max_iterations: int = 25,
+    line_search: bool = True,
+    linear_solver: str | LinearSolver = "auto",
+    raise_on_failure: bool = True,
+) -> SolveResult:
+    """Newton iterations at one fixed load factor, starting from ``u0``.
+
+    Parameters
+    ----------
+    body : Body
+        The body.
+    loads : iterable
+        Dirichlet conditions and residual terms (see :mod:`harpx.mechanics.loads`).
+    u0 : array_like, shape (ndof,), optional
+        Starting displacement (mm); zeros by default. Its Dirichlet values need not match:
+        the remaining increment is applied through the linearised predictor.
+    s : float, default 1.0
+        Load factor passed to every load.
+    tol, atol, max_iterations, line_search, linear_solver, raise_on_failure
+        As in :func:`solve`. Pass a :class:`~harpx.mechanics.linsolve.LinearSolver`
+        instance to reuse its symbolic analysis across calls.
+
+    Returns
+    -------
+    SolveResult
+        One load step; ``converged`` False (and ``u = u0``) on failure when
+        ``raise_on_failure`` is False.
+
+    Raises
+    ------
+    ElementInversionError
+        If an element inverts and line search cannot avoid it.
+    ConvergenceError
+        If Newton diverges or stalls.
+    """
+    u = _check_u0(body, u0)
+    nt = _Newton(
+        body,
+        loads,
+        tol=tol,
+        atol=atol,
+        max_iterations=max_iterations,
+        line_search=line_search,
+        linear_solver=linear_solver,
+    )
+    out = nt.run(u, float(s))
+    res = SolveResult(
+        u=out.u if out.ok else u,
+        converged=out.ok,
+        iterations=nt.iterations,
+        step_iterations=[out.iterations] if out.ok else [],
+        residual_history=[out.history] if out.ok else [],
+        min_jacobian=out.min_jacobian,
+        time_assembly=nt.time_assembly,
+        time_solve=nt.time_solve,
+        load_factors=[float(s)] if out.ok else [],
+        line_search_steps=nt.line_search_steps,
+    )
+    if not out.ok:
+        err = _failure(out.reason, out.cells, float(s), out.history, 0)
+        if raise_on_failure:
+            raise err
+        res.message = str(err)
+    return res
+
+
+def solve(
+    body: Any,
+    loads: Iterable[Any],
+    *,
+    steps: int = 10,
+    u0: ArrayLike | None = None,
+    tol: float = 1e-8,
+    atol: float | None = None,
+    max_iterations: int = 25,
+    line_search: bool = True,
+    max_cutbacks: int = 6,
+    linear_solver: str | LinearSolver = "auto",
+    raise_on_failure: bool = True,
+) -> SolveResult:
+    """Static equilibrium under loads ramped over load steps, with cut-back on failure.
+
+    Parameters
+    ----------
+    body : Body
+        The body.
+    loads : iterable
+        Dirichlet conditions (:class:`~harpx.mechanics.loads.Fixed`,
+        :class:`~harpx.mechanics.loads.Prescribed`) and residual terms
+        (:class:`~harpx.mechanics.loads.Pressure`, :class:`~harpx.mechanics.loads.BodyForce`,
+        or any object with ``residual_tangent(body, u, s)``).
+    steps : int, default 10
+        Number of equal load increments; ``s = 1/steps, ..., 1``.
+    u0 : array_like, shape (ndof,), optional
+        Starting displacement (mm), zeros by default.
+    tol : float, default 1e-8
+        Relative tolerance on the free residual norm (relative to the larger of the
+        step's initial free residual and the reaction norm).
+    atol : float, optional
+        Absolute tolerance in mN; default ``1e-12 κ V^(2/3)`` (the force of a 1e-12
+        volumetric strain over the body's cross-section).
+    max_iterations : int, default 25
+        Newton iterations per load step before a cut-back.
+    line_search : bool, default True
+        Backtracking on ``‖R_F‖`` (Armijo).
+    max_cutbacks : int, default 6
+        Consecutive halvings of a failing increment before giving up.
+    linear_solver : str or LinearSolver, default "auto"
+        See :mod:`harpx.mechanics.linsolve`.
+    raise_on_failure : bool, default True
+        Raise on failure; otherwise return the last converged state with
+        ``converged=False``.
+
+    Returns
+    -------
+    SolveResult
+
+    Raises
+    ------
+    ElementInversionError
+        If elements invert and ``max_cutbacks`` halvings cannot avoid it (names the cells
+        and the load factor).
+    ConvergenceError
+        If Newton fails for another reason after ``max_cutbacks`` halvings.
+
+    Examples
+    --------
+    >>> from harpx.mechanics import Body, NeoHookean, Fixed, Prescribed, box, solve
+    >>> body = Body(box((1.0, 1.0, 1.0), (1, 1, 1)), NeoHookean(c1=1.0, kappa=120.0))
+    >>> pull = Prescribed("right", lambda X, s: 0.1 * s * np.ones_like(X), components=(0,))
+    >>> loads = [Fixed("left", (0,)), Fixed("front", (1,)), Fixed("bottom", (2,)), pull]
+    >>> result = solve(body, loads, steps=2)
+    >>> result.converged, round(float(result.u.reshape(-1, 3)[:, 0].max()), 6)
+    (True, 0.1)
+    """
+    if int(steps) < 1:
+        raise ValueError(f"steps={steps!r} must be >= 1")
+    u = _check_u0(body, u0)
+    nt = _Newton(
+        body,
+        loads,
+        tol=tol,
+        atol=atol,
+        max_iterations=max_iterations,
+        line_search=line_search,
+        linear_solver=linear_solver,
+    )
+    nominal = 1.0 / int(steps)
+    ds = nominal
+    s_done = 0.0
+    res = SolveResult(u=u, converged=False)
+    consecutive = 0
+    min_j = float("nan")
+    while s_done < 1.0 - 1e-12:
+        s = min(1.0, s_done + ds)
+        if 1.0 - s < 1e-9:
+            s = 1.0
+        out = nt.run(u, s)
+        if out.ok:
+            u = out.u
+            s_done = s
+            consecutive = 0
+            min_j = out.min_jacobian
+            res.step_iterations.append(out.iterations)
+            res.residual_history.append(out.history)
+            res.load_factors.append(s)
+            ds = min(2.0 * ds, nominal) if ds < nominal else ds
+            continue
+        res.cutbacks += 1
+        consecutive += 1
+        if consecutive > max_cutbacks:
+            err = _failure(out.reason, out.cells, s, out.history, consecutive - 1)
+            res.u, res.min_jacobian, res.message = u, min_j, str(err)
+            res.iterations, res.time_assembly, res.time_solve = (
+                nt.iterations,
+                nt.time_assembly,
+                nt.time_solve,
+            )
+            res.line_search_steps = nt.line_search_steps
+            if raise_on_failure:
+                raise err
+            return res
+        ds *= 0.5
+    res.u = u
+    res.converged = True
+    res.min_jacobian = min_j
+    res.iterations = nt.iterations
+    res.time_assembly = nt.time_assembly
+    res.time_solve = nt.time_solve
+    res.line_search_steps = nt.line_search_steps
+    return res
