@@ -43,6 +43,7 @@ __all__ = [
     "SEQUENCES",
     "UNITS",
     "VarSpec",
+    "fill_standard_attrs",
     "standard_attrs",
     "validate",
 ]
@@ -174,6 +175,34 @@ def standard_attrs(name: str) -> dict[str, str]:
     if name not in UNITS:
         raise KeyError(f"{name!r} is not a standard harpx variable; known: {sorted(UNITS)}")
     return {"units": UNITS[name], "long_name": LONG_NAMES[name]}
+
+
+def fill_standard_attrs(ds: xr.Dataset) -> xr.Dataset:
+    """Copy of ``ds`` with missing ``units``/``long_name`` of standard variables filled in.
+
+    Existing attributes are kept; variables with non-standard names are left alone.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Any dataset.
+
+    Returns
+    -------
+    xarray.Dataset
+        A shallow copy (data shared) with the standard attributes added.
+
+    Examples
+    --------
+    >>> ds = fill_standard_attrs(xr.Dataset(coords={"x": [0.5, 1.5]}))
+    >>> ds.x.attrs
+    {'units': 'mm', 'long_name': 'x position of voxel centre'}
+    """
+    out = ds.copy(deep=False)
+    for name, var in out.variables.items():
+        if str(name) in UNITS:
+            var.attrs = {**standard_attrs(str(name)), **var.attrs}
+    return out
 
 
 @dataclass(frozen=True)

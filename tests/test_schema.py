@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from harpx.errors import SchemaError
-from harpx.schema import UNITS, standard_attrs, validate
+from harpx.schema import UNITS, fill_standard_attrs, standard_attrs, validate
 from tests._helpers import raise_if_dask_computes
 
 
@@ -333,3 +333,12 @@ def test_validate_never_accepts_nonfinite_image(index: tuple[int, ...], value: f
     ds["image"].values[index] = value
     with pytest.raises(SchemaError, match="'image' has 1 non-finite values"):
         validate(ds)
+
+
+def test_fill_standard_attrs_keeps_existing_and_copies() -> None:
+    bare = xr.Dataset({"phase": ("x", [0.0, 1.0])}, coords={"x": ("x", [0.5, 1.5], {"units": "mm",
+                                                                                   "note": "k"})})
+    filled = fill_standard_attrs(bare)
+    assert filled.phase.attrs == standard_attrs("phase")
+    assert filled.x.attrs == {**standard_attrs("x"), "note": "k"}
+    assert bare.phase.attrs == {}  # the input is not modified

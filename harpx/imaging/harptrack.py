@@ -1,0 +1,290 @@
+"""Conventional HARP tracking: the per-point fixed-point phase-matching baseline.
+
+Every material point ``X`` keeps its reference harmonic phase vector
+:math:`\\varphi_0(X) = \\varphi(X, t_0)` (paper eq. 1). In each frame, starting from the
+point's position in the previous frame, the position is refined by Gauss–Newton steps on the
+wrapped phase mismatch (DESIGN §4 "Conventional HARP", REFERENCES §4.4):
+
+.. math::
+
+    e = W(\\varphi(x, t) - \\varphi_0(X)), \\qquad
+    x \\leftarrow x - B (G_B^T G_B)^{-1} G_B^T e, \\qquad G_B = \\nabla\\varphi(x, t)\\, B,
+
+where ``B`` is an orthonormal basis of the span of the tag directions (3D with three tags;
+the acquisition plane with two tags, so 2D tracking only moves points in-plane). Each
+component of a step is clamped to one voxel. A point stops iterating when
+:math:`\\|e\\| < 10^{-4}` rad or after ``iterations`` steps.
+
+The method converges to the *nearest* position with the reference phase, so it inherits the
+textbook failures (REFERENCES §4.7) on purpose, as the baseline the FE method must beat: a
+frame-to-frame motion of more than half a tag period along a tag direction is tracked to the
+wrong tag line (a "tag jump"), and points near tissue edges follow the blurred phase there.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from numpy.typing import ArrayLike, NDArray
+
+from harpx.errors import SchemaError
+from harpx.imaging.sample import PhaseSampler, wrap
+from harpx.schema import AXES, GRID_DIMS, standard_attrs, validate
+
+__all__ = ["track_harp"]
+
+#: A point stops iterating once its residual norm is below this (rad).
+TOLERANCE = 1e-4
+
+
+def track_harp(
+    ds: xr.Dataset, *, points: ArrayLike | None = None, iterations: int = 10
+) -> xr.Dataset:
+    """Track material points through the frames by conventional HARP.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        A ``phase/1`` dataset, or a ``tagged/1`` dataset whose phase is then computed with
+        :func:`harpx.imaging.harp.extract_phase` (default settings).
+    points : array_like of shape (n, 3), optional
+        Reference positions X in mm, columns (x, y, z). Default: the centres of the phase-grid
+        voxels inside the data at frame 0 (inside every tag's ``mask`` and ``body >= 0.5``
+        where those exist, and above the sampler's magnitude floor); the result then also
+        holds ``displacement_grid``.
+    iterations : int, default 10
+        Maximum Gauss–Newton steps per point and frame (paper §4.1 uses ten).
+
+    Returns
+    -------
+    xarray.Dataset
+        A ``tracked/1`` dataset with ``method="harp"``: ``points`` (node, axis),
+        ``cells`` (empty, ``element="points"``), ``displacement`` (time, node, axis) in mm
+        (NaN where the point has no valid phase: outside the field of view, the mask or the
+        magnitude floor), per-frame ``epsilon`` (mean absolute wrapped residual over the
+        valid points, rad), ``iterations`` (sweeps run) and ``wall_time`` (s), and
+        ``displacement_grid`` (time, axis, z, y, x) when ``points`` is None (NaN outside the
+        tracked voxels).
+
+    Raises
+    ------
+    SchemaError
+        If ``ds`` is neither a valid ``phase/1`` nor a ``tagged/1`` dataset.
+    ValueError
+        If ``points`` is not (n, 3) or ``iterations < 1``.
+
+    Notes
+    -----
+    Frames are tracked in order, each started from the previous frame's positions
+    (frame-to-frame tracking, JHU ``TrackPointHarp``), but the target phase is always the
+    reference phase :math:`\\varphi_0(X)`, so errors do not accumulate through the phase.
+    A point that becomes invalid during a frame keeps its last position for the next frame.
+
+    Examples
+    --------
+    >>> from harpx.imaging.sample import wrap
+    >>> x = np.arange(24.0)
+    >>> shift = np.array([0.0, 1.5])  # mm along x at frames 0 and 1
+    >>> phase = wrap(2 * np.pi / 8 * (x[None, :] - shift[:, None]))  # (time, x)
+    >>> ds = xr.Dataset(
+    ...     {"phase": (("tag", "time", "z", "y", "x"),
+    ...                np.broadcast_to(phase[None, :, None, None, :], (1, 2, 1, 4, 24))),
+    ...      "magnitude": (("tag", "time", "z", "y", "x"), np.ones((1, 2, 1, 4, 24)))},
+    ...     coords={"tag": ["x"], "axis": ["x", "y", "z"], "time": [0.0, 18.0],
+    ...             "x": x, "y": np.arange(4.0), "z": [0.0],
+    ...             "tag_direction": (("tag", "axis"), [[1.0, 0.0, 0.0]]),
+    ...             "tag_frequency": ("tag", [1 / 8]), "slice_axis": ("tag", ["z"])},
+    ...     attrs={"harpx_schema": "phase/1", "sequence": "CSPAMM", "upsample": 1,
+    ...            "radius": 0.5})
+    >>> ds = harpx.schema.fill_standard_attrs(ds)
+    >>> out = track_harp(ds, points=[[10.0, 1.0, 0.0]])
+    >>> np.round(out.displacement.sel(axis="x").values[:, 0], 4).tolist()
+    [0.0, 1.5]
+    """
+    if int(iterations) < 1:
+        raise ValueError(f"iterations={iterations!r} must be at least 1")
+    ds = _as_phase(ds)
+    grid_points = points is None
+    reference = PhaseSampler(ds, 0)
+    if grid_points:
+        X, flat_index = _grid_points(ds, reference)
+    else:
+        X = np.asarray(points, dtype=np.float64)
+        if X.ndim != 2 or X.shape[1] != 3:
+            raise ValueError(
+                f"points must have shape (n, 3) with columns (x, y, z) in mm; got {X.shape}"
+            )
+        flat_index = None
+    phi0, valid0 = reference.phase(X)
+    basis = _tag_basis(reference.wavevectors)
+    step_limit = _voxel_size(ds)
+
+    ntime = ds.sizes["time"]
+    n = X.shape[0]
+    displacement = np.full((ntime, n, 3), np.nan)
+    displacement[0, valid0] = 0.0
+    epsilon = np.zeros(ntime)
+    sweeps = np.zeros(ntime, dtype=np.int64)
+    wall = np.zeros(ntime)
+    position = X.copy()
+    for t in range(1, ntime):
+        start = _time.perf_counter()
+        sampler = PhaseSampler(ds, t)
+        sweeps[t] = _track_frame(
+            sampler, position, phi0, valid0, basis, step_limit, int(iterations)
+        )
+        phi, valid = sampler.phase(position)
+        valid &= valid0
+        residual = np.abs(wrap(phi[valid] - phi0[valid]))
+        epsilon[t] = float(residual.mean()) if residual.size else np.nan
+        displacement[t, valid] = position[valid] - X[valid]
+        wall[t] = _time.perf_counter() - start
+
+    out = _assemble(ds, X, displacement, epsilon, sweeps, wall, int(iterations))
+    if grid_points:
+        assert flat_index is not None
+        out["displacement_grid"] = _on_grid(ds, displacement, flat_index)
+    return out
+
+
+def _as_phase(ds: xr.Dataset) -> xr.Dataset:
+    schema = ds.attrs.get("harpx_schema")
+    if schema == "tagged/1":
+        from harpx.imaging.harp import extract_phase
+
+        ds = extract_phase(ds)
+    elif schema != "phase/1":
+        raise SchemaError(
+            f"track_harp needs a 'phase/1' or 'tagged/1' dataset; attrs['harpx_schema'] is "
+            f"{schema!r}"
+        )
+    validate(ds, kind="phase")
+    return ds
+
+
+def _grid_points(
+    ds: xr.Dataset, reference: PhaseSampler
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Voxel centres inside the data at frame 0 and their flat (z, y, x) indices."""
+    z, y, x = (np.asarray(ds[d].values, np.float64) for d in GRID_DIMS)
+    inside = np.ones((z.size, y.size, x.size), bool)
+    if "mask" in ds.variables:
+        inside &= np.asarray(ds["mask"].transpose("tag", *GRID_DIMS).values, bool).all(axis=0)
+    if "body" in ds.variables:
+        inside &= np.asarray(ds["body"].transpose(*GRID_DIMS).values) >= 0.5
+    flat = np.flatnonzero(inside)
+    iz, iy, ix = np.unravel_index(flat, inside.shape)
+    pts = np.stack([x[ix], y[iy], z[iz]], axis=-1)
+    _, valid = reference.phase(pts)
+    return pts[valid], flat[valid]
+
+
+def _tag_basis(wavevectors: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Orthonormal basis (3, r) of the span of the tag directions."""
+    _, s, vt = np.linalg.svd(wavevectors, full_matrices=False)
+    rank = int(np.sum(s > 1e-9 * s.max()))
+    return vt[:rank].T
+
+
+def _voxel_size(ds: xr.Dataset) -> NDArray[np.float64]:
+    """Grid spacing along (x, y, z) in mm (inf along an axis with a single sample)."""
+    size = np.full(3, np.inf)
+    for column, name in enumerate(AXES):
+        values = np.asarray(ds[name].values, np.float64)
+        if values.size > 1:
+            size[column] = (values[-1] - values[0]) / (values.size - 1)
+    return size
+
+
+def _track_frame(
+    sampler: PhaseSampler,
+    position: NDArray[np.float64],
+    phi0: NDArray[np.float64],
+    valid0: NDArray[np.bool_],
+    basis: NDArray[np.float64],
+    step_limit: NDArray[np.float64],
+    iterations: int,
+) -> int:
+    """Gauss–Newton phase matching of every point in one frame (updates ``position``)."""
+    active = valid0.copy()
+    rank = basis.shape[1]
+    sweeps = 0
+    for sweep in range(iterations):
+        index = np.flatnonzero(active)
+        if index.size == 0:
+            break
+        sweeps = sweep + 1
+        phi, grad, valid = sampler.sample(position[index])
+        error = wrap(phi - phi0[index])  # (m, ntag), rad
+        done = valid & (np.linalg.norm(error, axis=1) < TOLERANCE)
+        gb = grad @ basis  # (m, ntag, r): gradient within the tag span
+        normal = np.einsum("mti,mtj->mij", gb, gb)
+        rhs = np.einsum("mti,mt->mi", gb, error)
+        # ill-conditioned normal equations (|H| ~ 0, collinear gradients): no update
+        scale = np.trace(normal, axis1=1, axis2=2) / rank
+        healthy = np.linalg.det(normal) > 1e-10 * np.maximum(scale, 1e-300) ** rank
+        update = valid & ~done & healthy
+        step = np.zeros((index.size, 3))
+        if update.any():
+            solved = np.linalg.solve(normal[update], rhs[update][..., None])[..., 0]
+            step[update] = -(solved @ basis.T)
+        position[index] += np.clip(step, -step_limit, step_limit)
+        active[index[done | ~valid | ~healthy]] = False
+    return sweeps
+
+
+def _assemble(
+    ds: xr.Dataset,
+    X: NDArray[np.float64],
+    displacement: NDArray[np.float64],
+    epsilon: NDArray[np.float64],
+    sweeps: NDArray[np.int64],
+    wall: NDArray[np.float64],
+    iterations: int,
+) -> xr.Dataset:
+    cells = xr.Variable(("cell", "vertex"), np.zeros((0, 0), np.int64), standard_attrs("cells"))
+    cells.attrs["element"] = "points"
+    attrs: dict[str, Any] = {
+        "harpx_schema": "tracked/1",
+        "method": "harp",
+        "max_iterations": iterations,
+        "tolerance": TOLERANCE,
+    }
+    for key in ("sequence", "upsample", "radius"):
+        if key in ds.attrs:
+            attrs[key if key == "sequence" else f"phase_{key}"] = ds.attrs[key]
+    return xr.Dataset(
+        {
+            "points": (("node", "axis"), X, standard_attrs("points")),
+            "cells": cells,
+            "displacement": (("time", "node", "axis"), displacement,
+                             standard_attrs("displacement")),
+            "epsilon": ("time", epsilon, standard_attrs("epsilon")),
+            "iterations": ("time", sweeps, standard_attrs("iterations")),
+            "wall_time": ("time", wall, standard_attrs("wall_time")),
+        },
+        coords={
+            "axis": ("axis", list(AXES), standard_attrs("axis")),
+            "time": ("time", np.asarray(ds["time"].values), dict(ds["time"].attrs)),
+        },
+        attrs=attrs,
+    )
+
+
+def _on_grid(
+    ds: xr.Dataset, displacement: NDArray[np.float64], flat_index: NDArray[np.int64]
+) -> xr.DataArray:
+    shape = tuple(ds.sizes[d] for d in GRID_DIMS)
+    ntime = displacement.shape[0]
+    grid = np.full((ntime, 3, int(np.prod(shape))), np.nan)
+    grid[:, :, flat_index] = displacement.transpose(0, 2, 1)
+    coords = {d: (d, np.asarray(ds[d].values), dict(ds[d].attrs)) for d in GRID_DIMS}
+    return xr.DataArray(
+        grid.reshape(ntime, 3, *shape),
+        dims=("time", "axis", *GRID_DIMS),
+        coords=coords,
+        attrs=standard_attrs("displacement_grid"),
+    )
