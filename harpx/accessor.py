@@ -5,7 +5,8 @@ Every method is one call; the full documentation lives on the function it forwar
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, Literal
 
 import xarray as xr
 
@@ -13,6 +14,9 @@ if TYPE_CHECKING:
     from pathlib import Path
 
     from harpx._typing import PathLike
+
+Method = Literal["penalty", "augmented-lagrangian"]
+Predictor = Literal["none", "linear"]
 
 
 @xr.register_dataset_accessor("harp")
@@ -56,3 +60,58 @@ class HarpAccessor:
         from harpx.io.netcdf import to_netcdf
 
         return to_netcdf(self._ds, path)
+
+    def track(
+        self,
+        body: Any,
+        *,
+        method: Method = "penalty",
+        epsilon: float = 0.05,
+        penalty: float = 1.0,
+        penalty_limit: float = 1e4,
+        ramp: int = 3,
+        multiplier_tolerance: float = 0.1,
+        max_updates: int = 10,
+        predictor: Predictor = "linear",
+        dirichlet: Sequence[Any] = (),
+        terms: Sequence[Any] = (),
+        intorder: int | None = None,
+        linear_solver: str = "auto",
+        progress: bool = False,
+    ) -> xr.Dataset:
+        """Track a finite-element body through the phase images.
+
+        See Also
+        --------
+        harpx.tracking.track.track
+        """
+        from harpx.tracking.track import track
+
+        return track(
+            self._ds, body, method=method, epsilon=epsilon, penalty=penalty,
+            penalty_limit=penalty_limit, ramp=ramp, multiplier_tolerance=multiplier_tolerance,
+            max_updates=max_updates, predictor=predictor, dirichlet=dirichlet, terms=terms,
+            intorder=intorder, linear_solver=linear_solver, progress=progress,
+        )
+
+    def track_harp(self, *, points: Any = None, iterations: int = 10) -> xr.Dataset:
+        """Conventional HARP tracking (fixed-point phase matching per material point).
+
+        See Also
+        --------
+        harpx.imaging.harptrack.track_harp
+        """
+        from harpx.imaging.harptrack import track_harp
+
+        return track_harp(self._ds, points=points, iterations=iterations)
+
+    def error(self, truth: xr.Dataset) -> xr.Dataset:
+        """Displacement error of a tracked dataset against ground truth.
+
+        See Also
+        --------
+        harpx.tracking.results.tracking_error
+        """
+        from harpx.tracking.results import tracking_error
+
+        return tracking_error(self._ds, truth)

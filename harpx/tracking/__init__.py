@@ -1,0 +1,1 @@
+"""Tracking a finite-element body through harmonic-phase images (paper §3)."""

@@ -1,0 +1,162 @@
+"""Gauss–Newton equilibrium of a hyperelastic body pulled by the phase constraint.
+
+At a fixed penalty (and fixed multipliers) the tracked configuration minimises the stored
+energy plus the constraint energy (:mod:`harpx.tracking.constraint`). The hyperelastic part
+uses its consistent tangent (:func:`harpx.mechanics.assembly.internal_forces`); the phase
+part its Gauss–Newton tangent, so convergence is fast but not exactly quadratic. Steps that
+would invert an element are halved.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from harpx._typing import FloatArray
+from harpx.errors import ElementInversionError
+from harpx.mechanics.assembly import internal_forces
+from harpx.mechanics.linsolve import LinearSolver
+from harpx.tracking.constraint import ConstraintState, PhaseConstraint
+
+
+@dataclass
+class EquilibriumResult:
+    """Outcome of one Gauss–Newton solve.
+
+    Attributes
+    ----------
+    u : ndarray, shape (ndof,)
+        Displacement, mm.
+    state : ConstraintState
+        Constraint evaluated at ``u``.
+    iterations : int
+        Gauss–Newton iterations taken.
+    step_norms : list of float
+        Largest nodal displacement increment of each iteration, mm.
+    converged : bool
+        Whether the last increment was below the tolerance.
+    """
+
+    u: FloatArray
+    state: ConstraintState
+    iterations: int
+    step_norms: list[float] = field(default_factory=list)
+    converged: bool = False
+
+
+def _split_dirichlet(body: Any, dirichlet: Sequence[Any]) -> tuple[np.ndarray, FloatArray]:
+    if not dirichlet:
+        return np.zeros(0, dtype=np.int64), np.zeros(0)
+    dofs = np.concatenate([d.dofs(body) for d in dirichlet])
+    values = np.concatenate([d.values(body, 1.0) for d in dirichlet])
+    return dofs, values
+
+
+def equilibrate(
+    body: Any,
+    constraint: PhaseConstraint,
+    u: FloatArray,
+    *,
+    dirichlet: Sequence[Any] = (),
+    terms: Sequence[Any] = (),
+    solver: LinearSolver,
+    tolerance: float = 1e-3,
+    max_iterations: int = 10,
+    max_halvings: int = 6,
+    max_step: float | None = None,
+) -> EquilibriumResult:
+    """Solve for equilibrium at the constraint's current penalty and multipliers.
+
+    Parameters
+    ----------
+    body : Body
+        The finite-element body.
+    constraint : PhaseConstraint
+        The phase constraint, already targeted at a frame.
+    u : ndarray, shape (ndof,)
+        Starting displacement, mm (e.g. the previous frame's or a prediction).
+    dirichlet : sequence of Dirichlet loads, optional
+        Prescribed displacements (``dofs(body)``, ``values(body, s)``).
+    terms : sequence of residual terms, optional
+        Further residual contributions (``residual_tangent(body, u, s)``).
+    solver : LinearSolver
+        Linear solver, reused across calls so factorisation set-up is reused.
+    tolerance : float, default 1e-3
+        Convergence when the largest nodal increment is below this, mm.
+    max_iterations : int, default 10
+        Iteration limit (the result reports whether it converged).
+    max_halvings : int, default 6
+        Step halvings allowed when a step would invert an element.
+    max_step : float, optional
+        Trust radius: steps whose largest nodal increment exceeds it are scaled down to it,
+        mm. Default: a quarter of the shortest tag period, so that no step carries a
+        point across a phase wrap into another tag's basin.
+
+    Returns
+    -------
+    EquilibriumResult
+
+    Raises
+    ------
+    ElementInversionError
+        If even the smallest step inverts elements.
+    """
+    u = np.array(u, dtype=float, copy=True)
+    fixed, fixed_values = _split_dirichlet(body, dirichlet)
+    u[fixed] = fixed_values
+    if max_step is None:
+        max_step = 0.5 * np.pi / constraint.max_wavenumber
+    free = np.setdiff1d(np.arange(body.ndof), fixed) if fixed.size else None
+    result = EquilibriumResult(u, constraint.state(u), 0)
+    internal = internal_forces(body, u)
+    if internal.r is None:
+        raise ElementInversionError(
+            f"the starting displacement of frame {constraint.frame} inverts cells "
+            f"{internal.inverted_cells[:10].tolist()}",
+            internal.inverted_cells,
+        )
+    for iteration in range(1, max_iterations + 1):
+        rc, Kc = constraint.assemble(result.state)
+        R = internal.r + rc
+        K = internal.K.copy()
+        K.data += Kc.data
+        for term in terms:
+            rt, Kt = term.residual_tangent(body, u, 1.0)
+            R = R + rt
+            if Kt is not None:
+                K = K + Kt
+        if free is None:
+            du = solver.solve(K, -R)
+        else:
+            du = np.zeros_like(u)
+            du[free] = solver.solve(K[free][:, free].tocsr(), -R[free])
+        largest = float(np.abs(du).max())
+        alpha = min(1.0, max_step / largest) if largest > 0 else 1.0
+        for _ in range(max_halvings + 1):
+            trial = u + alpha * du
+            internal_trial = internal_forces(body, trial)
+            if internal_trial.r is not None:
+                break
+            alpha *= 0.5
+        else:
+            raise ElementInversionError(
+                f"Gauss-Newton step {iteration} of frame {constraint.frame} inverts cells "
+                f"{internal_trial.inverted_cells[:10].tolist()} even after {max_halvings} "
+                "halvings; lower the penalty or track with more frames",
+                internal_trial.inverted_cells,
+                result.step_norms,
+            )
+        u = trial
+        internal = internal_trial
+        step = float(np.abs(alpha * du).max())
+        result.step_norms.append(step)
+        result.iterations = iteration
+        result.state = constraint.state(u)
+        if step < tolerance:
+            result.converged = True
+            break
+    result.u = u
+    return result

@@ -1,0 +1,124 @@
+"""Evaluate a finite-element displacement at arbitrary reference points (e.g. voxel centres).
+
+Points are located in the hexahedral mesh without Python loops over cells: the ``k`` cells
+with the nearest centroids are candidates, the trilinear geometry map of each candidate is
+inverted by Newton's method for all (point, candidate) pairs at once, and the first candidate
+whose reference coordinates fall in the unit cube wins. Points in no cell are reported as
+outside (NaN displacement), never extrapolated.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import skfem
+from scipy.spatial import cKDTree
+
+from harpx._typing import FloatArray, IntArray
+
+_GEOMETRY = skfem.ElementHex1()
+
+
+def _shape_values(element: Any, xi: FloatArray, nbasis: int) -> tuple[FloatArray, FloatArray]:
+    """Values (n, nb) and reference gradients (n, nb, 3) of an element's basis at ``xi`` (3, n)."""
+    vals = np.empty((xi.shape[1], nbasis))
+    grads = np.empty((xi.shape[1], nbasis, 3))
+    for a in range(nbasis):  # loop over the ≤ 20 basis functions, vectorised over points
+        phi, dphi = element.lbasis(xi, a)
+        vals[:, a] = phi
+        grads[:, a, :] = dphi.T
+    return vals, grads
+
+
+def locate(
+    mesh: skfem.MeshHex1, points: FloatArray, *, candidates: int = 8, tol: float = 1e-7
+) -> tuple[IntArray, FloatArray]:
+    """Find the cell and reference coordinates of each point.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshHex1
+        Hexahedral mesh (trilinear geometry), mm.
+    points : ndarray, shape (n, 3)
+        Physical points, mm.
+    candidates : int, default 8
+        Nearest cells (by centroid) tried per point.
+    tol : float, default 1e-7
+        Tolerance on the reference coordinates' unit-cube bounds (dimensionless).
+
+    Returns
+    -------
+    cells : ndarray of int, shape (n,)
+        Containing cell, or -1 where the point lies in no cell.
+    xi : ndarray, shape (n, 3)
+        Reference coordinates in [0, 1]³ (meaningless where ``cells == -1``).
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    n = points.shape[0]
+    cells_out = np.full(n, -1, dtype=np.int64)
+    xi_out = np.zeros((n, 3))
+    if n == 0:
+        return cells_out, xi_out
+    vertices = mesh.p.T[mesh.t.T]  # (ncell, 8, 3)
+    centroids = vertices.mean(axis=1)
+    radius = np.linalg.norm(vertices - centroids[:, None], axis=-1).max()
+    k = min(candidates, centroids.shape[0])
+    dist, cand = cKDTree(centroids).query(points, k=k)
+    dist = dist.reshape(n, k)
+    cand = cand.reshape(n, k)
+    near = dist[:, 0] <= radius * (1 + 1e-9)
+    if not near.any():
+        return cells_out, xi_out
+    pts = np.repeat(points[near], k, axis=0)
+    cc = cand[near].ravel()
+    xi = np.full((pts.shape[0], 3), 0.5)
+    verts = vertices[cc]  # (m, 8, 3)
+    for _ in range(20):  # Newton on the trilinear map, all pairs at once
+        vals, grads = _shape_values(_GEOMETRY, xi.T, 8)
+        x = np.einsum("ma,mai->mi", vals, verts)
+        jac = np.einsum("mai,maj->mij", verts, grads)  # dx_i/dxi_j
+        step = np.linalg.solve(jac, (pts - x)[..., None])[..., 0]
+        xi = np.clip(xi + step, -1.0, 2.0)
+        if np.abs(step).max() < 1e-12:
+            break
+    inside = np.all((xi >= -tol) & (xi <= 1 + tol), axis=1).reshape(-1, k)
+    first = inside.argmax(axis=1)
+    found = inside.any(axis=1)
+    idx_near = np.nonzero(near)[0]
+    rows = np.arange(idx_near.size)
+    cells_out[idx_near[found]] = cand[near][rows, first][found]
+    xi_out[idx_near[found]] = xi.reshape(-1, k, 3)[rows, first][found]
+    return cells_out, np.clip(xi_out, 0.0, 1.0)
+
+
+def interpolate_displacement(
+    body: Any, displacements: FloatArray, points: FloatArray
+) -> tuple[FloatArray, np.ndarray]:
+    """Displacement of material points given by reference positions.
+
+    Parameters
+    ----------
+    body : Body
+        The body whose dofs ``displacements`` refer to.
+    displacements : ndarray, shape (ntime, ndof)
+        Displacement vectors, mm.
+    points : ndarray, shape (n, 3)
+        Reference positions, mm.
+
+    Returns
+    -------
+    values : ndarray, shape (ntime, n, 3)
+        Displacement at the points, mm (NaN outside the mesh).
+    inside : ndarray of bool, shape (n,)
+        Points inside the mesh.
+    """
+    U = np.atleast_2d(np.asarray(displacements, dtype=float))
+    cells, xi = locate(body.mesh, points)
+    inside = cells >= 0
+    out = np.full((U.shape[0], points.shape[0], 3), np.nan)
+    if inside.any():
+        vals, _ = _shape_values(body._scalar_element, xi[inside].T, body.nbasis)
+        dofs = body.element_dofs[cells[inside]]  # (m, nb, 3)
+        out[:, inside] = np.einsum("ma,tmai->tmi", vals, U[:, dofs])
+    return out, inside

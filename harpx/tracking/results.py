@@ -1,0 +1,193 @@
+"""Build ``tracked/1`` datasets and compare them with ground truth."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from harpx._typing import FloatArray
+from harpx.schema import fill_standard_attrs, standard_attrs
+from harpx.tracking.resample import interpolate_displacement
+
+_DIAGNOSTIC_ATTRS = {
+    "stages": {"units": "1", "long_name": "penalty stages or multiplier updates"},
+    "target_reached": {"units": "1", "long_name": "tracking residual met its target"},
+}
+
+
+def _attrs(name: str) -> dict[str, str]:
+    return _DIAGNOSTIC_ATTRS.get(name) or standard_attrs(name)
+
+
+def grid_points(ds: xr.Dataset) -> FloatArray:
+    """Voxel-centre positions (nz·ny·nx, 3) in mm, columns (x, y, z), C order over (z, y, x)."""
+    z, y, x = (np.asarray(ds[d], dtype=float) for d in ("z", "y", "x"))
+    Z, Y, X = np.meshgrid(z, y, x, indexing="ij")
+    return np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
+
+
+def displacement_on_grid(body: Any, U: FloatArray, grid: xr.Dataset) -> xr.DataArray:
+    """FE displacement of the material points at the voxel centres of ``grid``.
+
+    Parameters
+    ----------
+    body : Body
+        The tracked body.
+    U : ndarray, shape (ntime, ndof)
+        Displacements per frame, mm.
+    grid : xarray.Dataset
+        Dataset with coordinates ``z``, ``y``, ``x`` (mm) and ``time``.
+
+    Returns
+    -------
+    xarray.DataArray
+        (time, axis, z, y, x) displacement in mm, NaN where the voxel centre lies in no cell.
+    """
+    pts = grid_points(grid)
+    lo = body.dof_points.min(axis=0) - 1e-9
+    hi = body.dof_points.max(axis=0) + 1e-9
+    in_box = np.all((pts >= lo) & (pts <= hi), axis=1)
+    shape = tuple(grid.sizes[d] for d in ("z", "y", "x"))
+    out = np.full((U.shape[0], pts.shape[0], 3), np.nan)
+    if in_box.any():
+        out[:, in_box], _ = interpolate_displacement(body, U, pts[in_box])
+    data = out.reshape(U.shape[0], *shape, 3).transpose(0, 4, 1, 2, 3)
+    return xr.DataArray(
+        data,
+        dims=("time", "axis", "z", "y", "x"),
+        coords={d: grid[d] for d in ("time", "z", "y", "x")} | {"axis": ["x", "y", "z"]},
+        attrs=standard_attrs("displacement_grid"),
+    )
+
+
+def tracked_dataset(
+    body: Any,
+    U: FloatArray,
+    phase: xr.Dataset,
+    diagnostics: Mapping[str, np.ndarray],
+    settings: Mapping[str, Any],
+) -> xr.Dataset:
+    """Assemble a self-contained ``tracked/1`` dataset.
+
+    Parameters
+    ----------
+    body : Body
+        The tracked body.
+    U : ndarray, shape (ntime, ndof)
+        Displacement per frame, mm.
+    phase : xarray.Dataset
+        The ``phase/1`` dataset that was tracked (for time and grid coordinates).
+    diagnostics : mapping of str to ndarray
+        Per-frame arrays (time,) or (time, cell).
+    settings : mapping
+        Settings recorded in ``attrs``.
+
+    Returns
+    -------
+    xarray.Dataset
+    """
+    ntime = U.shape[0]
+    nodal = np.stack([body.nodal_displacement(u) for u in U])  # (time, node, 3)
+    strain = np.stack([body.green_strain(u) for u in U])  # (time, cell, 3, 3)
+    ds = xr.Dataset(
+        coords={
+            "time": phase["time"],
+            "axis": xr.DataArray(["x", "y", "z"], dims="axis", attrs=standard_attrs("axis")),
+        }
+    )
+    ds["points"] = xr.DataArray(body.dof_points, dims=("node", "axis"), attrs=standard_attrs("points"))
+    cells_attrs = standard_attrs("cells") | {"element": body.element}
+    ds["cells"] = xr.DataArray(np.asarray(body.cells, dtype=np.int64), dims=("cell", "vertex"), attrs=cells_attrs)
+    if body.regions:
+        names = list(body.regions)
+        label = np.full(body.ncell, -1, dtype=np.int64)
+        for code, name in enumerate(names):  # loop over the few named regions
+            label[np.asarray(body.regions[name], dtype=np.int64)] = code
+        ds["region"] = xr.DataArray(
+            label, dims="cell", attrs=standard_attrs("region") | {"flag_meanings": " ".join(names)}
+        )
+    ds["displacement"] = xr.DataArray(nodal, dims=("time", "node", "axis"), attrs=standard_attrs("displacement"))
+    ds["green_strain"] = xr.DataArray(
+        strain, dims=("time", "cell", "i", "j"), attrs=standard_attrs("green_strain")
+    )
+    if getattr(body, "fibers_qp", None) is not None:
+        fib = body._cell_average(body.fibers_qp)
+        fib /= np.linalg.norm(fib, axis=1, keepdims=True)
+        ds["fiber"] = xr.DataArray(fib, dims=("cell", "axis"), attrs=standard_attrs("fiber"))
+        ds["fiber_stretch"] = xr.DataArray(
+            np.stack([body.fiber_stretch(u) for u in U]),
+            dims=("time", "cell"),
+            attrs=standard_attrs("fiber_stretch"),
+        )
+    for name, value in diagnostics.items():
+        dims = ("time",) if np.ndim(value) == 1 else ("time", "cell")
+        ds[name] = xr.DataArray(np.asarray(value), dims=dims, attrs=_attrs(name))
+    ds["displacement_grid"] = displacement_on_grid(body, U, phase)
+    ds["dof_displacement"] = xr.DataArray(
+        U, dims=("time", "dof"), attrs={"units": "mm", "long_name": "displacement of each dof"}
+    )
+    ds.attrs.update({"harpx_schema": "tracked/1", **{k: v for k, v in settings.items()}})
+    assert ds.sizes["time"] == ntime
+    return fill_standard_attrs(ds)
+
+
+def tracking_error(tracked: xr.Dataset, truth: xr.Dataset) -> xr.Dataset:
+    """Displacement error of a tracked result against ground truth, inside the body.
+
+    Parameters
+    ----------
+    tracked : xarray.Dataset
+        ``tracked/1`` dataset with ``displacement_grid``.
+    truth : xarray.Dataset
+        Dataset with ``displacement_true`` (time, axis, z, y, x), NaN outside the body
+        (a ``tagged/1`` or ``phase/1`` dataset).
+
+    Returns
+    -------
+    xarray.Dataset
+        Per frame (``time``) and overall (``*_all``) mean, standard deviation, 95th
+        percentile and maximum of the error magnitude |u − u_true| in mm, plus
+        ``coverage``: the fraction of body voxels that the tracked result covers.
+    """
+    if "displacement_true" not in truth:
+        raise ValueError("truth has no 'displacement_true'; pass the synthetic tagged dataset")
+    if "displacement_grid" not in tracked:
+        raise ValueError("tracked has no 'displacement_grid'; track with harpx.tracking.track")
+    true = truth["displacement_true"]
+    est = tracked["displacement_grid"]
+    same = all(
+        est.sizes[d] == true.sizes[d] and np.allclose(est[d].values, true[d].values)
+        for d in ("z", "y", "x")
+    )
+    if not same:
+        est = est.interp(z=true.z, y=true.y, x=true.x)
+    est = est.assign_coords(time=true.time.values)
+    err = np.sqrt(((est - true) ** 2).sum("axis", skipna=False))
+    body = np.isfinite(true).all("axis")
+    covered = np.isfinite(err)
+    values = err.values.reshape(err.sizes["time"], -1)
+    ok = covered.values.reshape(err.sizes["time"], -1)
+
+    def frame_stat(fn: Any) -> FloatArray:
+        return np.array([fn(v[m]) if m.any() else np.nan for v, m in zip(values, ok, strict=True)])
+
+    everything = values[ok]
+    stats = {
+        "mean": (frame_stat(np.mean), float(np.mean(everything))),
+        "sd": (frame_stat(np.std), float(np.std(everything))),
+        "p95": (frame_stat(lambda v: np.percentile(v, 95)), float(np.percentile(everything, 95))),
+        "max": (frame_stat(np.max), float(np.max(everything))),
+    }
+    out = xr.Dataset(coords={"time": true.time})
+    for name, (per_frame, overall) in stats.items():
+        out[name] = xr.DataArray(per_frame, dims="time", attrs={"units": "mm", "long_name": f"{name} displacement error"})
+        out[f"{name}_all"] = xr.DataArray(overall, attrs={"units": "mm", "long_name": f"{name} displacement error over all frames"})
+    n_body = float(body.values.sum())
+    out["coverage"] = xr.DataArray(
+        float(covered.values.sum()) / n_body if n_body else np.nan,
+        attrs={"units": "1", "long_name": "fraction of body voxels with a tracked displacement"},
+    )
+    return out
