@@ -67,29 +67,33 @@ def locate(
     dist, cand = cKDTree(centroids).query(points, k=k)
     dist = dist.reshape(n, k)
     cand = cand.reshape(n, k)
-    near = dist[:, 0] <= radius * (1 + 1e-9)
-    if not near.any():
-        return cells_out, xi_out
-    pts = np.repeat(points[near], k, axis=0)
-    cc = cand[near].ravel()
-    xi = np.full((pts.shape[0], 3), 0.5)
-    verts = vertices[cc]  # (m, 8, 3)
-    for _ in range(20):  # Newton on the trilinear map, all pairs at once
-        vals, grads = _shape_values(_GEOMETRY, xi.T, 8)
-        x = np.einsum("ma,mai->mi", vals, verts)
-        jac = np.einsum("mai,maj->mij", verts, grads)  # dx_i/dxi_j
-        step = np.linalg.solve(jac, (pts - x)[..., None])[..., 0]
-        xi = np.clip(xi + step, -1.0, 2.0)
-        if np.abs(step).max() < 1e-12:
+    unresolved = np.nonzero(dist[:, 0] <= radius * (1 + 1e-9))[0]
+    for rank in range(k):  # candidates in order of centroid distance; most points stop at 0
+        if unresolved.size == 0:
             break
-    inside = np.all((xi >= -tol) & (xi <= 1 + tol), axis=1).reshape(-1, k)
-    first = inside.argmax(axis=1)
-    found = inside.any(axis=1)
-    idx_near = np.nonzero(near)[0]
-    rows = np.arange(idx_near.size)
-    cells_out[idx_near[found]] = cand[near][rows, first][found]
-    xi_out[idx_near[found]] = xi.reshape(-1, k, 3)[rows, first][found]
+        cell = cand[unresolved, rank]
+        xi = _invert_trilinear(vertices[cell], points[unresolved])
+        inside = np.all((xi >= -tol) & (xi <= 1 + tol), axis=1)
+        cells_out[unresolved[inside]] = cell[inside]
+        xi_out[unresolved[inside]] = xi[inside]
+        unresolved = unresolved[~inside]
     return cells_out, np.clip(xi_out, 0.0, 1.0)
+
+
+def _invert_trilinear(verts: FloatArray, pts: FloatArray, iterations: int = 25) -> FloatArray:
+    """Reference coordinates of ``pts`` (m, 3) in the trilinear cells ``verts`` (m, 8, 3)."""
+    xi = np.full((pts.shape[0], 3), 0.5)
+    active = np.arange(pts.shape[0])
+    for _ in range(iterations):  # Newton, only on the pairs that have not converged
+        vals, grads = _shape_values(_GEOMETRY, xi[active].T, 8)
+        x = np.einsum("ma,mai->mi", vals, verts[active])
+        jac = np.einsum("mai,maj->mij", verts[active], grads)  # dx_i/dxi_j
+        step = np.linalg.solve(jac, (pts[active] - x)[..., None])[..., 0]
+        xi[active] = np.clip(xi[active] + step, -1.0, 2.0)
+        active = active[np.abs(step).max(axis=1) > 1e-12]
+        if active.size == 0:
+            break
+    return xi
 
 
 def interpolate_displacement(
