@@ -433,13 +433,12 @@ def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
             "cine stack needs the same frames (drop incomplete slices)"
         )
     times = np.array([[im.time for im in f] for f in frames], dtype=np.float64)
-    mean = times.mean(axis=0)
-    deviation = float(np.abs(times - mean).max())
-    if deviation > time_tolerance:
+    spread = times.max(axis=0) - times.min(axis=0)
+    if spread.max() > time_tolerance:
         raise HarpxError(
-            f"TriggerTime of the slices of {label} differ by up to {deviation:.3g} ms at the same "
-            f"frame index (> time_tolerance={time_tolerance:g} ms); raise time_tolerance if the "
-            "frames really correspond"
+            f"TriggerTime of the slices of {label} differ by up to {spread.max():.3g} ms at "
+            f"frame {int(np.argmax(spread))} (> time_tolerance={time_tolerance:g} ms); raise "
+            "time_tolerance if the frames really correspond"
         )
     offsets = local[[s[0] for s in slices], 2] - local[base, 2]
     origin = positions[base]
@@ -466,7 +465,7 @@ def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
         columns=first.columns,
         offsets=offsets,
         slab=(float(offsets[0] - below), float(offsets[-1] + above)),
-        times=mean,
+        times=times.mean(axis=0),
         images=frames,
     )
 
@@ -482,6 +481,7 @@ def _discover(paths_or_folder: PathLike | Sequence[PathLike]) -> list[_Image]:
     else:
         entries = [Path(p) for p in paths_or_folder]
     images: list[_Image] = []
+    seen: set[Path] = set()
     for entry in entries:
         if entry.is_dir():
             files = sorted(p for p in entry.rglob("*") if p.is_file())
@@ -491,6 +491,9 @@ def _discover(paths_or_folder: PathLike | Sequence[PathLike]) -> list[_Image]:
         else:
             raise HarpxError(f"DICOM path {str(entry)!r} does not exist")
         for path in files:
+            if path.resolve() in seen:
+                continue  # given twice (a folder and a file inside it)
+            seen.add(path.resolve())
             try:
                 header = pydicom.dcmread(path, stop_before_pixels=True)
             except pydicom.errors.InvalidDicomError as err:

@@ -417,8 +417,9 @@ def test_multiframe_timing_from_frame_acquisition_datetime(tmp_path: Path) -> No
 
 
 def test_explicit_spacing_and_tag_list(study: Path) -> None:
+    one_file = next((study / "sa").glob("*.dcm"))  # also inside a folder given: read once
     ds = read_tagged(
-        [study / "la", study / "sa"], spacing=2.0, tag_period={"l": 10.0, "x": 8.0},
+        [study / "la", study / "sa", one_file], spacing=2.0, tag_period={"l": 10.0, "x": 8.0},
         tag_directions=[(LA.uid, "l", LA.frame[:, 0]), ("1", "x", (2.0, 0.0, 0.0))],
         sequence="SPAMM",
     )
@@ -529,6 +530,25 @@ def test_inconsistent_frame_counts_across_slices(tmp_path: Path) -> None:
     written = write_classic(tmp_path, SA)
     next(p for p, kt in written.items() if kt == (2, 1)).unlink()
     with pytest.raises(HarpxError, match=r"different numbers of frames \[3, 3, 2\]"):
+        read_tagged(tmp_path, **{**READ, "tag_directions": {"SA tagged": ("x", "row")}})
+
+
+def test_trigger_times_across_slices_beyond_tolerance(tmp_path: Path) -> None:
+    def edit(ds, k, t):
+        if (k, t) == (2, 1):
+            ds.TriggerTime = ds_str(42.0)
+
+    write_classic(tmp_path, SA, edit=edit)
+    match = r"slices of series 'SA tagged' .* differ by up to 2 ms at frame 1"
+    with pytest.raises(HarpxError, match=match):
+        read_tagged(tmp_path, **{**READ, "tag_directions": {"SA tagged": ("x", "row")}})
+
+
+def test_duplicate_images_are_reported(tmp_path: Path) -> None:
+    written = write_classic(tmp_path, SA)
+    source = next(p for p, kt in written.items() if kt == (0, 0))
+    (tmp_path / "copy.dcm").write_bytes(source.read_bytes())
+    with pytest.raises(HarpxError, match="two images at the same slice position and TriggerTime"):
         read_tagged(tmp_path, **{**READ, "tag_directions": {"SA tagged": ("x", "row")}})
 
 
