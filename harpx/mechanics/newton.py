@@ -16,13 +16,18 @@ prescribed increment :math:`\Delta g = g(s) - u_D`,
     K_{FF}\, x_F = -R_F - K_{FD}\, \Delta g, \qquad \delta u = x + \Delta g ,
 
 so the first iteration of a step is the consistent linearised predictor and the boundary
-moves with it. The step :math:`u_{k+1} = u_k + \alpha\,\delta u` is damped by backtracking
-(:math:`\alpha = 1, 1/2, \dots`) until :math:`\|R_F\|` decreases by the Armijo factor
-:math:`1 - 10^{-4}\alpha` (a step that moves the boundary is only required to keep every
-:math:`\det F > 0`). Convergence: the boundary values are reached and
-:math:`\|R_F\| \le \max(\mathrm{tol}\cdot\rho, \mathrm{atol})`, with the force scale
-:math:`\rho` = the larger of the free residual at the start and the reaction norm
-:math:`\|R_D\|`. A step that diverges, stalls (``max_iterations``), produces NaN or inverts an
+moves with it. Steps are full Newton steps (keeping quadratic convergence, which energy or
+``‖R‖`` line searches destroy for nearly incompressible solids, where a full step overshoots
+the volumetric energy yet lands in the basin of convergence: measured 4--5 instead of 7--12
+iterations per step at κ/C1 = 10⁴). The line search is a safeguard: a trial with an inverted
+element or NaN is halved (:math:`\alpha = 1, 1/2, \dots`), and once :math:`\|R_F\|` has
+grown in two consecutive iterations the energy-slope line search takes over, accepting
+:math:`\alpha` when :math:`|\delta u \cdot R_F(u + \alpha\delta u)| \le 0.9\,
+|\delta u \cdot R_F(u)|` and otherwise moving to the secant zero of that slope (it needs
+only residuals, so it serves non-conservative terms too). Convergence: the boundary values
+are reached and :math:`\|R_F\| \le \max(\mathrm{tol}\cdot\rho, \mathrm{atol})`, with the
+force scale :math:`\rho` = the larger of the free residual at the start and the reaction
+norm :math:`\|R_D\|`. A step that diverges, stalls (``max_iterations``), produces NaN or inverts an
 element is retried with half the load increment, at most ``max_cutbacks`` times in a row.
 """
 
@@ -160,6 +165,7 @@ class _Newton:
         self.max_iterations = int(max_iterations)
         self.line_search = bool(line_search)
         self.max_backtracks = int(max_backtracks)
+        self.ls_ratio = 0.9
         self.solver = (
             linear_solver if isinstance(linear_solver, LinearSolver) else LinearSolver(linear_solver)
         )
@@ -235,6 +241,7 @@ class _Newton:
         g = self.boundary_values(s)
         history: list[float] = []
         scale = 0.0
+        growth = 0
         asm = self.assemble(u, s)
         for it in range(self.max_iterations + 1):
             if asm.R is None or asm.data is None:
@@ -280,32 +287,43 @@ class _Newton:
                 return _Outcome(False, u, history, it + 1, "nan", min_jacobian=asm.min_jacobian)
             step = x
             step[self.D] = dg[self.D]
-            # backtracking line search
+            # line search on the energy slope σ(α) = δu·R_F(u + α δu) (residual-only, so it
+            # also serves non-conservative terms), switched on once ‖R_F‖ has grown twice in a
+            # row; inverted or NaN trials always halve α
+            if it > 0 and not pending and rn > history[-2]:
+                growth += 1
+            elif it > 0:
+                growth = 0
+            damping = self.line_search and growth >= 2
             alpha = 1.0
-            best: tuple[float, FloatArray, _Assembled] | None = None
+            slope0 = float(step @ RF)
             last_bad = asm.inverted
             accepted = None
+            fallback = None
             for _ in range(self.max_backtracks + 1):
                 ut = u + alpha * step
                 trial = self.assemble(ut, s)
-                if trial.R is None:
-                    last_bad = trial.inverted
-                else:
-                    tf = trial.R.copy()
-                    tf[self.D] = 0.0
-                    tn = float(np.linalg.norm(tf))
-                    if np.isfinite(tn):
-                        if pending or not self.line_search or tn <= (1.0 - 1e-4 * alpha) * rn:
-                            accepted = (ut, trial)
-                            break
-                        if best is None or tn < best[0]:
-                            best = (tn, ut, trial)
-                if not self.line_search and trial.R is not None:
+                if trial.R is None or not np.all(np.isfinite(trial.R)):
+                    if trial.R is None:
+                        last_bad = trial.inverted
+                    alpha *= 0.5
+                    self.line_search_steps += 1
+                    continue
+                fallback = (ut, trial)
+                if pending or not damping or slope0 >= 0.0:
+                    accepted = fallback
                     break
-                alpha *= 0.5
+                tf = trial.R.copy()
+                tf[self.D] = 0.0
+                slope = float(step @ tf)
+                if slope <= 0.0 or abs(slope) <= self.ls_ratio * abs(slope0):
+                    accepted = fallback
+                    break
+                # overshoot (the energy rises again before α): secant zero of σ, safeguarded
+                alpha *= float(np.clip(slope0 / (slope0 - slope), 0.1, 0.9))
                 self.line_search_steps += 1
-            if accepted is None and best is not None:
-                accepted = (best[1], best[2])
+            if accepted is None:
+                accepted = fallback
             if accepted is None:
                 return _Outcome(False, u, history, it + 1, "inverted", last_bad, asm.min_jacobian)
             u, asm = accepted
@@ -451,7 +469,8 @@ def solve(
     max_iterations : int, default 25
         Newton iterations per load step before a cut-back.
     line_search : bool, default True
-        Backtracking on ``‖R_F‖`` (Armijo).
+        Safeguarded line search (see the module docstring): halve steps that invert
+        elements; energy-slope line search after two consecutive residual increases.
     max_cutbacks : int, default 6
         Consecutive halvings of a failing increment before giving up.
     linear_solver : str or LinearSolver, default "auto"
@@ -499,6 +518,7 @@ def solve(
     s_done = 0.0
     res = SolveResult(u=u, converged=False)
     consecutive = 0
+    inverted: tuple[IntArray, float, list[float]] | None = None
     min_j = float("nan")
     while s_done < 1.0 - 1e-12:
         s = min(1.0, s_done + ds)
@@ -509,6 +529,7 @@ def solve(
             u = out.u
             s_done = s
             consecutive = 0
+            inverted = None
             min_j = out.min_jacobian
             res.step_iterations.append(out.iterations)
             res.residual_history.append(out.history)
@@ -517,8 +538,13 @@ def solve(
             continue
         res.cutbacks += 1
         consecutive += 1
+        if out.reason == "inverted":
+            inverted = (out.cells, s, out.history)
         if consecutive > max_cutbacks:
-            err = _failure(out.reason, out.cells, s, out.history, consecutive - 1)
+            if inverted is not None:  # an inversion in this failure chain is the root cause
+                err = _failure("inverted", inverted[0], inverted[1], inverted[2], consecutive - 1)
+            else:
+                err = _failure(out.reason, out.cells, s, out.history, consecutive - 1)
             res.u, res.min_jacobian, res.message = u, min_j, str(err)
             res.iterations, res.time_assembly, res.time_solve = (
                 nt.iterations,
