@@ -1,0 +1,380 @@
+"""Track a cohort of subjects in parallel with dask.distributed, resumably.
+
+:func:`track_many` treats each input archive (``tagged/1`` or ``phase/1`` NetCDF) as one
+subject: it builds the subject's :class:`~harpx.mechanics.body.Body` with a user function,
+tracks it with :func:`harpx.tracking.track.track` on a dask cluster and writes one
+``tracked/1`` archive per subject with the atomic :func:`harpx.io.netcdf.to_netcdf`.
+
+Nothing is lost when a cohort is interrupted or a subject fails:
+
+- archives are only ever complete (atomic writes), so a killed run leaves finished subjects
+  finished and the others absent;
+- a re-run skips every subject whose archive opens cleanly and was made from the same input
+  (its SHA-256 is recorded in the archive), and redoes missing, corrupt or stale ones;
+- a failing subject does not stop the others: all are run, then one :class:`CohortError`
+  lists the failures.
+
+dask.distributed is an optional dependency (``pip install harpx[distributed]``), imported
+only when there is work to do.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+import pickle
+import uuid
+from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+from tqdm.auto import tqdm
+
+from harpx._typing import PathLike
+from harpx.errors import ArchiveError, HarpxError, SchemaError
+from harpx.io.netcdf import open_dataset, to_netcdf
+from harpx.schema import validate
+
+__all__ = ["CohortError", "output_path", "track_many", "track_subject"]
+
+#: Suffix of each subject's archive: ``<input stem>_tracked.nc``.
+OUTPUT_SUFFIX = "_tracked.nc"
+_SOURCE_ATTR = "source_file"
+_DIGEST_ATTR = "source_sha256"
+
+
+class CohortError(HarpxError):
+    """Some subjects of a cohort failed; the others were written.
+
+    Parameters
+    ----------
+    message : str
+        Summary naming every failed subject.
+    failures : dict of pathlib.Path to BaseException
+        Input archive → the error it raised.
+    outputs : list of pathlib.Path
+        Output archive of every subject, in input order (those of failed subjects do not
+        exist).
+    """
+
+    def __init__(
+        self, message: str, failures: Mapping[Path, BaseException], outputs: list[Path]
+    ) -> None:
+        self.failures: dict[Path, BaseException] = dict(failures)
+        self.outputs: list[Path] = list(outputs)
+        super().__init__(message)
+
+
+def output_path(path: PathLike, output_dir: PathLike) -> Path:
+    """Archive that :func:`track_many` writes for one input archive.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Input archive.
+    output_dir : str or os.PathLike
+        Output directory.
+
+    Returns
+    -------
+    pathlib.Path
+        ``output_dir / (stem + "_tracked.nc")``.
+
+    Examples
+    --------
+    >>> output_path("cohort/s01.nc", "out").as_posix()
+    'out/s01_tracked.nc'
+    """
+    return Path(output_dir) / f"{Path(path).stem}{OUTPUT_SUFFIX}"
+
+
+def track_many(
+    paths: Iterable[PathLike],
+    body_factory: Callable[[Any], Any],
+    *,
+    output_dir: PathLike,
+    client: Any = None,
+    address: str | None = None,
+    n_workers: int = 2,
+    track_kwargs: Mapping[str, Any] | None = None,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> list[Path]:
+    """Track every subject of a cohort on a dask cluster, one archive per subject.
+
+    Parameters
+    ----------
+    paths : iterable of str or os.PathLike
+        Input archives, one per subject: ``tagged/1`` (its phase is extracted with the
+        defaults of :func:`harpx.imaging.harp.extract_phase`) or ``phase/1`` NetCDF files.
+        File stems must be unique.
+    body_factory : callable
+        ``body_factory(ds) -> Body`` for the subject's dataset (mesh in mm, in the image
+        frame). It runs on the workers, so it must be picklable: a top-level function of an
+        importable module, or a :func:`functools.partial` of one.
+    output_dir : str or os.PathLike
+        Directory of the output archives ``<stem>_tracked.nc`` (created if needed).
+    client : distributed.Client, optional
+        An existing client to run on (left open).
+    address : str, optional
+        Scheduler address of a running cluster (e.g. ``"tcp://10.0.0.5:8786"``); a client
+        is opened for this call and closed after it.
+    n_workers : int, default 2
+        Worker processes of the local cluster started when neither ``client`` nor
+        ``address`` is given (one thread each; BLAS and MKL threads are set to 1 by
+        dask's worker environment). The cluster is closed at the end.
+    track_kwargs : mapping, optional
+        Keyword arguments of :func:`harpx.tracking.track.track` (e.g. ``epsilon``,
+        ``method``), the same for every subject.
+    overwrite : bool, default False
+        Redo every subject. By default a subject is skipped when its archive opens cleanly,
+        is a valid ``tracked/1`` dataset and records the SHA-256 of the current input; with
+        other ``body_factory`` or ``track_kwargs`` than the earlier run, pass True.
+    progress : bool, default True
+        Show a progress bar over subjects.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The output archive of each subject, in input order.
+
+    Raises
+    ------
+    CohortError
+        After every other subject is written, if some subjects failed (missing or unreadable
+        input, ``body_factory`` or tracking errors, a lost worker); ``err.failures`` maps
+        each failed input to its error. Re-running resumes with the failed ones only.
+    ValueError
+        If both ``client`` and ``address`` are given, ``n_workers < 1``, or two inputs share
+        a file stem.
+    TypeError
+        If ``track_kwargs`` has a name :func:`~harpx.tracking.track.track` does not take,
+        or ``body_factory`` cannot be pickled.
+    ImportError
+        If there is work to do and dask.distributed is not installed.
+
+    Notes
+    -----
+    The skip decision is made here, before any cluster starts: a cohort that is already
+    complete needs no cluster. Each output archive records ``source_file`` (input name) and
+    ``source_sha256`` in its attributes.
+
+    Examples
+    --------
+    >>> def body_factory(ds):  # doctest: +SKIP
+    ...     return Body(cylinder(30.0, 12.0), NeoHookean(c1=1.0, kappa=120.0))
+    >>> track_many(sorted(Path("cohort").glob("*.nc")), body_factory,
+    ...            output_dir="tracked", track_kwargs={"epsilon": 0.05})  # doctest: +SKIP
+    """
+    inputs = [Path(p) for p in paths]
+    kwargs = dict(track_kwargs or {})
+    _check_arguments(inputs, body_factory, client, address, n_workers, kwargs)
+    out_dir = Path(output_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    outputs = [output_path(p, out_dir) for p in inputs]
+
+    failures: dict[int, BaseException] = {}
+    todo: list[tuple[int, str]] = []  # (subject index, input digest)
+    for i, (source, target) in enumerate(zip(inputs, outputs, strict=True)):
+        try:
+            digest = _sha256(source)
+        except OSError as exc:
+            failures[i] = ArchiveError(f"cannot read input {str(source)!r}: {exc}")
+            continue
+        if overwrite or not _is_complete(target, digest):
+            todo.append((i, digest))
+
+    done = len(inputs) - len(todo) - len(failures)
+    with tqdm(total=len(inputs), initial=done, disable=not progress, desc="subjects",
+              unit="subject") as bar:
+        bar.update(len(failures))
+        if todo:
+            _run(todo, inputs, outputs, body_factory, kwargs, client, address, n_workers,
+                 failures, bar)
+    if failures:
+        raise _cohort_error(inputs, outputs, failures, out_dir)
+    return outputs
+
+
+# --- the work of one subject (runs on a worker) -------------------------------------------
+
+
+def track_subject(
+    source: PathLike,
+    target: PathLike,
+    body_factory: Callable[[Any], Any],
+    track_kwargs: Mapping[str, Any] | None = None,
+    digest: str | None = None,
+) -> Path:
+    """Track one subject and write its archive (the task :func:`track_many` distributes).
+
+    Parameters
+    ----------
+    source : str or os.PathLike
+        Input ``tagged/1`` or ``phase/1`` archive.
+    target : str or os.PathLike
+        Output ``tracked/1`` archive, written atomically.
+    body_factory : callable
+        ``body_factory(ds) -> Body``.
+    track_kwargs : mapping, optional
+        Keyword arguments of :func:`harpx.tracking.track.track`.
+    digest : str, optional
+        SHA-256 of ``source`` recorded in the archive (computed if None).
+
+    Returns
+    -------
+    pathlib.Path
+        ``target``.
+    """
+    from harpx.tracking.track import track
+
+    source = Path(source)
+    ds = open_dataset(source)
+    kind = ds.attrs.get("harpx_schema")
+    if kind not in ("tagged/1", "phase/1"):
+        raise SchemaError(
+            f"input {str(source)!r} has harpx_schema {kind!r}; track_many needs 'tagged/1' "
+            "or 'phase/1' archives"
+        )
+    tracked = track(ds, body_factory(ds), **dict(track_kwargs or {}))
+    tracked.attrs[_SOURCE_ATTR] = source.name
+    tracked.attrs[_DIGEST_ATTR] = digest if digest is not None else _sha256(source)
+    return to_netcdf(tracked, target)
+
+
+# --- helpers ------------------------------------------------------------------------------
+
+
+def _check_arguments(
+    inputs: list[Path],
+    body_factory: Callable[[Any], Any],
+    client: Any,
+    address: str | None,
+    n_workers: int,
+    kwargs: Mapping[str, Any],
+) -> None:
+    if client is not None and address is not None:
+        raise ValueError("pass either client= or address=, not both")
+    if client is None and address is None and int(n_workers) < 1:
+        raise ValueError(f"n_workers={n_workers!r} must be at least 1")
+    stems: dict[str, list[str]] = {}
+    for p in inputs:
+        stems.setdefault(p.stem, []).append(str(p))
+    clashes = {s: v for s, v in stems.items() if len(v) > 1}
+    if clashes:
+        raise ValueError(
+            f"inputs share file stems, so their outputs would collide: {clashes!r}; rename "
+            "them or track them into different output_dir"
+        )
+    if not callable(body_factory):
+        raise TypeError(f"body_factory must be callable, got {type(body_factory).__name__!r}")
+    from harpx.tracking.track import track
+
+    params = inspect.signature(track).parameters
+    allowed = [n for n, p in params.items() if p.kind is inspect.Parameter.KEYWORD_ONLY]
+    unknown = sorted(set(kwargs) - set(allowed))
+    if unknown:
+        raise TypeError(
+            f"track_kwargs has {unknown!r}, which harpx.tracking.track.track does not take; "
+            f"allowed: {allowed!r}"
+        )
+    try:
+        import cloudpickle
+
+        cloudpickle.dumps(body_factory)
+    except ImportError:  # pragma: no cover - cloudpickle comes with dask
+        pickle.dumps(body_factory)
+    except Exception as exc:
+        raise TypeError(
+            f"body_factory {body_factory!r} cannot be pickled for the dask workers "
+            f"({type(exc).__name__}: {exc}); define it as a top-level function of an "
+            "importable module"
+        ) from exc
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _is_complete(target: Path, digest: str) -> bool:
+    """Whether ``target`` is a readable, valid tracked/1 archive made from this input."""
+    if not target.is_file():
+        return False
+    try:
+        ds = open_dataset(target)  # loads everything: a truncated file fails here
+        validate(ds, "tracked")
+    except (ArchiveError, SchemaError):
+        return False
+    return ds.attrs.get(_DIGEST_ATTR) == digest
+
+
+def _run(
+    todo: list[tuple[int, str]],
+    inputs: list[Path],
+    outputs: list[Path],
+    body_factory: Callable[[Any], Any],
+    kwargs: Mapping[str, Any],
+    client: Any,
+    address: str | None,
+    n_workers: int,
+    failures: dict[int, BaseException],
+    bar: Any,
+) -> None:
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError as exc:
+        raise ImportError(
+            "track_many needs dask.distributed; install it with `pip install "
+            "harpx[distributed]` (or `pip install distributed`)"
+        ) from exc
+    owned: list[Any] = []  # cluster/client opened here, closed in `finally`
+    try:
+        if client is None:
+            if address is not None:
+                client = Client(address)
+            else:
+                cluster = LocalCluster(
+                    n_workers=int(n_workers), threads_per_worker=1, processes=True,
+                    dashboard_address=None,
+                )
+                owned.append(cluster)
+                client = Client(cluster)
+            owned.insert(0, client)
+        futures = {
+            client.submit(
+                track_subject, str(inputs[i]), str(outputs[i]), body_factory, kwargs, digest,
+                key=f"harpx-track-{inputs[i].stem}-{uuid.uuid4().hex}", pure=False,
+            ): i
+            for i, digest in todo
+        }
+        for future in as_completed(futures):
+            i = futures[future]
+            try:
+                future.result()
+            except Exception as exc:  # one subject's failure never stops the others
+                failures[i] = exc
+            bar.update(1)
+    finally:
+        for thing in owned:
+            thing.close()
+
+
+def _cohort_error(
+    inputs: list[Path], outputs: list[Path], failures: Mapping[int, BaseException], out: Path
+) -> CohortError:
+    lines = []
+    for i in sorted(failures):
+        exc = failures[i]
+        first = (str(exc).strip().splitlines() or [""])[0]
+        lines.append(f"  {str(inputs[i])!r}: {type(exc).__name__}: {first}")
+    n_ok = len(inputs) - len(failures)
+    message = (
+        f"{len(failures)} of {len(inputs)} subjects failed; the other {n_ok} archives are in "
+        f"{str(out)!r}:\n" + "\n".join(lines) + "\nfix these subjects and run track_many "
+        "again: finished subjects are skipped"
+    )
+    return CohortError(message, {inputs[i]: failures[i] for i in failures}, outputs)

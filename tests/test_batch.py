@@ -1,0 +1,240 @@
+"""Tests of harpx.batch.track_many: a cohort on a dask cluster, resume, and failures."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from harpx.batch import CohortError, output_path, track_many, track_subject
+from harpx.errors import HarpxError
+from harpx.io.netcdf import open_dataset, to_netcdf
+from harpx.mechanics.body import Body
+from harpx.mechanics.materials import NeoHookean
+from harpx.mechanics.mesh import cylinder
+from harpx.scenes._motion import RotationalImpact
+from harpx.tracking.track import track
+from tests._ideal import ideal_phase
+
+distributed = pytest.importorskip("distributed")
+
+RADIUS, HEIGHT = 12.0, 6.0
+# SuperLU is single-threaded and deterministic, so worker and serial runs do the same
+# floating-point operations (PARDISO's results depend on its thread count)
+TRACK_KWARGS = {"epsilon": 0.05, "linear_solver": "superlu"}
+
+
+def _inside(X: np.ndarray) -> np.ndarray:
+    return ((np.hypot(X[:, 0], X[:, 1]) <= RADIUS) & (np.abs(X[:, 2]) <= HEIGHT / 2)).astype(float)
+
+
+def body_factory(ds: xr.Dataset) -> Body:
+    """The subjects' body: a coarse cylinder (so the test is fast), the same for everyone."""
+    mesh = cylinder(RADIUS, HEIGHT, n_radial=1, n_circumferential=8, n_axial=1,
+                    center=(0.0, 0.0, -HEIGHT / 2))
+    return Body(mesh, NeoHookean(c1=1.0, kappa=120.0))
+
+
+def _subject(angle_mm: float, *, shift: float = 0.0) -> xr.Dataset:
+    """Ideal phase of a lagged rotation (edge turns ``angle_mm``), 3 frames, 4x20x20 voxels."""
+    motion = RotationalImpact(radius=RADIUS, base=-HEIGHT / 2, height=HEIGHT,
+                              angle=angle_mm / RADIUS)
+    ds = ideal_phase(motion, shape=(4, 20, 20), spacing=(2.0, 1.5, 1.5),
+                     times=np.arange(3) * 18.0, body=_inside)
+    if shift:  # the image grid moved away: the mesh lies outside the field of view
+        ds = ds.assign_coords(x=ds.x + shift)
+        ds["x"].attrs.update({"units": "mm", "long_name": "x position of voxel centre"})
+    return ds
+
+
+@pytest.fixture(scope="module")
+def cohort(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    folder = tmp_path_factory.mktemp("cohort")
+    return [to_netcdf(_subject(a), folder / f"s{k}.nc") for k, a in enumerate((2.0, 3.0, 4.0))]
+
+
+@pytest.fixture(scope="module")
+def client() -> Iterator[object]:
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        with distributed.Client(cluster) as c:
+            yield c
+
+
+@pytest.fixture(scope="module")
+def serial(cohort: list[Path]) -> list[xr.Dataset]:
+    """Reference: a plain loop over track() in this process."""
+    return [track(open_dataset(p), body_factory(None), **TRACK_KWARGS) for p in cohort]
+
+
+def _mtimes(paths: list[Path]) -> list[int]:
+    return [p.stat().st_mtime_ns for p in paths]
+
+
+def test_cohort_on_a_local_cluster_matches_a_serial_loop(
+    cohort: list[Path], serial: list[xr.Dataset], tmp_path: Path
+) -> None:
+    # the default path: a LocalCluster with 2 worker processes started and closed here
+    outputs = track_many(cohort, body_factory, output_dir=tmp_path / "out", n_workers=2,
+                         track_kwargs=TRACK_KWARGS, progress=False)
+    assert outputs == [tmp_path / "out" / f"s{k}_tracked.nc" for k in range(3)]
+    for path, source, expected in zip(outputs, cohort, serial, strict=True):
+        actual = open_dataset(path)
+        # same code, same single-threaded solver, same inputs: agreement to rounding
+        xr.testing.assert_allclose(actual.displacement, expected.displacement, rtol=1e-10)
+        assert actual.attrs["source_file"] == source.name
+        assert len(actual.attrs["source_sha256"]) == 64
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [p.name for p in outputs]
+
+
+def test_resume_redoes_only_missing_and_corrupt_subjects(
+    cohort: list[Path], client: object, tmp_path: Path
+) -> None:
+    out = tmp_path / "out"
+    outputs = track_many(cohort, body_factory, output_dir=out, client=client,
+                         track_kwargs=TRACK_KWARGS, progress=False)
+    first = [open_dataset(p) for p in outputs]
+    outputs[0].unlink()  # an interrupted cohort: one subject never written...
+    data = outputs[1].read_bytes()
+    outputs[1].write_bytes(data[: len(data) // 2])  # ...and one archive damaged afterwards
+    untouched = _mtimes(outputs[2:])
+    # through the scheduler address this time (an existing cluster)
+    again = track_many(cohort, body_factory, output_dir=out,
+                       address=client.scheduler.address,  # type: ignore[attr-defined]
+                       track_kwargs=TRACK_KWARGS, progress=False)
+    assert again == outputs
+    assert _mtimes(outputs[2:]) == untouched  # the finished subject was skipped
+    for path, before in zip(outputs, first, strict=True):
+        # recomputed subjects: same inputs, same deterministic solver: same result to rounding
+        xr.testing.assert_allclose(open_dataset(path).displacement, before.displacement,
+                                   rtol=1e-10)
+
+
+def test_complete_cohort_needs_no_cluster(
+    cohort: list[Path], client: object, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    outputs = track_many(cohort, body_factory, output_dir=tmp_path, client=client,
+                         track_kwargs=TRACK_KWARGS, progress=False)
+    stamps = _mtimes(outputs)
+
+    def no_cluster(*args: object, **kwargs: object) -> None:
+        raise AssertionError("a complete cohort must not start a cluster")
+
+    monkeypatch.setattr(distributed, "LocalCluster", no_cluster)
+    assert track_many(cohort, body_factory, output_dir=tmp_path, progress=False) == outputs
+    assert _mtimes(outputs) == stamps
+
+
+def test_changed_input_or_overwrite_recomputes(
+    cohort: list[Path], client: object, tmp_path: Path
+) -> None:
+    inputs = [tmp_path / p.name for p in cohort[:2]]
+    for src, dst in zip(cohort, inputs, strict=False):
+        dst.write_bytes(src.read_bytes())
+    outputs = track_many(inputs, body_factory, output_dir=tmp_path / "out", client=client,
+                         track_kwargs=TRACK_KWARGS, progress=False)
+    stamps = _mtimes(outputs)
+    to_netcdf(_subject(1.0), inputs[0])  # subject 0 re-exported with other images: stale
+    track_many(inputs, body_factory, output_dir=tmp_path / "out", client=client,
+               track_kwargs=TRACK_KWARGS, progress=False)
+    after = _mtimes(outputs)
+    assert after[0] > stamps[0] and after[1] == stamps[1]
+    track_many(inputs, body_factory, output_dir=tmp_path / "out", client=client,
+               track_kwargs=TRACK_KWARGS, overwrite=True, progress=False)
+    assert all(a > b for a, b in zip(_mtimes(outputs), after, strict=True))
+
+
+def test_failing_subjects_are_reported_after_the_others_are_written(
+    cohort: list[Path], client: object, tmp_path: Path
+) -> None:
+    far = to_netcdf(_subject(2.0, shift=500.0), tmp_path / "far.nc")  # mesh outside the FOV
+    missing = tmp_path / "missing.nc"
+    inputs = [cohort[0], far, missing, cohort[1]]
+    with pytest.raises(CohortError, match="2 of 4 subjects failed") as info:
+        track_many(inputs, body_factory, output_dir=tmp_path / "out", client=client,
+                   track_kwargs=TRACK_KWARGS, progress=False)
+    err = info.value
+    assert isinstance(err, HarpxError)
+    message = str(err)
+    assert "far.nc': SchemaError: no constraint point" in message
+    assert "missing.nc': ArchiveError: cannot read input" in message
+    assert set(err.failures) == {far, missing}
+    assert err.outputs == [output_path(p, tmp_path / "out") for p in inputs]
+    # the good subjects are complete archives; the failed ones left nothing behind
+    names = sorted(p.name for p in (tmp_path / "out").iterdir())
+    assert names == ["s0_tracked.nc", "s1_tracked.nc"]
+    for path in (err.outputs[0], err.outputs[3]):
+        assert open_dataset(path).attrs["harpx_schema"] == "tracked/1"
+
+
+def _lambda_holder() -> object:
+    import threading
+
+    lock = threading.Lock()
+    return lambda ds: lock  # closes over a lock: not picklable
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        pytest.param({"client": object(), "address": "tcp://x:1"}, ValueError,
+                     "either client= or address=", id="client-and-address"),
+        pytest.param({"n_workers": 0}, ValueError, "n_workers=0", id="n-workers"),
+        pytest.param({"track_kwargs": {"epsilon": 0.1, "tolerance": 1}}, TypeError,
+                     r"track_kwargs has \['tolerance'\]", id="track-kwargs"),
+        pytest.param({"body_factory": _lambda_holder()}, TypeError,
+                     "cannot be pickled for the dask workers", id="unpicklable-factory"),
+        pytest.param({"body_factory": 3}, TypeError, "body_factory must be callable",
+                     id="not-callable"),
+    ],
+)
+def test_bad_arguments_fail_before_any_work(
+    cohort: list[Path], tmp_path: Path, kwargs: dict, error: type, match: str
+) -> None:
+    factory = kwargs.pop("body_factory", body_factory)
+    with pytest.raises(error, match=match):
+        track_many(cohort, factory, output_dir=tmp_path / "out", progress=False, **kwargs)
+    assert not (tmp_path / "out").exists()
+
+
+def test_duplicate_stems_are_refused(cohort: list[Path], tmp_path: Path) -> None:
+    other = tmp_path / "elsewhere"
+    other.mkdir()
+    twin = other / cohort[0].name
+    twin.write_bytes(cohort[0].read_bytes())
+    with pytest.raises(ValueError, match="inputs share file stems.*'s0'"):
+        track_many([cohort[0], twin], body_factory, output_dir=tmp_path / "out")
+
+
+def test_track_subject_refuses_a_tracked_archive(
+    cohort: list[Path], serial: list[xr.Dataset], tmp_path: Path
+) -> None:
+    tracked = to_netcdf(serial[0], tmp_path / "t.nc")
+    with pytest.raises(HarpxError, match="has harpx_schema 'tracked/1'; track_many needs"):
+        track_subject(tracked, tmp_path / "o.nc", body_factory)
+    assert not (tmp_path / "o.nc").exists()
+
+
+def test_output_path() -> None:
+    assert output_path(os.path.join("a", "b.c.nc"), "out") == Path("out") / "b.c_tracked.nc"
+
+
+def test_phase_extraction_is_lazy_on_dask_inputs() -> None:
+    harp = pytest.importorskip("harpx.imaging.harp")
+    from tests._helpers import raise_if_dask_computes
+    from tests.test_schema import make_tagged
+
+    eager_in = make_tagged(nt=3)
+    # only the image is chunked (ds.chunk() would make the small coordinates dask arrays
+    # too, and validate() loads coordinates by design)
+    lazy_in = eager_in.assign(image=eager_in.image.chunk({"time": 1}))
+    with raise_if_dask_computes():
+        lazy = harp.extract_phase(lazy_in)
+    assert lazy.phase.chunks is not None  # still a dask array
+    eager = harp.extract_phase(eager_in)
+    # same kernel on the same slices, blocked differently: floating-point identity
+    xr.testing.assert_allclose(lazy.compute(), eager, rtol=1e-12)
