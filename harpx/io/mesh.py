@@ -55,7 +55,7 @@ import numpy as np
 import xarray as xr
 
 from harpx._typing import FloatArray, IntArray, PathLike
-from harpx.errors import SchemaError
+from harpx.errors import ArchiveError, SchemaError
 from harpx.mechanics.mesh import MeshSpec, hex_mesh
 from harpx.schema import validate
 
@@ -407,6 +407,8 @@ def read_body_mesh(path: PathLike) -> MeshSpec:
     ------
     FileNotFoundError
         If the file (or a frame a PVD lists) does not exist.
+    ArchiveError
+        If the file cannot be parsed (truncated, corrupt, unknown format); names the path.
     SchemaError
         If the file has no hexahedra, or some hexahedra are inverted or degenerate (a
         non-positive Jacobian at a corner); the message lists their ids.
@@ -425,7 +427,7 @@ def read_body_mesh(path: PathLike) -> MeshSpec:
     if suffix in _SUFFIXES["xdmf"] and _is_time_series(path):
         mesh, names = _read_xdmf_series(path)
     else:
-        mesh = meshio.read(path)
+        mesh = _read(path)
         names = {
             key[len(_REGION_FIELD):]: int(np.ravel(value)[0])
             for key, value in mesh.field_data.items() if key.startswith(_REGION_FIELD)
@@ -433,11 +435,25 @@ def read_body_mesh(path: PathLike) -> MeshSpec:
     return _mesh_spec(mesh, names, path)
 
 
+def _read(path: Path) -> meshio.Mesh:
+    """``meshio.read`` with its failures (including its ``sys.exit``) as ArchiveError."""
+    try:
+        return meshio.read(path)
+    except SystemExit:  # meshio 5 exits the interpreter when no reader can parse the file
+        reason = "meshio cannot parse it"
+    except Exception as exc:
+        reason = f"{type(exc).__name__}: {exc}"
+    raise ArchiveError(
+        f"cannot read mesh {str(path)!r} ({reason}); the file may be truncated, corrupt or "
+        "not a mesh format meshio knows from its suffix"
+    )
+
+
 def _first_pvd_frame(path: Path) -> Path:
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
-        raise SchemaError(f"{str(path)!r} is not a readable PVD collection ({exc})") from exc
+        raise ArchiveError(f"cannot read {str(path)!r} as a PVD collection ({exc})") from exc
     sets = root.findall("./Collection/DataSet")
     if not sets:
         raise SchemaError(f"PVD collection {str(path)!r} lists no DataSet files")
@@ -458,11 +474,17 @@ def _is_time_series(path: Path) -> bool:
 
 
 def _read_xdmf_series(path: Path) -> tuple[meshio.Mesh, dict[str, int]]:
-    with meshio.xdmf.TimeSeriesReader(path) as reader:
-        points, cells = reader.read_points_cells()
-        cell_data: dict[str, Any] = {}
-        if reader.num_steps:
-            _, _, cell_data = reader.read_data(0)
+    try:
+        with meshio.xdmf.TimeSeriesReader(path) as reader:
+            points, cells = reader.read_points_cells()
+            cell_data: dict[str, Any] = {}
+            if reader.num_steps:
+                _, _, cell_data = reader.read_data(0)
+    except Exception as exc:
+        raise ArchiveError(
+            f"cannot read the XDMF time series {str(path)!r} ({type(exc).__name__}: {exc}); "
+            "it or its .h5 file may be truncated or corrupt"
+        ) from exc
     names: dict[str, int] = {}
     for info in ET.parse(path).getroot().iter("Information"):
         if info.get("Name") == _XDMF_INFO:

@@ -278,7 +278,8 @@ def test_read_body_mesh_rejects_bad_hexahedra(tmp_path: Path, corrupt, bad_cells
     points, cells = _vtk_box_cells()
     path = tmp_path / "bad.vtu"
     meshio.write(path, meshio.Mesh(points, [("hexahedron", corrupt(cells))]))
-    with pytest.raises(SchemaError, match=rf"inverted or degenerate hexahedra .*cells \[{bad_cells}\]"):
+    match = rf"inverted or degenerate hexahedra .*cells \[{bad_cells}\]"
+    with pytest.raises(SchemaError, match=match):
         read_body_mesh(path)
 
 
