@@ -26,6 +26,11 @@ place). Two volumetric treatments are offered (``Body.volumetric``):
   itself; only the volumetric energy sees :math:`\theta_e`. Condensing the element pressure
   :math:`p_e = U'(\theta_e/J_{g,e})` gives exactly the formulas below. The same treatment
   serves hex8 (Q1/P0) and hex20 (Q2/P0, inf--sup stable).
+* ``"linear-dilatation"`` (Q2/P1-disc for hex20): the same with the dilatation and pressure
+  linear in each element, :math:`\theta = \Pi_e J` the element-wise :math:`L^2` projection
+  onto :math:`\psi = (1, X - X_c, Y - Y_c, Z - Z_c)`, energy
+  :math:`\sum_e \int_e J_g U(\theta/J_g)\, dV`. Optimal for hex20 (L2 error
+  :math:`O(h^3)` where Q2/P0 is limited by its constant pressure).
 
 Residual
 --------
@@ -37,7 +42,8 @@ With :math:`b_{e,ai} = \int_e (\operatorname{cof}F)_{iJ}\, \partial_J N_a\, dV
     r_{ai} = \sum_e \int_e \big(P^{iso}_{iJ} + p\, (\operatorname{cof}F)_{iJ}\big)
              \partial_J N_a\, dV ,
 
-with :math:`p = p_e` (mean dilatation) or :math:`p = U'(J/J_g)` (pointwise), and
+with :math:`p = p_e` (mean dilatation), :math:`p = \Pi_e U'(\theta/J_g)` (linear
+dilatation) or :math:`p = U'(J/J_g)` (pointwise), and
 :math:`P^{iso}` already pushed through the growth split (``kinematics.push_growth_response``).
 
 Tangent
@@ -52,6 +58,11 @@ Using :math:`\partial(\operatorname{cof}F)_{iJ}/\partial F_{kL}
               + \frac{U''(\theta_e/J_{g,e})}{J_{g,e} V_e}\, b_{e,ai}\, b_{e,bk}
               \quad\text{(mean dilatation)},
 
+and in general (the mean dilatation is the case :math:`\psi = 1`)
+:math:`C^T M^{-1} D M^{-1} C` with :math:`C = \int_e \psi\, b\, dV`,
+:math:`M = \int_e \psi\psi^T dV`, :math:`D = \int_e \psi\, U''(\theta/J_g)/J_g\,
+\psi^T dV`,
+
 .. math::
 
     \mathbb{A} = \mathbb{A}^{iso}
@@ -60,7 +71,11 @@ Using :math:`\partial(\operatorname{cof}F)_{iJ}/\partial F_{kL}
       \;\Big[+ \frac{U''(J/J_g)}{J_g}\, \operatorname{cof}F \otimes \operatorname{cof}F
       \ \text{(pointwise only)}\Big].
 
-The first term is contracted in two batched matrix products per block of elements
+The volumetric terms are contracted through the vectors
+:math:`b_{q,ai} = (\operatorname{cof}F)_{iJ}\partial_J N_a` (one small matrix product per
+element, the :math:`\operatorname{cof}F \odot \operatorname{cof}F` part by swapping the
+component indices of the same product). The material term is contracted in two batched
+matrix products per block of elements
 (``A·∇N_b`` over :math:`L`, then ``∇N_a^T·(…)`` over the Gauss points and :math:`J` at once),
 which costs :math:`O(n_{el}\, n_{qp}\, (3 n_b)^2\, 3)` and runs at BLAS speed. Element
 matrices are scattered into a CSR matrix whose pattern (``indptr``, ``indices`` and the
@@ -278,26 +293,55 @@ class Internal:
     inverted_cells: IntArray
 
 
-def _volumetric(body: object, F: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, dict]:
-    """Pressure field p (ncell,nqp), cof F, J and extra data for the tangent."""
+def _pressure_space(body: object) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Element pressure/dilatation basis ψ at the Gauss points and its projector (cached).
+
+    Returns ``psi`` (ncell, nqp, npr), ``psiW = ψᵀ diag(dV)`` (ncell, npr, nqp),
+    ``Minv = (ψᵀ W ψ)⁻¹`` (ncell, npr, npr) and the L2 projector ``Pr = ψ Minv ψᵀ W``
+    (ncell, nqp, nqp). ``npr`` = 1 (mean dilatation) or 4 (linear dilatation: 1 and the
+    centred, scaled coordinates).
+    """
+    cached = getattr(body, "_pressure_space_cache", None)
+    if cached is not None:
+        return cached
     dV = body.dV  # type: ignore[attr-defined]
     Ve = body.cell_volume  # type: ignore[attr-defined]
+    nel, nq = dV.shape
+    if body.volumetric == "linear-dilatation":  # type: ignore[attr-defined]
+        X = body.quadrature_points  # type: ignore[attr-defined]
+        xc = np.einsum("eq,eqi->ei", dV, X) / Ve[:, None]
+        ell = np.cbrt(Ve)
+        psi = np.concatenate([np.ones((nel, nq, 1)), (X - xc[:, None, :]) / ell[:, None, None]], -1)
+    else:
+        psi = np.ones((nel, nq, 1))
+    psiW = np.ascontiguousarray((psi * dV[..., None]).transpose(0, 2, 1))
+    Minv = np.linalg.inv(np.matmul(psiW, psi))
+    proj = np.matmul(psi, np.matmul(Minv, psiW))
+    cached = (psi, psiW, Minv, proj)
+    body._pressure_space_cache = cached  # type: ignore[attr-defined]
+    return cached
+
+
+def _volumetric(body: object, F: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, dict]:
+    """Pressure field p (ncell,nqp), cof F, J and extra data for the tangent."""
     Jg = body.growth_jacobian  # type: ignore[attr-defined]
     J, cof = _det_cof(F)
     mat = body.material  # type: ignore[attr-defined]
     extra: dict = {}
-    if body.volumetric == "mean-dilatation":  # type: ignore[attr-defined]
-        theta = (J * dV).sum(axis=1) / Ve
-        jg = np.ones_like(theta) if Jg is None else Jg
-        _, dU, d2U = mat.volumetric(theta / jg)
-        p = np.broadcast_to(np.asarray(dU, dtype=np.float64)[:, None], J.shape)
-        extra["rank1"] = np.asarray(d2U, dtype=np.float64) / (jg * Ve)
-        extra["theta"] = theta
-    else:
-        jg = 1.0 if Jg is None else Jg[:, None]
+    jg = 1.0 if Jg is None else Jg[:, None]
+    if body.volumetric == "pointwise":  # type: ignore[attr-defined]
         _, dU, d2U = mat.volumetric(J / jg)
         p = np.asarray(dU, dtype=np.float64)
         extra["d2U"] = np.asarray(d2U, dtype=np.float64) / jg
+        return p, cof, J, extra
+    psi, psiW, Minv, proj = _pressure_space(body)
+    theta = np.matmul(proj, J[..., None])[..., 0]  # L2 projection of J per element
+    _, dU, d2U = mat.volumetric(theta / jg)
+    # projected pressure p̃ = Pr U'(θ) (Pr is self-adjoint in the dV-weighted product)
+    p = np.matmul(proj, np.asarray(dU, dtype=np.float64)[..., None])[..., 0]
+    D = np.matmul(psiW * (np.asarray(d2U, dtype=np.float64) / jg)[:, None, :], psi)
+    extra["Q"] = np.matmul(Minv, np.matmul(D, Minv))  # (ncell, npr, npr)
+    extra["theta"] = theta
     return p, cof, J, extra
 
 
@@ -346,7 +390,7 @@ def internal_forces(body: object, u: ArrayLike, *, tangent: bool = True) -> Inte
         ``inverted_cells`` lists the cells).
     """
     F = body.deformation_gradient(u)  # type: ignore[attr-defined]
-    Jq = np.linalg.det(F)
+    Jq, _ = _det_cof(F)
     min_j = float(Jq.min()) if Jq.size else 1.0
     bad = np.nonzero(~(Jq > 0.0).all(axis=1))[0]
     if bad.size or not np.isfinite(min_j):
@@ -366,34 +410,33 @@ def internal_forces(body: object, u: ArrayLike, *, tangent: bool = True) -> Inte
     if not tangent:
         return Internal(r, None, min_j, bad)
     assert A is not None
-    # volumetric part of the pointwise tangent
-    coef = p / J
-    A = A + coef[..., None, None, None, None] * (
-        cof[..., :, :, None, None] * cof[..., None, None, :, :]
-        - cof[..., :, None, None, :] * np.swapaxes(cof, -1, -2)[..., None, :, :, None]
-    )
+    # Volumetric part, contracted through b_q[(a, i)] = (cof F)_iJ ∂_J N_a instead of being
+    # added to A (cheaper): with M_w = Σ_q w_q b_q b_qᵀ,
+    #   Σ_q (p/J) (cof ⊗ cof - cof ⊙ cof) dV → M_{p/J}[(a,i),(b,k)] - M_{p/J}[(a,k),(b,i)],
+    #   pointwise U''-term (U''/Jg) cof ⊗ cof dV → M_{U''/Jg}.
+    Bq = np.matmul(G, np.swapaxes(cof, -1, -2)).reshape(nel, nq, 3 * nb)  # (e, q, (a, i))
+    w_geo = p / J * dV
+    Mg = np.matmul(np.swapaxes(Bq, 1, 2), Bq * w_geo[..., None]).reshape(nel, nb, 3, nb, 3)
+    Kvol = Mg - Mg.transpose(0, 1, 4, 3, 2)  # (e, a, i, b, k)
     if "d2U" in extra:
-        A += extra["d2U"][..., None, None, None, None] * (
-            cof[..., :, :, None, None] * cof[..., None, None, :, :]
-        )
-    rank1 = extra.get("rank1")
-    if rank1 is not None:
-        bvec = np.matmul(Gt, (cof * dV[..., None, None]).transpose(0, 1, 3, 2).reshape(nel, nq * 3, 3))
-    Ke = np.empty((nel, nb, 3, 3, nb))
+        w_u = extra["d2U"] * dV
+        Kvol += np.matmul(np.swapaxes(Bq, 1, 2), Bq * w_u[..., None]).reshape(nel, nb, 3, nb, 3)
+    Q = extra.get("Q")
+    if Q is not None:
+        # condensed volumetric block Cᵀ Q C with C = ψᵀ W B
+        C = np.matmul(_pressure_space(body)[1], Bq)  # (e, npr, 3 nb)
+        Kvol += np.matmul(np.swapaxes(C, 1, 2), np.matmul(Q, C)).reshape(nel, nb, 3, nb, 3)
+    Ke = Kvol.transpose(0, 1, 2, 4, 3).copy()  # (e, a, i, k, b)
     block = max(1, _BLOCK_FLOATS // (nq * 27 * nb))
+    buf = np.empty((min(block, nel), nq, 3, 3, 3, 3))
     for s in range(0, nel, block):
         sl = slice(s, min(s + block, nel))
         n = sl.stop - sl.start
-        Ad = A[sl] * dV[sl, :, None, None, None, None]
-        Ap = Ad.transpose(0, 1, 3, 2, 4, 5).reshape(n, nq, 27, 3)  # (e, q, (J, i, k), L)
-        B = np.matmul(Ap, G[sl].transpose(0, 1, 3, 2))  # (e, q, (J, i, k), b)
-        Kb = np.matmul(Gt[sl], B.reshape(n, nq * 3, 9 * nb)).reshape(n, nb, 3, 3, nb)
-        if rank1 is not None:
-            bv = bvec[sl]
-            Kb += rank1[sl, None, None, None, None] * (
-                bv[:, :, :, None, None] * bv.transpose(0, 2, 1)[:, None, None, :, :]
-            )
-        Ke[sl] = Kb
+        # (e, q, J, i, k, L) scaled by dV in one pass
+        Ap = np.multiply(A[sl].transpose(0, 1, 3, 2, 4, 5), dV[sl, :, None, None, None, None],
+                         out=buf[:n])  # fmt: skip
+        B = np.matmul(Ap.reshape(n, nq, 27, 3), G[sl].transpose(0, 1, 3, 2))  # (e,q,(J,i,k),b)
+        Ke[sl] += np.matmul(Gt[sl], B.reshape(n, nq * 3, 9 * nb)).reshape(n, nb, 3, 3, nb)
     pat = sparsity(body)
     data = np.bincount(pat.element_positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz)
     return Internal(r, pat.matrix(data), min_j, bad)

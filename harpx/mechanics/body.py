@@ -99,10 +99,11 @@ class Body:
         law or one stretch θ per cell (dimensionless).
     boundaries : dict of str to array of int, optional
         Named facet sets (columns of ``mesh.facets``). Defaults to the mesh's boundaries.
-    volumetric : {"mean-dilatation", "pointwise"}, default "mean-dilatation"
+    volumetric : {"mean-dilatation", "linear-dilatation", "pointwise"}, default "mean-dilatation"
         Treatment of the volumetric energy: element-constant dilatation and pressure
-        (three-field, locking-free) or pointwise (plain displacement formulation; locks for
-        nearly incompressible materials).
+        (three-field, locking-free; Q1/P0 and Q2/P0), element-linear dilatation and pressure
+        (Q2/P1-disc, locking-free, optimal order for hex20), or pointwise (plain displacement
+        formulation; locks for nearly incompressible materials).
 
     Attributes
     ----------
@@ -157,7 +158,7 @@ class Body:
         t_max: float | Mapping[str, float] | None = None,
         growth: Any = None,
         boundaries: Mapping[str, ArrayLike] | None = None,
-        volumetric: Literal["mean-dilatation", "pointwise"] = "mean-dilatation",
+        volumetric: Literal["mean-dilatation", "linear-dilatation", "pointwise"] = "mean-dilatation",
     ) -> None:
         spec_regions: Mapping[str, ArrayLike] = {}
         spec_boundaries: Mapping[str, ArrayLike] = {}
@@ -177,9 +178,16 @@ class Body:
             )
         if element not in ELEMENTS:
             raise ValueError(f"element={element!r} is not one of {sorted(ELEMENTS)!r}")
-        if volumetric not in ("mean-dilatation", "pointwise"):
+        if volumetric not in ("mean-dilatation", "linear-dilatation", "pointwise"):
             raise ValueError(
-                f"volumetric={volumetric!r} must be 'mean-dilatation' or 'pointwise'"
+                f"volumetric={volumetric!r} must be 'mean-dilatation', 'linear-dilatation' "
+                "or 'pointwise'"
+            )
+        if volumetric == "linear-dilatation" and element != "hex20":
+            raise ValueError(
+                f"volumetric='linear-dilatation' needs element='hex20' (Q2/P1); with "
+                f"element={element!r} (Q1/P1 is not inf-sup stable and locks) use "
+                "'mean-dilatation'"
             )
         self.mesh = mesh
         self.material = material

@@ -27,8 +27,10 @@ grown in two consecutive iterations the energy-slope line search takes over, acc
 only residuals, so it serves non-conservative terms too). Convergence: the boundary values
 are reached and :math:`\|R_F\| \le \max(\mathrm{tol}\cdot\rho, \mathrm{atol})`, with the
 force scale :math:`\rho` = the larger of the free residual at the start and the reaction
-norm :math:`\|R_D\|`. A step that diverges, stalls (``max_iterations``), produces NaN or inverts an
-element is retried with half the load increment, at most ``max_cutbacks`` times in a row.
+norm :math:`\|R_D\|`. A step that diverges (``‖R_F‖`` grows four times in a row), stalls
+(no new smallest ``‖R_F‖`` in six iterations, or ``max_iterations``), produces NaN or inverts
+an element is retried with half the load increment, at most ``max_cutbacks`` times in a row;
+after a converged step the increment doubles again up to ``1/steps``.
 """
 
 from __future__ import annotations
@@ -166,6 +168,7 @@ class _Newton:
         self.line_search = bool(line_search)
         self.max_backtracks = int(max_backtracks)
         self.ls_ratio = 0.9
+        self.stall_iterations = 6
         self.solver = (
             linear_solver if isinstance(linear_solver, LinearSolver) else LinearSolver(linear_solver)
         )
@@ -242,6 +245,7 @@ class _Newton:
         history: list[float] = []
         scale = 0.0
         growth = 0
+        best_rn, best_it = np.inf, 0
         asm = self.assemble(u, s)
         for it in range(self.max_iterations + 1):
             if asm.R is None or asm.data is None:
@@ -295,6 +299,12 @@ class _Newton:
             elif it > 0:
                 growth = 0
             damping = self.line_search and growth >= 2
+            if not pending and rn < best_rn:
+                best_rn, best_it = rn, it
+            if growth >= 4 or (not pending and it - best_it >= self.stall_iterations):
+                # diverging, or no progress: give up early, the caller halves the increment
+                reason = "diverged" if growth >= 4 else "stalled"
+                return _Outcome(False, u, history, it, reason, min_jacobian=asm.min_jacobian)
             alpha = 1.0
             slope0 = float(step @ RF)
             last_bad = asm.inverted
@@ -306,6 +316,10 @@ class _Newton:
                 if trial.R is None or not np.all(np.isfinite(trial.R)):
                     if trial.R is None:
                         last_bad = trial.inverted
+                    if pending:
+                        # the prescribed increment cannot be applied in one linearised step:
+                        # fail fast, the caller halves the load increment
+                        break
                     alpha *= 0.5
                     self.line_search_steps += 1
                     continue
