@@ -60,6 +60,7 @@ __all__ = [
     "harmonic_images",
     "harmonic_phase",
     "linear_weights",
+    "refine_linear",
     "refine_positions",
     "upsample_slices",
     "wrap",
@@ -531,30 +532,131 @@ def _phase_magnitude(
 def _interp_rows(
     h: NDArray[np.float64], out: NDArray[np.float64], diff: NDArray[np.float64], m: int
 ) -> None:
-    """Linear interpolation along axis 0 onto the refined positions (float views of complex).
+    """Linear interpolation along axis 0 onto the refined positions.
 
-    ``h`` is (n, k), ``out`` is (m n, k) and ``diff`` is (n - 1, k) scratch. Refined row
-    ``m i + r`` sits at native position ``i + δ_r`` with ``δ_r = (r + 1/2)/m - 1/2``, so each
-    phase ``r`` is one strided slice of ``out`` with a constant weight: two vectorised
-    operations per refined row and no gathers. Rows beyond the end centres are copies.
+    ``h`` is (n, ...), ``out`` is (m n, ...) and ``diff`` is (n - 1, ...) scratch (float
+    views of complex arrays work too). Refined row ``m i + r`` sits at native position
+    ``i + δ_r`` with ``δ_r = (r + 1/2)/m - 1/2``, so each phase ``r`` is one strided slice of
+    ``out`` with a constant weight: two vectorised operations per refined row and no gathers.
+    Rows beyond the end centres are copies. A NaN spreads only to rows that weight it.
     """
+    _interp_axis(h, out, diff, m, 0)
+
+
+def _interp_axis(
+    h: NDArray[np.float64], out: NDArray[np.float64], diff: NDArray[np.float64], m: int, axis: int
+) -> None:
+    """:func:`_interp_rows` along any ``axis`` (slicing, no copies of ``h``)."""
     if m == 1:
         np.copyto(out, h)
         return
-    np.subtract(h[1:], h[:-1], out=diff)
+
+    def sl(s: slice) -> tuple[slice, ...]:
+        index = [slice(None)] * h.ndim
+        index[axis] = s
+        return tuple(index)
+
+    if h.shape[axis] == 1:
+        for r in range(m):
+            np.copyto(out[sl(slice(r, r + 1))], h)
+        return
+    np.subtract(h[sl(slice(1, None))], h[sl(slice(None, -1))], out=diff)
     for r in range(m):
         delta = (r + 0.5) / m - 0.5
-        rows = out[r::m]
+        rows = out[sl(slice(r, None, m))]
         if delta == 0.0:
             np.copyto(rows, h)
-        elif delta > 0.0:
-            np.multiply(diff, delta, out=rows[:-1])
-            np.add(rows[:-1], h[:-1], out=rows[:-1])
-            np.copyto(rows[-1], h[-1])
-        else:
-            np.multiply(diff, 1.0 + delta, out=rows[1:])
-            np.add(rows[1:], h[:-1], out=rows[1:])
-            np.copyto(rows[0], h[0])
+            continue
+        inner = sl(slice(None, -1)) if delta > 0.0 else sl(slice(1, None))
+        edge = sl(slice(-1, None)) if delta > 0.0 else sl(slice(0, 1))
+        target = rows[inner]
+        np.multiply(diff, delta if delta > 0.0 else 1.0 + delta, out=target)
+        np.add(target, h[sl(slice(None, -1))], out=target)
+        np.copyto(rows[edge], h[edge])
+
+
+def refine_linear(
+    volume: ArrayLike, factors: Sequence[int], *, threads: int | None = None
+) -> NDArray[np.float64]:
+    """Separable linear interpolation of volumes onto the grid-aligned refined grid.
+
+    Parameters
+    ----------
+    volume : array_like of float, shape (..., nz, ny, nx)
+        Values at the native voxel centres (any units); NaN allowed.
+    factors : (int, int, int)
+        Refinement factor per trailing axis.
+    threads : int or None
+        Volumes (leading index) are spread over this many worker threads; None means
+        ``os.cpu_count()``.
+
+    Returns
+    -------
+    ndarray of float64, shape (..., mz nz, my ny, mx nx)
+        Values at the refined centres (:func:`refine_positions`); constant beyond the outer
+        native centres; a refined value is NaN iff a native neighbour with non-zero weight is.
+
+    Examples
+    --------
+    >>> from harpx.imaging._kernels import refine_linear
+    >>> refine_linear(np.array([[[0.0, 1.0]]]), (1, 1, 2))
+    array([[[0.  , 0.25, 0.75, 1.  ]]])
+    """
+    v = np.asarray(volume, dtype=np.float64)
+    if v.ndim < 3:
+        raise ValueError(f"'volume' needs at least 3 dimensions, got shape {v.shape!r}")
+    mz, my, mx = (_check_factor(f, "factors") for f in factors)
+    nz, ny, nx = v.shape[-3:]
+    lead = v.shape[:-3]
+    count = int(np.prod(lead, dtype=np.int64))
+    big = (nz * mz, ny * my, nx * mx)
+    out = np.empty((count, *big))
+    flat = v.reshape(count, nz, ny, nx)
+    i0, i1, w = linear_weights(nz, mz)
+
+    def work(items: Sequence[int]) -> None:
+        # z is refined plane by plane from in-plane refined planes kept in cache, so the
+        # output is written once: x first (strided slices on the smallest array), then y
+        wide = np.empty((ny, big[2]))
+        diff_x = np.empty((ny, max(nx - 1, 0)))
+        diff_y = np.empty((max(ny - 1, 0), big[2]))
+        diff_z = np.empty(big[1:])
+        planes: dict[int, NDArray[np.float64]] = {}
+
+        def plane(i: int, k: int) -> NDArray[np.float64]:
+            if k not in planes:
+                if len(planes) == 2:
+                    buffer = planes.pop(min(planes))
+                else:
+                    buffer = np.empty(big[1:])
+                _interp_axis(flat[i, k], wide, diff_x, mx, 1)
+                _interp_axis(wide, buffer, diff_y, my, 0)
+                planes[k] = buffer
+            return planes[k]
+
+        for i in items:
+            planes.clear()
+            pair = (-1, -1)
+            for j in range(big[0]):
+                low = plane(i, int(i0[j]))
+                if w[j] == 0.0:
+                    np.copyto(out[i, j], low)
+                    continue
+                high = plane(i, int(i1[j]))
+                if pair != (i0[j], i1[j]):
+                    np.subtract(high, low, out=diff_z)
+                    pair = (i0[j], i1[j])
+                np.multiply(diff_z, w[j], out=out[i, j])
+                np.add(out[i, j], low, out=out[i, j])
+
+    workers = max(1, min(default_threads(threads), count))
+    if workers == 1:
+        work(range(count))
+    else:
+        jobs = [_pool().submit(work, range(k, count, workers)) for k in range(workers)]
+        for job in jobs:
+            job.result()
+    return out.reshape(*lead, *big)
 
 
 def _volume_worker(

@@ -17,7 +17,7 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from harpx.errors import SchemaError
-from harpx.imaging._kernels import harmonic_phase, linear_weights, refine_positions
+from harpx.imaging._kernels import harmonic_phase, refine_linear, refine_positions
 from harpx.imaging.fft import default_threads
 from harpx.schema import AXES, GRID_DIMS, standard_attrs, validate
 
@@ -90,18 +90,21 @@ def refinement_factors(ds: xr.Dataset, upsample: int) -> tuple[int, int, int]:
     )
 
 
-def _check_chunks(image: xr.DataArray) -> bool:
-    if image.chunks is None:
-        return False
-    for dim in GRID_DIMS:
-        n = len(image.chunksizes[dim])
-        if n > 1:
-            raise SchemaError(
-                f"'image' is chunked along core dim {dim!r} ({n} chunks); every slice must be "
-                f"one chunk: rechunk with ds.chunk({{{dim!r}: -1}}) (chunk over 'tag' or "
-                "'time' instead)"
-            )
-    return True
+def _check_chunks(ds: xr.Dataset, names: list[str]) -> bool:
+    """True if ``image`` is dask-backed; SchemaError if any variable is chunked in space."""
+    for name in names:
+        var = ds[name]
+        if var.chunks is None:
+            continue
+        for dim in GRID_DIMS:
+            n = len(var.chunksizes[dim])
+            if n > 1:
+                raise SchemaError(
+                    f"{name!r} is chunked along core dim {dim!r} ({n} chunks); every slice must "
+                    f"be one chunk: rechunk with ds.chunk({{{dim!r}: -1}}) (chunk over 'tag' or "
+                    "'time' instead)"
+                )
+    return ds["image"].chunks is not None
 
 
 def _phase_block(
@@ -147,17 +150,21 @@ def _refine_nearest(var: xr.Variable, factors: dict[str, int]) -> xr.Variable:
     return var.isel(index) if index else var
 
 
-def _refine_linear(var: xr.Variable, factors: dict[str, int]) -> xr.Variable:
-    """Separable linear interpolation onto the refined centres (constant beyond the ends)."""
-    for dim, m in factors.items():
-        if m == 1:
-            continue
-        i0, i1, w = linear_weights(var.sizes[dim], m)
-        low = var.isel({dim: i0})
-        high = var.isel({dim: i1})
-        # i1 == i0 where w == 0, so NaN neighbours with zero weight do not leak
-        var = low + (high - low) * xr.Variable(dim, w)
-    return var
+def _refine_linear(var: xr.Variable, factors: tuple[int, int, int], threads: int) -> xr.Variable:
+    """Linear interpolation onto the refined centres (constant beyond the ends), lazily."""
+    sizes = {d: var.sizes[d] * m for d, m in zip(GRID_DIMS, factors, strict=True)}
+    lead = [d for d in var.dims if d not in GRID_DIMS]
+    return xr.apply_ufunc(
+        refine_linear,
+        var.transpose(*lead, *GRID_DIMS),
+        input_core_dims=[list(GRID_DIMS)],
+        output_core_dims=[list(GRID_DIMS)],
+        exclude_dims=set(GRID_DIMS),
+        dask="parallelized",
+        output_dtypes=[np.float64],
+        dask_gufunc_kwargs={"output_sizes": sizes},
+        kwargs={"factors": factors, "threads": threads},
+    )
 
 
 def extract_phase(
@@ -232,7 +239,8 @@ def extract_phase(
     validate(ds, "tagged")
     _check_options(upsample, radius)
     image = ds["image"]
-    lazy = _check_chunks(image)
+    carried = [n for n in ("mask", "body", "displacement_true") if n in ds.variables]
+    lazy = _check_chunks(ds, ["image", *carried])
     nthreads = default_threads(threads) if threads is not None or not lazy else 1
     factors = refinement_factors(ds, int(upsample))
     spacing = tuple(_spacing(ds, d) or 1.0 for d in GRID_DIMS)
@@ -285,7 +293,7 @@ def extract_phase(
         data_vars["mask"] = mask
     for name in ("body", "displacement_true"):
         if name in ds.variables:
-            var = _refine_linear(ds[name].variable.astype(np.float64), factor_of)
+            var = _refine_linear(ds[name].variable.astype(np.float64), factors, nthreads)
             var.attrs = {**standard_attrs(name), **ds[name].attrs}
             data_vars[name] = var
     attrs = {k: v for k, v in ds.attrs.items() if k != "harpx_schema"}

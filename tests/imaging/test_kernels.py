@@ -13,6 +13,7 @@ from harpx.imaging._kernels import (
     harmonic_images,
     harmonic_phase,
     linear_weights,
+    refine_linear,
     refine_positions,
     upsample_slices,
     wrap,
@@ -172,3 +173,22 @@ def test_kernel_bad_input():
         harmonic_images(img, (1, 1), (0.11, 0.11), 0.01)
     with pytest.raises(ValueError, match="'slice_axis'"):
         harmonic_phase(np.ones((2, 4, 4)), spacing=(1, 1, 1), freq=(0, 0, 0.2), slice_axis=3)
+
+
+@pytest.mark.parametrize("factors", [(2, 2, 2), (1, 3, 2), (3, 1, 1), (1, 1, 1)])
+def test_refine_linear_matches_weighted_neighbours(factors, rng):
+    volume = rng.standard_normal((2, 5, 6, 7))
+    volume[0, 2, 3, 4] = np.nan  # e.g. a voxel outside the body
+    ours = refine_linear(volume, factors, threads=2)
+    expected = volume
+    for axis, m in zip((1, 2, 3), factors, strict=True):
+        i0, i1, w = linear_weights(expected.shape[axis], m)
+        shape = [1, 1, 1, 1]
+        shape[axis] = -1
+        expected = np.take(expected, i0, axis=axis) * (1 - w).reshape(shape) + np.take(
+            expected, i1, axis=axis
+        ) * w.reshape(shape)
+    # same weights, other operation order: rounding only; NaN exactly where a neighbour
+    # with non-zero weight is NaN
+    np.testing.assert_array_equal(np.isnan(ours), np.isnan(expected))
+    np.testing.assert_allclose(ours, expected, rtol=0, atol=1e-13)

@@ -1,0 +1,190 @@
+"""Benchmark of ``extract_phase`` against bare 2D FFT round trips of the same data.
+
+Cases (isotropic voxels, ``upsample=2``, radius 0.5, three tags x, y, z with slice axes z, z, y):
+
+* **phantom**: 3 tags × 13 frames × 13 slices × 160² (1.5 mm voxels, paper §4.1 size);
+* **cardiac**: 3 tags × 25 frames × 12 slices × 256² (1.25 mm voxels, paper §4.2 size).
+
+``phase()`` is :func:`harpx.imaging.harp.extract_phase` on an in-memory ``tagged/1`` dataset,
+output included (phase and magnitude on the common refined grid, 8× the input voxels).
+The FFT baselines transform exactly the arrays a straightforward implementation of the same
+method transforms: for every tag, its acquisition slices *upsampled in-plane* (x and y tags:
+frames × nz slices of 2ny × 2nx; z tag: frames × ny slices of 2nz × 2nx), complex128, one
+forward and one inverse 2D FFT:
+
+* **pyfftw**: ``pyfftw.FFTW`` plans (FFTW_MEASURE, all cores) executed on preallocated aligned
+  buffers — the bare transform cost, nothing else;
+* **numpy.fft** and **scipy.fft** (``workers`` = all cores) ``fft2`` + ``ifft2``.
+
+Every repeat runs all methods back to back (the machine may be shared) and the table shows
+medians over repeats; the first ``phase()`` call, which plans the FFTs, is reported apart.
+Run ``python benchmarks/bench_phase.py`` (``--quick`` for the phantom case only, ``--repeats``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import os
+import platform
+import statistics
+import time
+
+import numpy as np
+import pyfftw
+import scipy
+import scipy.fft
+import xarray as xr
+
+from harpx.imaging.harp import extract_phase
+from harpx.imaging.synth import synthesize_tagged
+
+CASES = {
+    "phantom": dict(frames=13, shape=(13, 160, 160), spacing=1.5, period=8.0),
+    "cardiac": dict(frames=25, shape=(12, 256, 256), spacing=1.25, period=8.0),
+}
+UPSAMPLE = 2
+
+
+def tagged_dataset(frames: int, shape: tuple[int, int, int], spacing: float, period: float):
+    """A CSPAMM cine of a still 3D pattern with noise (content does not change the cost)."""
+    return synthesize_tagged(
+        lambda X, t: np.zeros_like(X),
+        shape=shape,
+        spacing=(spacing,) * 3,
+        times=np.arange(frames) * 20.0,
+        tag_period=period,
+        snr=20.0,
+        oversample=1,
+        rng=0,
+    )
+
+
+def fft_stacks(shape: tuple[int, int, int], frames: int) -> list[tuple[int, int, int]]:
+    """Shapes of the upsampled in-plane slice stacks transformed per tag (x, y, z tags)."""
+    nz, ny, nx = shape
+    m = UPSAMPLE
+    return [
+        (frames * nz, m * ny, m * nx),  # x tag, slices normal to z
+        (frames * nz, m * ny, m * nx),  # y tag, slices normal to z
+        (frames * ny, m * nz, m * nx),  # z tag, slices normal to y
+    ]
+
+
+class PyfftwRoundTrip:
+    """Forward + inverse 2D FFT plans on two preallocated aligned buffers."""
+
+    def __init__(self, shape: tuple[int, int, int], threads: int, rng) -> None:
+        self.a = pyfftw.empty_aligned(shape, dtype=np.complex128)
+        self.b = pyfftw.empty_aligned(shape, dtype=np.complex128)
+        flags = ("FFTW_MEASURE",)
+        self.fwd = pyfftw.FFTW(self.a, self.b, axes=(-2, -1), flags=flags, threads=threads)
+        self.inv = pyfftw.FFTW(
+            self.b,
+            self.a,
+            axes=(-2, -1),
+            direction="FFTW_BACKWARD",
+            flags=flags,
+            threads=threads,
+        )
+        self.a[...] = rng.standard_normal(shape)
+
+    def __call__(self) -> None:
+        self.fwd.execute()
+        self.inv.execute()
+
+
+def timed(fn) -> float:
+    gc.collect()
+    start = time.perf_counter()
+    fn()
+    return time.perf_counter() - start
+
+
+def run_case(name: str, repeats: int, threads: int) -> dict:
+    spec = CASES[name]
+    ds = tagged_dataset(spec["frames"], spec["shape"], spec["spacing"], spec["period"])
+    rng = np.random.default_rng(1)
+    stacks = fft_stacks(spec["shape"], spec["frames"])
+    fft_elems = sum(int(np.prod(s)) for s in stacks)
+
+    first = timed(lambda: extract_phase(ds, upsample=UPSAMPLE))  # plans the FFTs
+    out = extract_phase(ds, upsample=UPSAMPLE)
+    out_elems = int(out.phase.size)
+    del out
+
+    times: dict[str, list[float]] = {"phase": [], "pyfftw": [], "numpy": [], "scipy": []}
+    for _ in range(repeats):
+        times["phase"].append(timed(lambda: extract_phase(ds, upsample=UPSAMPLE)))
+        # pyfftw: plans are built per stack outside the timed region
+        total = 0.0
+        for shape in stacks:
+            rt = PyfftwRoundTrip(shape, threads, rng)
+            rt()  # warm the buffers
+            total += timed(rt)
+            del rt
+        times["pyfftw"].append(total)
+        for label, mod, kw in (
+            ("numpy", np.fft, {}),
+            ("scipy", scipy.fft, {"workers": threads}),
+        ):
+            total = 0.0
+            for shape in stacks:
+                data = rng.standard_normal(shape) + 0j
+                total += timed(lambda d=data, m=mod, k=kw: m.ifft2(m.fft2(d, **k), **k))
+                del data
+            times[label].append(total)
+    med = {k: statistics.median(v) for k, v in times.items()}
+    return {
+        "name": name,
+        "first": first,
+        "median": med,
+        "all": times,
+        "fft_elems": fft_elems,
+        "out_elems": out_elems,
+        "stacks": stacks,
+        "input": tuple(ds.image.shape),
+    }
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="phantom case only")
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--threads", type=int, default=os.cpu_count() or 1)
+    args = parser.parse_args(argv)
+    names = ["phantom"] if args.quick else ["phantom", "cardiac"]
+    print(
+        f"# bench_phase: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"threads={args.threads}, numpy {np.__version__}, scipy {scipy.__version__}, "
+        f"pyfftw {pyfftw.__version__}, xarray {xr.__version__}, load "
+        f"{os.getloadavg()[0]:.1f}"
+    )
+    results = [run_case(name, args.repeats, args.threads) for name in names]
+    print()
+    print(
+        "| case | input (tag, time, z, y, x) | FFT'd stacks (upsampled) | phase() s | "
+        "pyfftw fwd+inv s | numpy.fft s | scipy.fft s | phase / pyfftw | phase / numpy | "
+        "first phase() s |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for r in results:
+        m = r["median"]
+        stacks = " + ".join("x".join(str(n) for n in s) for s in r["stacks"])
+        print(
+            f"| {r['name']} | {r['input']} | {stacks} | {m['phase']:.3f} | {m['pyfftw']:.3f} | "
+            f"{m['numpy']:.3f} | {m['scipy']:.3f} | {m['phase'] / m['pyfftw']:.2f} | "
+            f"{m['phase'] / m['numpy']:.2f} | {r['first']:.2f} |"
+        )
+    print()
+    for r in results:
+        print(
+            f"{r['name']}: phase() writes {r['out_elems'] / 1e6:.0f} M voxels x 2 variables; "
+            f"the FFT baselines transform {r['fft_elems'] / 1e6:.0f} M complex values; "
+            "per-repeat seconds: "
+            + "; ".join(f"{k} {', '.join(f'{v:.3f}' for v in vs)}" for k, vs in r["all"].items())
+        )
+
+
+if __name__ == "__main__":
+    main()
