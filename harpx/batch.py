@@ -157,7 +157,9 @@ def track_many(
     -----
     The skip decision is made here, before any cluster starts: a cohort that is already
     complete needs no cluster. Each output archive records ``source_file`` (input name) and
-    ``source_sha256`` in its attributes.
+    ``source_sha256`` in its attributes. Workers read the inputs and write the outputs
+    themselves, so on a remote cluster (``address=``) both paths must name the same files
+    on the workers (a shared file system).
 
     Examples
     --------
