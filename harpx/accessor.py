@@ -13,6 +13,8 @@ import xarray as xr
 if TYPE_CHECKING:
     from pathlib import Path
 
+    from numpy.typing import ArrayLike
+
     from harpx._typing import PathLike
 
 Method = Literal["penalty", "augmented-lagrangian"]
@@ -94,7 +96,9 @@ class HarpAccessor:
             intorder=intorder, linear_solver=linear_solver, progress=progress,
         )
 
-    def track_harp(self, *, points: Any = None, iterations: int = 10) -> xr.Dataset:
+    def track_harp(
+        self, *, points: ArrayLike | xr.Dataset | None = None, iterations: int = 10
+    ) -> xr.Dataset:
         """Conventional HARP tracking (fixed-point phase matching per material point).
 
         See Also
@@ -115,3 +119,14 @@ class HarpAccessor:
         from harpx.tracking.results import tracking_error
 
         return tracking_error(self._ds, truth)
+
+    def to_meshio(self, path: PathLike, *, series: Literal["vtu", "xdmf"] = "xdmf") -> list[Path]:
+        """Write a tracked result as a ParaView time series (XDMF, or VTU files and a PVD).
+
+        See Also
+        --------
+        harpx.io.mesh.to_meshio
+        """
+        from harpx.io.mesh import to_meshio
+
+        return to_meshio(self._ds, path, series=series)

@@ -41,7 +41,7 @@ TOLERANCE = 1e-4
 
 
 def track_harp(
-    ds: xr.Dataset, *, points: ArrayLike | None = None, iterations: int = 10
+    ds: xr.Dataset, *, points: ArrayLike | xr.Dataset | None = None, iterations: int = 10
 ) -> xr.Dataset:
     """Track material points through the frames by conventional HARP.
 
@@ -50,11 +50,13 @@ def track_harp(
     ds : xarray.Dataset
         A ``phase/1`` dataset, or a ``tagged/1`` dataset whose phase is then computed with
         :func:`harpx.imaging.harp.extract_phase` (default settings).
-    points : array_like of shape (n, 3), optional
-        Reference positions X in mm, columns (x, y, z). Default: the centres of the phase-grid
-        voxels inside the data at frame 0 (inside every tag's ``mask`` and ``body >= 0.5``
-        where those exist, and above the sampler's magnitude floor); the result then also
-        holds ``displacement_grid``.
+    points : array_like of shape (n, 3) or xarray.Dataset, optional
+        Reference positions X in mm, columns (x, y, z); or a dataset with ``z``, ``y``, ``x``
+        coordinates (e.g. the acquired ``tagged/1`` images) whose voxel centres inside the
+        data are tracked. Default: the centres of the phase-grid voxels inside the data at
+        frame 0 (inside every tag's ``mask`` and ``body >= 0.5`` where those exist, and
+        above the sampler's magnitude floor). With a grid (default or dataset) the result
+        also holds ``displacement_grid`` on that grid.
     iterations : int, default 10
         Maximum Gauss–Newton steps per point and frame (paper §4.1 uses ten).
 
@@ -107,10 +109,11 @@ def track_harp(
     if int(iterations) < 1:
         raise ValueError(f"iterations={iterations!r} must be at least 1")
     ds = _as_phase(ds)
-    grid_points = points is None
+    grid = ds if points is None else points if isinstance(points, xr.Dataset) else None
+    grid_points = grid is not None
     reference = PhaseSampler(ds, 0)
-    if grid_points:
-        X, flat_index = _grid_points(ds, reference)
+    if grid is not None:
+        X, flat_index = _grid_points(grid, reference)
     else:
         X = np.asarray(points, dtype=np.float64)
         if X.ndim != 2 or X.shape[1] != 3:
@@ -146,7 +149,7 @@ def track_harp(
     out = _assemble(ds, X, displacement, epsilon, sweeps, wall, int(iterations))
     if grid_points:
         assert flat_index is not None
-        out["displacement_grid"] = _on_grid(ds, displacement, flat_index)
+        out["displacement_grid"] = _on_grid(grid, displacement, flat_index)
     return out
 
 

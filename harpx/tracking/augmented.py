@@ -16,7 +16,7 @@ from harpx._typing import FloatArray
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.tracking.constraint import PhaseConstraint
 from harpx.tracking.equilibrium import equilibrate
-from harpx.tracking.penalty import FrameOutcome
+from harpx.tracking.penalty import STALL, FrameOutcome
 
 
 def track_frame_augmented(
@@ -71,6 +71,7 @@ def track_frame_augmented(
     scale = constraint.penalty_scale()
     lam = float(penalty)
     iterations = stages = 0
+    best = float("inf")
     while True:
         constraint.penalty = lam * scale
         for _ in range(max_updates):
@@ -87,6 +88,7 @@ def track_frame_augmented(
             change = constraint.update_multipliers(state)
             if change < multiplier_tolerance:
                 break
-        if 2.0 * lam > penalty_limit:
+        if 2.0 * lam > penalty_limit or eps > (1.0 - STALL) * best:
             return FrameOutcome(u, state, eps, lam, iterations, stages, False)
+        best = min(best, eps)
         lam *= 2.0

@@ -4,8 +4,10 @@ Paper §3.2 "Solution Strategy": a global penalty λ(t) increasing linearly, wit
 adjusted to a desired tracking residual ε. Here the ramp restarts every frame from a soft
 penalty, so the parts of the body whose phase is unambiguous pull the model first and the
 mechanics carries it past wrap ambiguities; the frame stops at the first stage whose ε meets
-the target. When the ramp's top does not reach it, λ_max is doubled (up to ``penalty_limit``),
-and the λ_max that worked starts the next frame.
+the target. When the ramp's top does not reach it, λ_max is doubled (up to ``penalty_limit``)
+while each doubling still lowers ε by at least 3 %; past that the residual is at the noise
+floor of the data, and raising λ would only fit noise. The λ_max that worked starts the next
+frame.
 """
 
 from __future__ import annotations
@@ -20,6 +22,10 @@ from harpx._typing import FloatArray
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.tracking.constraint import ConstraintState, PhaseConstraint
 from harpx.tracking.equilibrium import equilibrate
+
+#: Relative decrease of ε below which raising the penalty is judged to have stalled (the
+#: residual has reached the noise floor of the data).
+STALL = 0.03
 
 
 @dataclass
@@ -105,6 +111,7 @@ def track_frame_penalty(
     lam_max = float(penalty)
     fractions = np.arange(1, ramp + 1) / ramp
     levels = list(lam_max * fractions)
+    best = np.inf
     while True:
         for lam in levels:
             constraint.penalty = lam * scale
@@ -118,7 +125,9 @@ def track_frame_penalty(
             eps = state.epsilon()
             if eps <= target:
                 return FrameOutcome(u, state, eps, lam, iterations, stages, True)
-        if 2.0 * lam_max > penalty_limit:
+        if 2.0 * lam_max > penalty_limit or eps > (1.0 - STALL) * best:
+            # the limit, or the data's noise floor: doubling λ no longer lowers ε
             return FrameOutcome(u, state, eps, lam_max, iterations, stages, False)
+        best = min(best, eps)
         lam_max *= 2.0
         levels = [lam_max]

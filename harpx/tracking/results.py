@@ -163,7 +163,11 @@ def tracking_error(tracked: xr.Dataset, truth: xr.Dataset) -> xr.Dataset:
         for d in ("z", "y", "x")
     )
     if not same:
-        est = est.interp(z=true.z, y=true.y, x=true.x)
+        # linear interpolation from the (finer) tracked grid; where a neighbour lies outside
+        # the mesh (faces of the body), fall back to the nearest tracked voxel centre
+        linear = est.interp(z=true.z, y=true.y, x=true.x)
+        nearest = est.interp(z=true.z, y=true.y, x=true.x, method="nearest")
+        est = linear.fillna(nearest)
     est = est.assign_coords(time=true.time.values)
     err = np.sqrt(((est - true) ** 2).sum("axis", skipna=False))
     body = np.isfinite(true).all("axis")
