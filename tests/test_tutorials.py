@@ -1,0 +1,34 @@
+"""Every tutorial runs, and leaves behind the numbers it promises."""
+
+from __future__ import annotations
+
+import runpy
+from pathlib import Path
+
+import pytest
+
+TUTORIALS = sorted((Path(__file__).resolve().parents[1] / "tutorials").glob("*.py"))
+
+# name left in the tutorial's namespace -> check on its value (tolerances from the
+# measured values of each scene at its small size, with margin)
+EXPECTATIONS = {
+    "01_phantom.py": {
+        # the FE result is within 0.3 mm mean of the truth and the archive round-trips
+        "fe_error": lambda err: float(err.mean_all) < 0.3,
+        "fe_error_reopened": lambda v: v < 0.3,
+        "harp_error": lambda err: float(err.mean_all) < 1.0,
+    },
+}
+
+
+@pytest.mark.parametrize("path", TUTORIALS, ids=[p.name for p in TUTORIALS])
+def test_tutorial_runs(path, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    namespace = runpy.run_path(str(path), run_name="__main__")
+    checks = EXPECTATIONS.get(path.name, {})
+    for name, check in checks.items():
+        assert name in namespace, f"{path.name} does not define {name!r}"
+        assert check(namespace[name]), f"{path.name}: {name} = {namespace[name]!r}"
+    if path.name not in EXPECTATIONS:
+        # a tutorial must assert something; the scene engineers add theirs to EXPECTATIONS
+        pytest.fail(f"{path.name} has no expectations in tests/test_tutorials.py")
