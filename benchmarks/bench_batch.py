@@ -9,10 +9,11 @@ write, by :func:`harpx.batch.track_subject`.
 
 * **serial**: a plain Python loop over the subjects in this process (NumPy/MKL/pyFFTW free to
   use every core).
-* **cohort (cold)**: ``track_many(..., n_workers=2)``: starts a ``LocalCluster`` with 2
-  single-threaded worker processes, tracks, closes it; the cluster start-up is included.
-* **cohort (warm)**: ``track_many(..., client=client)`` on an already running cluster of the
-  same shape (what a long-lived cluster or a second cohort sees).
+* **cohort (warm)**: ``track_many(..., client=client)`` on an already running
+  :func:`harpx.batch.local_cluster` of 2 single-threaded worker processes (what a
+  long-lived cluster or a second cohort sees).
+* **cohort (cold)**: ``track_many(..., n_workers=2)``: starts such a cluster, tracks, closes
+  it; the cluster start-up (~2-4 s) is included.
 
 Each variant runs ``--repeats`` times (default 3) into fresh output directories
 (``overwrite=True``); medians are reported with the wall-time ratio serial / cohort. Run
@@ -87,9 +88,9 @@ def main() -> None:
     if args.quick:
         args.subjects, args.repeats = 4, 2
 
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
-    from harpx.batch import track_many
+    from harpx.batch import local_cluster, track_many
     from harpx.io.netcdf import open_dataset
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -102,10 +103,9 @@ def main() -> None:
         load_before = os.getloadavg()[0]
         run_serial(paths[:1], root / "warmup")  # imports, FFT plans, MKL: not timed
 
-        times: dict[str, list[float]] = {"serial": [], "cohort (cold)": [],
-                                         "cohort (warm)": []}
-        with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
-                          dashboard_address=None) as cluster, Client(cluster) as client:
+        times: dict[str, list[float]] = {"serial": [], "cohort (warm)": [],
+                                         "cohort (cold)": []}
+        with local_cluster(args.workers) as cluster, Client(cluster) as client:
             track_many(paths[:1], body_factory, output_dir=root / "warm-up", client=client,
                        track_kwargs=TRACK_KWARGS, progress=False)  # worker imports: not timed
             for r in range(args.repeats):
@@ -117,12 +117,14 @@ def main() -> None:
                 track_many(paths, body_factory, output_dir=root / f"warm{r}", client=client,
                            track_kwargs=TRACK_KWARGS, overwrite=True, progress=False)
                 times["cohort (warm)"].append(time.perf_counter() - start)
-        for r in range(args.repeats):  # no other cluster alive while the cold one runs
-            start = time.perf_counter()
-            cold = track_many(paths, body_factory, output_dir=root / f"cold{r}",
-                              n_workers=args.workers, track_kwargs=TRACK_KWARGS,
-                              overwrite=True, progress=False)
-            times["cohort (cold)"].append(time.perf_counter() - start)
+
+                # (the idle warm cluster stays up: the variants alternate within a repeat so
+                # that they see the same machine load)
+                start = time.perf_counter()
+                cold = track_many(paths, body_factory, output_dir=root / f"cold{r}",
+                                  n_workers=args.workers, track_kwargs=TRACK_KWARGS,
+                                  overwrite=True, progress=False)
+                times["cohort (cold)"].append(time.perf_counter() - start)
 
         # the cohort computes what the loop computes
         worst = max(
@@ -130,7 +132,7 @@ def main() -> None:
                                 - open_dataset(b).displacement.values)))
             for a, b in zip(serial, cold, strict=True)
         )
-        eps = [float(open_dataset(p).epsilon.values[1:].max()) for p in serial]
+        eps = [float(open_dataset(p).epsilon.values[1:].max()) for p in [*serial, *cold]]
         track_time = [float(open_dataset(p).wall_time.sum()) for p in serial]
         load_after = os.getloadavg()[0]
 
@@ -150,8 +152,11 @@ def main() -> None:
     print(f"1-min load average: {load_before:.2f} before, {load_after:.2f} after "
           f"(cpu_count={os.cpu_count()}; a load above the core count means other processes "
           "shared the machine and the ratios understate the speed-up)")
-    print(f"max |u_cohort - u_serial| = {worst:.2e} mm (PARDISO with 1 vs all threads); "
-          f"tracking residual ε per subject <= {max(eps):.3f} rad")
+    print(f"max |u_cohort - u_serial| = {worst:.2e} mm over all subjects and frames: the "
+          "workers run PARDISO and pyFFTW on 1 thread, the loop on all cores; such rounding "
+          "differences can flip a discrete stop of the penalty loop (ε <= target), so results "
+          f"agree to the tracking tolerance, not to rounding; ε per subject <= {max(eps):.3f} "
+          "rad in both")
 
 
 if __name__ == "__main__":

@@ -35,7 +35,7 @@ from harpx.errors import ArchiveError, HarpxError, SchemaError
 from harpx.io.netcdf import open_dataset, to_netcdf
 from harpx.schema import validate
 
-__all__ = ["CohortError", "output_path", "track_many", "track_subject"]
+__all__ = ["CohortError", "local_cluster", "output_path", "track_many", "track_subject"]
 
 #: Suffix of each subject's archive: ``<input stem>_tracked.nc``.
 OUTPUT_SUFFIX = "_tracked.nc"
@@ -121,8 +121,8 @@ def track_many(
         is opened for this call and closed after it.
     n_workers : int, default 2
         Worker processes of the local cluster started when neither ``client`` nor
-        ``address`` is given (one thread each; BLAS and MKL threads are set to 1 by
-        dask's worker environment). The cluster is closed at the end.
+        ``address`` is given (:func:`local_cluster`: one thread and one BLAS/MKL thread
+        each). The cluster is closed at the end.
     track_kwargs : mapping, optional
         Keyword arguments of :func:`harpx.tracking.track.track` (e.g. ``epsilon``,
         ``method``), the same for every subject.
@@ -244,7 +244,53 @@ def track_subject(
     return to_netcdf(tracked, target)
 
 
+def local_cluster(n_workers: int = 2) -> Any:
+    """A local dask cluster tuned for tracking: processes with one thread each.
+
+    Parameters
+    ----------
+    n_workers : int, default 2
+        Worker processes (one per core is a good choice).
+
+    Returns
+    -------
+    distributed.LocalCluster
+        Its dashboard (if bokeh is installed) is on a free port. Close it (or use it as a
+        context manager) when done.
+
+    Notes
+    -----
+    Workers get ``OMP_NUM_THREADS = MKL_NUM_THREADS = OPENBLAS_NUM_THREADS = 1`` (one BLAS,
+    PARDISO and pyFFTW thread per process, so workers do not oversubscribe the cores) but
+    not dask's default ``MALLOC_TRIM_THRESHOLD_=65536``: with it, glibc returns memory to
+    the system after every large temporary, and tracking a subject took twice the CPU time
+    (measured 2.2 s vs 1.1 s for a benchmark subject, ``benchmarks/bench_batch.py``).
+    Use this cluster's settings for a cluster started elsewhere too.
+    """
+    (LocalCluster,) = _distributed("local_cluster", "LocalCluster")
+    import dask
+
+    if int(n_workers) < 1:
+        raise ValueError(f"n_workers={n_workers!r} must be at least 1")
+    environ = {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1}
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+        return LocalCluster(n_workers=int(n_workers), threads_per_worker=1, processes=True,
+                            dashboard_address=":0")
+
+
 # --- helpers ------------------------------------------------------------------------------
+
+
+def _distributed(caller: str, *names: str) -> tuple[Any, ...]:
+    """Names from dask.distributed, with an install hint if it is missing."""
+    try:
+        import distributed
+    except ImportError as exc:
+        raise ImportError(
+            f"{caller} needs dask.distributed; install it with `pip install "
+            "harpx[distributed]` (or `pip install distributed`)"
+        ) from exc
+    return tuple(getattr(distributed, name) for name in names)
 
 
 def _check_arguments(
@@ -326,23 +372,14 @@ def _run(
     failures: dict[int, BaseException],
     bar: Any,
 ) -> None:
-    try:
-        from distributed import Client, LocalCluster, as_completed
-    except ImportError as exc:
-        raise ImportError(
-            "track_many needs dask.distributed; install it with `pip install "
-            "harpx[distributed]` (or `pip install distributed`)"
-        ) from exc
+    Client, as_completed = _distributed("track_many", "Client", "as_completed")
     owned: list[Any] = []  # cluster/client opened here, closed in `finally`
     try:
         if client is None:
             if address is not None:
                 client = Client(address)
             else:
-                cluster = LocalCluster(
-                    n_workers=int(n_workers), threads_per_worker=1, processes=True,
-                    dashboard_address=None,
-                )
+                cluster = local_cluster(n_workers)
                 owned.append(cluster)
                 client = Client(cluster)
             owned.insert(0, client)

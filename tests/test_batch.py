@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from harpx.batch import CohortError, output_path, track_many, track_subject
+from harpx.batch import CohortError, local_cluster, output_path, track_many, track_subject
 from harpx.errors import HarpxError
 from harpx.io.netcdf import open_dataset, to_netcdf
 from harpx.mechanics.body import Body
@@ -59,10 +59,8 @@ def cohort(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
 
 @pytest.fixture(scope="module")
 def client() -> Iterator[object]:
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster:
-        with distributed.Client(cluster) as c:
-            yield c
+    with local_cluster(2) as cluster, distributed.Client(cluster) as c:
+        yield c
 
 
 @pytest.fixture(scope="module")
@@ -217,6 +215,21 @@ def test_track_subject_refuses_a_tracked_archive(
     with pytest.raises(HarpxError, match="has harpx_schema 'tracked/1'; track_many needs"):
         track_subject(tracked, tmp_path / "o.nc", body_factory)
     assert not (tmp_path / "o.nc").exists()
+
+
+def _environment() -> dict[str, str | None]:
+    keys = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "MALLOC_TRIM_THRESHOLD_")
+    return {k: os.environ.get(k) for k in keys}
+
+
+def test_local_cluster_workers_are_single_threaded_without_malloc_trim(client: object) -> None:
+    info = client.scheduler_info()  # type: ignore[attr-defined]
+    assert [w["nthreads"] for w in info["workers"].values()] == [1, 1]
+    environments = client.run(_environment)  # type: ignore[attr-defined]
+    expected = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MALLOC_TRIM_THRESHOLD_": None}
+    assert list(environments.values()) == [expected, expected]
+    with pytest.raises(ValueError, match="n_workers=0"):
+        local_cluster(0)
 
 
 def test_output_path() -> None:
