@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -230,6 +231,15 @@ def test_local_cluster_workers_are_single_threaded_without_malloc_trim(client: o
     assert list(environments.values()) == [expected, expected]
     with pytest.raises(ValueError, match="n_workers=0"):
         local_cluster(0)
+
+
+def test_missing_distributed_gives_an_install_hint(
+    cohort: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(sys.modules, "distributed", None)  # as if not installed
+    with pytest.raises(ImportError, match=r"pip install harpx\[distributed\]"):
+        track_many(cohort, body_factory, output_dir=tmp_path, progress=False)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_output_path() -> None:
