@@ -299,6 +299,8 @@ class _Band:
     big: tuple[int, int]  # refined size
     rows: NDArray[np.intp]  # refined row indices (mod big[0]) of the disk's bounding box
     cols: NDArray[np.intp]  # refined column indices (mod big[1])
+    row_runs: tuple[tuple[slice, slice], ...]  # rows as (destination, source) slices
+    col_runs: tuple[tuple[slice, slice], ...]  # columns as (destination, source) slices
     gather1: NDArray[np.intp]  # (ra, rb) row indices into the native half spectrum
     gather2: NDArray[np.intp]  # (ra, rb) column indices into the native half spectrum
     sign: NDArray[np.float64]  # (ra, rb) +1 / -1 on the imaginary part (Hermitian symmetry)
@@ -311,6 +313,16 @@ def _band_indices(n: int, m: int, d: float, lo: float, hi: float) -> NDArray[np.
     qlo = max(int(np.ceil(lo / step - 1e-9)), -(big // 2))
     qhi = min(int(np.floor(hi / step + 1e-9)), (big - 1) // 2)
     return np.arange(qlo, qhi + 1, dtype=np.int64)
+
+
+def _runs(index: NDArray[np.int64]) -> tuple[tuple[slice, slice], ...]:
+    """Split consecutive indices (wrapping at most once) into (destination, source) slices."""
+    breaks = np.flatnonzero(np.diff(index) != 1) + 1
+    bounds = [0, *breaks.tolist(), len(index)]
+    return tuple(
+        (slice(int(index[a]), int(index[a]) + (b - a)), slice(a, b))
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True)
+    )
 
 
 @functools.lru_cache(maxsize=64)
@@ -348,6 +360,8 @@ def _band(
         big=big,
         rows=(q1 % big[0]).astype(np.intp),
         cols=(q2 % big[1]).astype(np.intp),
+        row_runs=_runs(q1 % big[0]),
+        col_runs=_runs(q2 % big[1]),
         gather1=j1.astype(np.intp),
         gather2=j2.astype(np.intp),
         sign=sign,
@@ -359,20 +373,26 @@ class _Bandpass:
     """Executes the sparse spectral pipeline on a batch of real slices with cached plans.
 
     Arrays are 3D with the batch (slice) axis at position ``slice_axis`` and the two
-    in-plane axes in their original order, so volumes are transformed in place of memory
-    order and the harmonic image comes out in the caller's layout. One instance per worker
-    thread and call: it zeroes the inverse-FFT input buffers once, then every batch writes
-    the same sparse positions, so the zeros stay valid.
+    in-plane axes in their original order, so volumes are transformed in their memory
+    order and the harmonic image comes out in the caller's layout. With
+    ``slice_factor > 1`` the harmonic image is also refined along the slice axis by linear
+    interpolation, applied to the small half-transformed band (linear interpolation between
+    slices commutes with the in-plane inverse FFT), so the last FFT pass directly yields the
+    refined slices. One instance per worker thread and call: it zeroes the inverse-FFT input
+    buffers once, then every batch writes the same sparse positions, so the zeros stay valid.
     """
 
-    def __init__(self, band: _Band, batch: int, threads: int, slice_axis: int = 0) -> None:
+    def __init__(
+        self, band: _Band, batch: int, threads: int, slice_axis: int = 0, slice_factor: int = 1
+    ) -> None:
         self.band = band
         self.s = slice_axis
+        self.m = slice_factor
         a, b = (k for k in range(3) if k != slice_axis)
         (n1, n2), (b1, b2) = band.n, band.big
 
-        def shape(first: int, second: int) -> tuple[int, ...]:
-            out = [batch, batch, batch]
+        def shape(first: int, second: int, slices: int = batch) -> tuple[int, ...]:
+            out = [slices, slices, slices]
             out[a], out[b] = first, second
             return tuple(out)
 
@@ -380,17 +400,21 @@ class _Bandpass:
         # first inverse pass along the in-plane axis a over the few columns of the disk,
         # then the full pass along b (the contiguous axis unless slices are along x)
         self.p1 = get_plan(
-            shape(b1, len(band.cols)),
+            shape(b1, len(band.cols)), np.complex128, (a,), direction="backward", threads=threads
+        )
+        self.p2 = get_plan(
+            shape(b1, b2, batch * slice_factor),
             np.complex128,
-            (a,),
+            (b,),
             direction="backward",
             threads=threads,
         )
-        self.p2 = get_plan(
-            shape(b1, b2), np.complex128, (b,), direction="backward", threads=threads
-        )
         self.p1.input_array[...] = 0.0
         self.p2.input_array[...] = 0.0
+        self.diff = [
+            np.empty((max(batch - 1, 0), b1, src.stop - src.start), dtype=np.complex128)
+            for _, src in band.col_runs
+        ]
 
     def _view(self, array: NDArray) -> NDArray:
         return np.moveaxis(array, self.s, 0)
@@ -403,9 +427,19 @@ class _Bandpass:
         g = self._view(self.fwd.output_array)[:, band.gather1, band.gather2]
         g.imag *= band.sign
         g *= band.weight
-        self._view(self.p1.input_array)[:, band.rows, :] = g
+        p1_in = self._view(self.p1.input_array)
+        for dst, src in band.row_runs:  # contiguous runs: slice copies, no fancy indexing
+            p1_in[:, dst, :] = g[:, src, :]
         self.p1.execute()
-        self._view(self.p2.input_array)[:, :, band.cols] = self._view(self.p1.output_array)
+        p1_out = self._view(self.p1.output_array)
+        p2_in = self._view(self.p2.input_array)
+        for (dst, src), diff in zip(band.col_runs, self.diff, strict=True):
+            # refine along the slices here, on (slices, rows, run) arrays: never the phase
+            low, high = p1_out[:, :, src], p2_in[:, :, dst]
+            if low.strides[-1] == high.strides[-1] == low.itemsize:
+                # float views: complex-by-real products as real products
+                low, high, diff = (a.view(np.float64) for a in (low, high, diff))
+            _interp_rows(low, high, diff, self.m)
         self.p2.execute()
         return self.p2.output_array
 
@@ -671,47 +705,17 @@ def _volume_worker(
 ) -> None:
     """Fill ``phase[f]`` and ``magnitude[f]`` (refined z, y, x) for the given frames.
 
-    The harmonic image keeps the volume's memory layout, and output is written plane by
-    plane along refined z, so every write is contiguous. Between slices the *complex*
-    harmonic image is interpolated linearly, never the wrapped phase.
+    The harmonic image keeps the volume's memory layout and is already refined along the
+    slices (:class:`_Bandpass`), so its axis 0 is the output's z: output is written plane
+    by plane, every write contiguous.
     """
-    ns = volume.shape[1 + slice_axis]
-    run = _Bandpass(band, ns, threads, slice_axis)
-    m = slice_factor
-    nfine = ns * m
-    b1, b2 = band.big
-    if slice_axis == 0:  # z slices: refined plane j mixes two harmonic slices
-        plane = (b1, b2)
-        i0, _, w = linear_weights(ns, m)
-        diff = np.zeros((ns, b1, b2), dtype=np.complex128)  # diff[ns - 1] stays 0
-        diff_f = diff.view(np.float64)
-    else:  # y (x) slices: refined z plane r interpolates rows (columns) of H[r]
-        plane = (nfine, b2) if slice_axis == 1 else (b2, nfine)
-        diff_f = np.empty((max(ns - 1, 0), 2 * b2))
+    run = _Bandpass(band, volume.shape[1 + slice_axis], threads, slice_axis, slice_factor)
+    plane = phase.shape[2:]
     re, im = np.empty(plane), np.empty(plane)
-    mix = np.empty(plane, dtype=np.complex128)
-    mix_f = mix.view(np.float64)  # complex-by-real products as real products
     for f in frames:
         h = run(volume[f])
-        if slice_axis == 0:
-            hf = h.view(np.float64)
-            if m > 1:
-                np.subtract(hf[1:], hf[:-1], out=diff_f[:-1])
-            for j in range(nfine):
-                if w[j] == 0.0:
-                    src = h[i0[j]]
-                else:
-                    np.multiply(diff_f[i0[j]], w[j], out=mix_f)
-                    np.add(mix_f, hf[i0[j]], out=mix_f)
-                    src = mix
-                _phase_magnitude(src, phase[f, j], magnitude[f, j], re, im)
-            continue
-        for r in range(b1):
-            if slice_axis == 1:
-                _interp_rows(h[r].view(np.float64), mix_f, diff_f, m)
-            else:  # complex columns: interpolate the transposed (slice, y) views
-                _interp_rows(h[r].T, mix.T, diff_f.view(np.complex128)[:, :b2], m)
-            _phase_magnitude(mix, phase[f, r], magnitude[f, r], re, im)
+        for r in range(h.shape[0]):
+            _phase_magnitude(h[r], phase[f, r], magnitude[f, r], re, im)
 
 
 def harmonic_phase(
