@@ -75,6 +75,7 @@ class HarpAccessor:
         multiplier_tolerance: float = 0.1,
         max_updates: int = 10,
         predictor: Predictor = "linear",
+        tolerance: float = 0.01,
         dirichlet: Sequence[Any] = (),
         terms: Sequence[Any] = (),
         intorder: int | None = None,
@@ -92,7 +93,7 @@ class HarpAccessor:
         return track(
             self._ds, body, method=method, epsilon=epsilon, penalty=penalty,
             penalty_limit=penalty_limit, ramp=ramp, multiplier_tolerance=multiplier_tolerance,
-            max_updates=max_updates, predictor=predictor, dirichlet=dirichlet, terms=terms,
+            max_updates=max_updates, predictor=predictor, tolerance=tolerance, dirichlet=dirichlet, terms=terms,
             intorder=intorder, linear_solver=linear_solver, progress=progress,
         )
 

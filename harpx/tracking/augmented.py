@@ -15,7 +15,7 @@ from typing import Any
 from harpx._typing import FloatArray
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.tracking.constraint import PhaseConstraint
-from harpx.tracking.equilibrium import equilibrate
+from harpx.tracking.equilibrium import Timings, equilibrate
 from harpx.tracking.penalty import STALL, FrameOutcome
 
 
@@ -34,6 +34,7 @@ def track_frame_augmented(
     terms: Sequence[Any] = (),
     tolerance: float = 1e-3,
     max_iterations: int = 10,
+    timings: Timings | None = None,
 ) -> FrameOutcome:
     """Track one frame with the augmented-Lagrangian method.
 
@@ -61,6 +62,8 @@ def track_frame_augmented(
         Prescribed displacements and further residual terms.
     tolerance : float, default 1e-3
         Gauss–Newton increment tolerance, mm.
+    timings : Timings, optional
+        Accumulates sampling, assembly and solve times.
     max_iterations : int, default 10
         Gauss–Newton iterations per solve.
 
@@ -77,7 +80,7 @@ def track_frame_augmented(
         for _ in range(max_updates):
             res = equilibrate(
                 body, constraint, u, dirichlet=dirichlet, terms=terms, solver=solver,
-                tolerance=tolerance, max_iterations=max_iterations,
+                tolerance=tolerance, max_iterations=max_iterations, timings=timings,
             )
             u, state = res.u, res.state
             iterations += res.iterations

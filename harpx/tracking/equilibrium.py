@@ -9,6 +9,7 @@ would invert an element are halved.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -20,6 +21,19 @@ from harpx.errors import ElementInversionError
 from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.tracking.constraint import ConstraintState, PhaseConstraint
+
+
+@dataclass
+class Timings:
+    """Wall time spent in each part of the tracking solves, s."""
+
+    sampling: float = 0.0
+    assembly: float = 0.0
+    solve: float = 0.0
+
+    def as_attrs(self) -> dict[str, float]:
+        """The timings as dataset attributes (``time_sampling`` …), s."""
+        return {f"time_{k}": round(v, 3) for k, v in vars(self).items()}
 
 
 @dataclass
@@ -67,6 +81,7 @@ def equilibrate(
     max_iterations: int = 10,
     max_halvings: int = 6,
     max_step: float | None = None,
+    timings: Timings | None = None,
 ) -> EquilibriumResult:
     """Solve for equilibrium at the constraint's current penalty and multipliers.
 
@@ -94,6 +109,8 @@ def equilibrate(
         Trust radius: steps whose largest nodal increment exceeds it are scaled down to it,
         mm. Default: a quarter of the shortest tag period, so that no step carries a
         point across a phase wrap into another tag's basin.
+    timings : Timings, optional
+        Accumulates the time spent sampling images, assembling and solving.
 
     Returns
     -------
@@ -104,14 +121,19 @@ def equilibrate(
     ElementInversionError
         If even the smallest step inverts elements.
     """
+    clock = timings if timings is not None else Timings()
     u = np.array(u, dtype=float, copy=True)
     fixed, fixed_values = _split_dirichlet(body, dirichlet)
     u[fixed] = fixed_values
     if max_step is None:
         max_step = 0.5 * np.pi / constraint.max_wavenumber
     free = np.setdiff1d(np.arange(body.ndof), fixed) if fixed.size else None
+    tic = time.perf_counter()
     result = EquilibriumResult(u, constraint.state(u), 0)
+    clock.sampling += time.perf_counter() - tic
+    tic = time.perf_counter()
     internal = internal_forces(body, u)
+    clock.assembly += time.perf_counter() - tic
     if internal.r is None:
         raise ElementInversionError(
             f"the starting displacement of frame {constraint.frame} inverts cells "
@@ -119,6 +141,7 @@ def equilibrate(
             internal.inverted_cells,
         )
     for iteration in range(1, max_iterations + 1):
+        tic = time.perf_counter()
         rc, Kc = constraint.assemble(result.state)
         R = internal.r + rc
         K = internal.K.copy()
@@ -128,11 +151,15 @@ def equilibrate(
             R = R + rt
             if Kt is not None:
                 K = K + Kt
+        clock.assembly += time.perf_counter() - tic
+        tic = time.perf_counter()
         if free is None:
             du = solver.solve(K, -R)
         else:
             du = np.zeros_like(u)
             du[free] = solver.solve(K[free][:, free].tocsr(), -R[free])
+        clock.solve += time.perf_counter() - tic
+        tic = time.perf_counter()
         largest = float(np.abs(du).max())
         alpha = min(1.0, max_step / largest) if largest > 0 else 1.0
         for _ in range(max_halvings + 1):
@@ -149,12 +176,15 @@ def equilibrate(
                 internal_trial.inverted_cells,
                 result.step_norms,
             )
+        clock.assembly += time.perf_counter() - tic
         u = trial
         internal = internal_trial
         step = float(np.abs(alpha * du).max())
         result.step_norms.append(step)
         result.iterations = iteration
+        tic = time.perf_counter()
         result.state = constraint.state(u)
+        clock.sampling += time.perf_counter() - tic
         if step < tolerance:
             result.converged = True
             break

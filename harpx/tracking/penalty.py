@@ -21,11 +21,13 @@ import numpy as np
 from harpx._typing import FloatArray
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.tracking.constraint import ConstraintState, PhaseConstraint
-from harpx.tracking.equilibrium import equilibrate
+from harpx.tracking.equilibrium import Timings, equilibrate
 
 #: Relative decrease of ε below which raising the penalty is judged to have stalled (the
 #: residual has reached the noise floor of the data).
 STALL = 0.03
+#: Gauss–Newton iterations of the intermediate (continuation) stages of the ramp.
+RAMP_ITERATIONS = 3
 
 
 @dataclass
@@ -73,6 +75,7 @@ def track_frame_penalty(
     terms: Sequence[Any] = (),
     tolerance: float = 1e-3,
     max_iterations: int = 10,
+    timings: Timings | None = None,
 ) -> FrameOutcome:
     """Track one frame with the penalty method.
 
@@ -98,6 +101,8 @@ def track_frame_penalty(
         Prescribed displacements and further residual terms.
     tolerance : float, default 1e-3
         Gauss–Newton increment tolerance, mm.
+    timings : Timings, optional
+        Accumulates sampling, assembly and solve times.
     max_iterations : int, default 10
         Gauss–Newton iterations per stage.
 
@@ -113,11 +118,15 @@ def track_frame_penalty(
     levels = list(lam_max * fractions)
     best = np.inf
     while True:
-        for lam in levels:
+        for stage, lam in enumerate(levels):
             constraint.penalty = lam * scale
+            # stages below the ramp's top only continue the path: a few iterations suffice
+            last = stage == len(levels) - 1
             res = equilibrate(
                 body, constraint, u, dirichlet=dirichlet, terms=terms, solver=solver,
-                tolerance=tolerance, max_iterations=max_iterations,
+                tolerance=tolerance,
+                max_iterations=max_iterations if last else min(max_iterations, RAMP_ITERATIONS),
+                timings=timings,
             )
             u, state = res.u, res.state
             iterations += res.iterations

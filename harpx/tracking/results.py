@@ -29,6 +29,33 @@ def grid_points(ds: xr.Dataset) -> FloatArray:
     return np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
 
 
+def acquired_grid(phase: xr.Dataset) -> xr.Dataset:
+    """The acquired (native) voxel grid behind a possibly upsampled ``phase/1`` dataset.
+
+    Upsampling subdivides every voxel into ``m`` along each axis (``upsample_factors``), so
+    the acquired centre is the mean of its ``m`` sub-voxel centres.
+
+    Parameters
+    ----------
+    phase : xarray.Dataset
+        ``phase/1`` dataset.
+
+    Returns
+    -------
+    xarray.Dataset
+        Empty dataset with the acquired ``z``, ``y``, ``x`` coordinates (mm) and ``time``.
+    """
+    factors = phase.attrs.get("upsample_factors", [1, 1, 1])
+    coords: dict[str, Any] = {"time": phase["time"]}
+    for dim, m in zip(("z", "y", "x"), np.atleast_1d(factors), strict=True):
+        values = np.asarray(phase[dim], dtype=float)
+        m = int(m)
+        if m > 1 and values.size % m == 0:
+            values = values.reshape(-1, m).mean(axis=1)
+        coords[dim] = xr.DataArray(values, dims=dim, attrs=dict(phase[dim].attrs))
+    return xr.Dataset(coords=coords)
+
+
 def displacement_on_grid(body: Any, U: FloatArray, grid: xr.Dataset) -> xr.DataArray:
     """FE displacement of the material points at the voxel centres of ``grid``.
 
@@ -88,6 +115,8 @@ def tracked_dataset(
     Returns
     -------
     xarray.Dataset
+        ``displacement_grid`` is on the acquired voxel grid (:func:`acquired_grid`), the
+        grid of ``displacement_true`` in synthetic ``tagged/1`` data.
     """
     ntime = U.shape[0]
     nodal = np.stack([body.nodal_displacement(u) for u in U])  # (time, node, 3)
@@ -125,7 +154,7 @@ def tracked_dataset(
     for name, value in diagnostics.items():
         dims = ("time",) if np.ndim(value) == 1 else ("time", "cell")
         ds[name] = xr.DataArray(np.asarray(value), dims=dims, attrs=_attrs(name))
-    ds["displacement_grid"] = displacement_on_grid(body, U, phase)
+    ds["displacement_grid"] = displacement_on_grid(body, U, acquired_grid(phase))
     ds["dof_displacement"] = xr.DataArray(
         U, dims=("time", "dof"), attrs={"units": "mm", "long_name": "displacement of each dof"}
     )

@@ -22,6 +22,7 @@ from harpx.mechanics.linsolve import LinearSolver
 from harpx.schema import validate
 from harpx.tracking.augmented import track_frame_augmented
 from harpx.tracking.constraint import PhaseConstraint
+from harpx.tracking.equilibrium import Timings
 from harpx.tracking.penalty import FrameOutcome, track_frame_penalty
 from harpx.tracking.results import tracked_dataset
 
@@ -51,6 +52,7 @@ def track(
     multiplier_tolerance: float = 0.1,
     max_updates: int = 10,
     predictor: Predictor = "linear",
+    tolerance: float = 0.01,
     dirichlet: Sequence[Any] = (),
     terms: Sequence[Any] = (),
     intorder: int | None = None,
@@ -84,6 +86,8 @@ def track(
     predictor : {"none", "linear"}, default "linear"
         Start each frame from the previous displacement, or extrapolate linearly from the
         previous two frames.
+    tolerance : float, default 0.01
+        Gauss–Newton convergence: largest nodal increment, mm (1/75 of a 0.75 mm voxel).
     dirichlet : sequence, optional
         Prescribed displacements (:class:`harpx.mechanics.loads.Fixed`, ``Prescribed``).
     terms : sequence, optional
@@ -111,7 +115,7 @@ def track(
         raise ValueError(f"method={method!r}; expected 'penalty' or 'augmented-lagrangian'")
     if predictor not in ("none", "linear"):
         raise ValueError(f"predictor={predictor!r}; expected 'none' or 'linear'")
-    for name, value in (("epsilon", epsilon), ("penalty", penalty)):
+    for name, value in (("epsilon", epsilon), ("penalty", penalty), ("tolerance", tolerance)):
         if not (np.isfinite(value) and value > 0):
             raise ValueError(f"{name}={value!r} must be a positive number")
     if penalty_limit < penalty:
@@ -128,6 +132,7 @@ def track(
             "check that the mesh (mm) and the image grid (coords x, y, z) overlap"
         )
     solver = LinearSolver(linear_solver)
+    timings = Timings()
     U = np.zeros((ntime, body.ndof))
     eps = np.zeros(ntime)
     eps_cell = np.full((ntime, body.ncell), np.nan)
@@ -152,7 +157,7 @@ def track(
                 u0 = U[n - 1]
         common = dict(
             target=epsilon, penalty=lam, penalty_limit=penalty_limit, solver=solver,
-            dirichlet=dirichlet, terms=terms,
+            dirichlet=dirichlet, terms=terms, timings=timings, tolerance=tolerance,
         )
         outcome: FrameOutcome
         if method == "penalty":
@@ -179,11 +184,13 @@ def track(
         "ramp": int(ramp),
         "multiplier_tolerance": float(multiplier_tolerance),
         "predictor": predictor,
+        "tolerance": float(tolerance),
         "constraint_intorder": -1 if constraint.intorder is None else constraint.intorder,
         "constraint_points_per_cell": constraint.points_per_cell,
         "constraint_points": int(constraint.points.shape[0]),
         "penalty_scale": constraint.penalty_scale(),
         "linear_solver": solver.method,
+        **timings.as_attrs(),
     }
     diagnostics = {
         "epsilon": eps,
