@@ -18,7 +18,10 @@ write, by :func:`harpx.batch.track_subject`.
 Each variant runs ``--repeats`` times (default 3) into fresh output directories
 (``overwrite=True``); medians are reported with the wall-time ratio serial / cohort. Run
 ``python benchmarks/bench_batch.py`` (``--quick``: 4 subjects, 2 repeats). Timings are
-wall-clock seconds on this machine; ``os.cpu_count()`` is printed with them.
+wall-clock seconds on this machine; ``os.cpu_count()``, the load average and the machine's
+*parallel ceiling* (the speed-up it gives right now to the same number of pure-CPU
+processes, measured before and after) are printed with them, since a shared machine caps
+any process pool below its worker count.
 """
 
 from __future__ import annotations
@@ -78,6 +81,33 @@ def run_serial(paths: list[Path], out: Path) -> list[Path]:
     return [track_subject(p, output_path(p, out), body_factory, TRACK_KWARGS) for p in paths]
 
 
+def _spin(n: int = 15_000_000) -> None:
+    s = 0
+    for i in range(n):
+        s += i
+
+
+def parallel_ceiling(workers: int) -> float:
+    """Speed-up this machine gives right now to ``workers`` pure-CPU processes over one.
+
+    The best any process pool can do here; below ``workers`` when other processes share
+    the cores.
+    """
+    from multiprocessing import get_context
+
+    ctx = get_context("spawn")
+    elapsed = []
+    for n in (1, workers):
+        procs = [ctx.Process(target=_spin) for _ in range(n)]
+        start = time.perf_counter()
+        for proc in procs:
+            proc.start()
+        for proc in procs:
+            proc.join()
+        elapsed.append(time.perf_counter() - start)
+    return workers * elapsed[0] / elapsed[1]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--subjects", type=int, default=8)
@@ -101,6 +131,7 @@ def main() -> None:
         print(f"# cohort: {args.subjects} subjects written in {time.perf_counter() - start:.1f} s"
               f"; cpu_count={os.cpu_count()}, workers={args.workers}", file=sys.stderr)
         load_before = os.getloadavg()[0]
+        ceiling_before = parallel_ceiling(args.workers)
         run_serial(paths[:1], root / "warmup")  # imports, FFT plans, MKL: not timed
 
         times: dict[str, list[float]] = {"serial": [], "cohort (warm)": [],
@@ -135,6 +166,7 @@ def main() -> None:
         eps = [float(open_dataset(p).epsilon.values[1:].max()) for p in [*serial, *cold]]
         track_time = [float(open_dataset(p).wall_time.sum()) for p in serial]
         load_after = os.getloadavg()[0]
+        ceiling_after = parallel_ceiling(args.workers)
 
     med = {k: statistics.median(v) for k, v in times.items()}
     print(f"\n{args.subjects} subjects, {args.workers} workers, median of {args.repeats} "
@@ -150,8 +182,10 @@ def main() -> None:
     print(f"FE tracking alone: {statistics.median(track_time):.2f} s per subject (median, last "
           f"serial run); the rest is phase extraction, mesh set-up and the archive write")
     print(f"1-min load average: {load_before:.2f} before, {load_after:.2f} after "
-          f"(cpu_count={os.cpu_count()}; a load above the core count means other processes "
-          "shared the machine and the ratios understate the speed-up)")
+          f"(cpu_count={os.cpu_count()}); parallel ceiling of this machine for "
+          f"{args.workers} processes (pure-CPU spin, {args.workers} vs 1 process): "
+          f"{ceiling_before:.2f} before, {ceiling_after:.2f} after. A ceiling below "
+          f"{args.workers} means other processes shared the cores during the run.")
     print(f"max |u_cohort - u_serial| = {worst:.2e} mm over all subjects and frames: the "
           "workers run PARDISO and pyFFTW on 1 thread, the loop on all cores; such rounding "
           "differences can flip a discrete stop of the penalty loop (ε <= target), so results "
