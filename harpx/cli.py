@@ -39,13 +39,13 @@ def _demo(args: argparse.Namespace) -> int:
     rows: list[dict[str, Any]] = []
     results = {}
     t = time.perf_counter()
-    harp = track_harp(phase)
+    harp = track_harp(phase, points=scene.tagged)
     results["HARP"] = harp
     rows.append({"method": "conventional HARP", "seconds": time.perf_counter() - t + phase_time, "result": harp})
     for element in args.elements:
         body = scene.body(element)
         t = time.perf_counter()
-        fe = track(phase, body, method=args.method, epsilon=args.epsilon, progress=True)
+        fe = track(phase, body, method=args.method, epsilon=args.epsilon, progress=args.progress)
         results[f"FE {element}"] = fe
         rows.append({"method": f"FE {args.method} {element} ({body.ncell} cells)", "seconds": time.perf_counter() - t + phase_time, "result": fe})
         to_netcdf(fe, out / f"phantom_{element}.nc")
@@ -82,7 +82,7 @@ def _track(args: argparse.Namespace) -> int:
 
     ds = open_dataset(args.input)
     body = Body(args.mesh, NeoHookean(c1=args.c1, kappa=args.kappa), element=args.element)
-    result = track(ds, body, method=args.method, epsilon=args.epsilon, progress=True)
+    result = track(ds, body, method=args.method, epsilon=args.epsilon, progress=args.progress)
     to_netcdf(result, args.output)
     print(f"wrote {args.output}")
     return 0
@@ -118,6 +118,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--method", choices=["penalty", "augmented-lagrangian"], default="penalty")
     demo.add_argument("--epsilon", type=float, default=0.05, help="target tracking residual, rad")
     demo.add_argument("--elements", nargs="+", choices=["hex8", "hex20"], default=["hex8"])
+    demo.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
     demo.set_defaults(func=_demo)
 
     phase = sub.add_parser("phase", help="harmonic phase of a tagged archive")
@@ -136,6 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
     trk.add_argument("--kappa", type=float, default=120.0, help="bulk modulus, kPa")
     trk.add_argument("--method", choices=["penalty", "augmented-lagrangian"], default="penalty")
     trk.add_argument("--epsilon", type=float, default=0.05, help="target tracking residual, rad")
+    trk.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
     trk.set_defaults(func=_track)
 
     rep = sub.add_parser("report", help="summarise a tracked archive")

@@ -53,21 +53,21 @@ def displacement_maps(
     zsel = float(true.z[true.sizes["z"] // 2]) if z is None else z
     true = true.sel(z=zsel, method="nearest")
     ncol = len(results) + 1
-    fig, axes = plt.subplots(2, ncol, figsize=(3.2 * ncol, 6.2), squeeze=False)
+    fig, axes = plt.subplots(2, ncol, figsize=(3.6 * ncol, 6.6), squeeze=False, layout="constrained")
     vmax = float(np.nanmax(_magnitude(true)))
     extent = [float(true.x[0]), float(true.x[-1]), float(true.y[0]), float(true.y[-1])]
     axes[0, 0].imshow(_magnitude(true), origin="lower", extent=extent, vmin=0, vmax=vmax)
-    axes[0, 0].set_title("truth |u| (mm)")
+    axes[0, 0].set_title("truth: |u| (mm)", fontsize=9)
     axes[1, 0].axis("off")
     for col, (name, ds) in enumerate(results.items(), start=1):
         est = ds["displacement_grid"].sel(time=time, method="nearest")
         est = est.interp(z=true.z, y=true.y, x=true.x) if est.sizes["x"] != true.sizes["x"] else est.sel(z=zsel, method="nearest")
         mag = _magnitude(est)
         im = axes[0, col].imshow(mag, origin="lower", extent=extent, vmin=0, vmax=vmax)
-        axes[0, col].set_title(f"{name} |u| (mm)")
+        axes[0, col].set_title(f"{name}: |u| (mm)", fontsize=9)
         err = _magnitude(est - true.values)
         im2 = axes[1, col].imshow(err, origin="lower", extent=extent, vmin=0, vmax=2.0, cmap="magma")
-        axes[1, col].set_title(f"{name} error (mm), mean {float(np.nanmean(err)):.2f}")
+        axes[1, col].set_title(f"{name}: error (mm)\nslice mean {float(np.nanmean(err)):.2f}", fontsize=9)
     fig.colorbar(im, ax=axes[0, :].tolist(), shrink=0.8)
     fig.colorbar(im2, ax=axes[1, 1:].tolist(), shrink=0.8)
     fig.suptitle(f"t = {float(true.time):.0f} ms, z = {zsel:.1f} mm")
