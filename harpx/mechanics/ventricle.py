@@ -14,9 +14,11 @@ with the transmural coordinate :math:`t \in [0, 1]` (0 endocardium, 1 epicardium
 the base plane :math:`z = z_b` (``truncation``). On the surface of layer :math:`t` a point is
 :math:`(a \sin\nu \cos\theta,\ a \sin\nu \sin\theta,\ -c \cos\nu)`, with the circumferential
 angle :math:`\theta` and the polar angle :math:`\nu` from the apex. The longitudinal mesh
-coordinate is the *arc-length fraction* :math:`\sigma \in [0, 1]` of the meridian from the
-apex (:math:`\sigma = 0`) to the base (:math:`\sigma = 1`), so cells have even lengths from a
-flat apex to a steep equator.
+coordinate is the *arc-length fraction* :math:`\sigma \in [0, 1]` of the mid-wall meridian
+from the apex (:math:`\sigma = 0`) to the base (:math:`\sigma = 1`), so cells have even
+lengths from a flat apex to a steep equator; the other layers' nodes lie on the mid-wall
+normals (transmural lines cross the wall at right angles), slid near the base so that the
+base row lies on the base plane (:meth:`VentricleGeometry.surface_points`).
 
 Apex
 ----
@@ -135,31 +137,52 @@ class VentricleGeometry:
         c = self.inner[1] + t * (self.outer[1] - self.inner[1])
         return a, c
 
-    def _meridian_table(self, t: float) -> tuple[FloatArray, FloatArray]:
-        """Polar angle ν and arc-length fraction σ along the meridian of layer ``t``."""
+    def _meridian_table(self, t: float) -> tuple[FloatArray, FloatArray, float]:
+        """Polar angle ν in [0, π], arc length from the apex (mm) and the base arc length."""
         a, c = (float(v) for v in self.semi_axes(t))
-        nu_base = float(np.arccos(np.clip(-self.truncation / c, -1.0, 1.0)))
-        nu = np.linspace(0.0, nu_base, _ARC_SAMPLES)
+        nu = np.linspace(0.0, np.pi, _ARC_SAMPLES)
         speed = np.sqrt((a * np.cos(nu)) ** 2 + (c * np.sin(nu)) ** 2)
         arc = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(nu))])
-        return nu, arc / arc[-1]
+        nu_base = float(np.arccos(np.clip(-self.truncation / c, -1.0, 1.0)))
+        return nu, arc, float(np.interp(nu_base, nu, arc))
 
     def meridian_length(self, t: float) -> float:
         """Arc length (mm) of layer ``t``'s meridian from the apex to the base plane."""
+        return self._meridian_table(t)[2]
+
+    def _project(self, sigma: FloatArray, t: float) -> FloatArray:
+        """Arc position (mm) on layer ``t`` of the mid-wall normal through arc fraction σ."""
+        nu_m, arc_m, length_m = self._meridian_table(0.5)
+        a_m, c_m = (float(v) for v in self.semi_axes(0.5))
+        num = np.interp(sigma * length_m, arc_m, nu_m)
+        r0, z0 = a_m * np.sin(num), -c_m * np.cos(num)
+        nr, nz = r0 / a_m**2, z0 / c_m**2
+        norm = np.hypot(nr, nz)
+        nr, nz = nr / norm, nz / norm
         a, c = (float(v) for v in self.semi_axes(t))
-        nu_base = float(np.arccos(np.clip(-self.truncation / c, -1.0, 1.0)))
-        nu = np.linspace(0.0, nu_base, _ARC_SAMPLES)
-        speed = np.sqrt((a * np.cos(nu)) ** 2 + (c * np.sin(nu)) ** 2)
-        return float(np.sum(0.5 * (speed[1:] + speed[:-1]) * np.diff(nu)))
+        A = nr**2 / a**2 + nz**2 / c**2
+        B = 2.0 * (r0 * nr / a**2 + z0 * nz / c**2)
+        C = r0**2 / a**2 + z0**2 / c**2 - 1.0
+        lam = -2.0 * C / (B + np.sqrt(np.maximum(B * B - 4.0 * A * C, 0.0)))
+        r, z = r0 + lam * nr, z0 + lam * nz
+        nu_t, arc_t, _ = self._meridian_table(t)
+        return np.interp(np.arctan2(r / a, -z / c), nu_t, arc_t)
 
     def surface_points(self, theta: ArrayLike, sigma: ArrayLike, t: float) -> FloatArray:
-        """Points of layer ``t`` at angles ``theta`` (rad) and arc fractions ``sigma``.
+        r"""Points of layer ``t`` at angles ``theta`` (rad) and mid-wall arc fractions ``sigma``.
+
+        The longitudinal coordinate σ is the arc-length fraction of the mid-wall meridian
+        (``t = 1/2``) from the apex (0) to the base (1). The point of layer ``t`` lies on the
+        normal to the mid-wall through that mid-wall point, so transmural mesh lines cross
+        the wall at right angles; near the base it is slid along its meridian by
+        :math:`\sigma^4` times the mismatch at σ = 1, which puts the base row exactly on the
+        base plane while leaving the rest of the wall (practically) normal.
 
         Parameters
         ----------
         theta, sigma : array_like
-            Circumferential angle (rad) and meridian arc-length fraction from the apex
-            (0) to the base (1), broadcast together.
+            Circumferential angle (rad) and mid-wall arc fraction in [0, 1], broadcast
+            together.
         t : float
             Transmural fraction (0 endocardium, 1 epicardium).
 
@@ -171,8 +194,10 @@ class VentricleGeometry:
         theta, sigma = np.broadcast_arrays(
             np.asarray(theta, dtype=np.float64), np.asarray(sigma, dtype=np.float64)
         )
-        table_nu, table_sigma = self._meridian_table(t)
-        nu = np.interp(sigma, table_sigma, table_nu)
+        nu_t, arc_t, length_t = self._meridian_table(t)
+        arc = self._project(sigma, t)
+        arc = arc + sigma**4 * (length_t - self._project(np.array(1.0), t))
+        nu = np.interp(arc, arc_t, nu_t)
         a, c = (float(v) for v in self.semi_axes(t))
         r = a * np.sin(nu)
         return np.stack([r * np.cos(theta), r * np.sin(theta), -c * np.cos(nu)], axis=-1)
