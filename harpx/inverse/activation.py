@@ -3,16 +3,23 @@ r"""Direct estimate of muscle activation from tracked fibre stretch (paper §4.3
 The paper estimates the contractile stress of each tongue muscle *directly* from the
 image-derived fibre shortening, by solving the active-contraction law of its reference [1]
 for :math:`T_{max}` (the "Eq. 4" the paper cites is that law, not its phase equation),
-instead of running an optimisation loop of forward simulations. This module does that in
-three explicit steps, each a plain function:
+instead of running an optimisation loop of forward simulations. This module does that, plus two
+optional closed-form corrections, as plain functions:
 
-1. :func:`estimate_activation` — per element, the direct inversion below; per muscle, the
-   median (or volume-weighted mean) of the element values with their spread.
-2. :func:`correct_activation` — optional: *one* closed-form linear correction at the tracked
-   configuration (a linear system of the size of the number of muscles; never iterated).
-3. :func:`resimulate` — a forward simulation of the tracking model with the per-muscle
+1. :func:`estimate_activation` — the paper's direct estimate: per element, the inversion
+   below; per muscle, the median (or volume-weighted mean) of the element values with
+   their spread.
+2. :func:`correct_activation` — *one* linear equilibrium correction at the tracked
+   configuration for the load that neighbouring muscles and attachments carry (a linear
+   system of the size of the number of muscles).
+3. :func:`calibrate_activation` — *one* per-muscle scaling for the attenuation of the
+   measurement chain (imaging, phase filtering, regularised tracking), measured by passing a
+   re-simulation with the estimate through the same chain.
+4. :func:`resimulate` — a forward simulation of the tracking model with the per-muscle
    estimates, compared with the tracked fibre stretch element by element and per muscle
    (paper Fig. 3c; :func:`plot_stretch_agreement`).
+
+None of them iterates: there is no objective function and no search.
 
 Per-element equation (uniaxial fibre equilibrium)
 -------------------------------------------------
@@ -1002,8 +1009,9 @@ def plot_stretch_agreement(
     Returns
     -------
     matplotlib.figure.Figure
-        Left: bars of the volume-weighted mean stretch per muscle (error bars: sd over the
-        muscle's cells); right: element-by-element scatter with the identity line.
+        Left: bars of the volume-weighted mean fibre strain λ − 1 per muscle in % (error
+        bars: sd over the muscle's cells); right: element-by-element scatter of the stretch
+        with the identity line.
 
     Raises
     ------
@@ -1018,19 +1026,20 @@ def plot_stretch_agreement(
     fig = Figure(figsize=(10.0, 4.0), layout="constrained")
     ax, ax2 = fig.subplots(1, 2)
     x = np.arange(len(names))
-    nbar = 3 if truth else 2
-    width = 0.8 / nbar
-    ax.bar(x - width * (nbar - 1) / 2, comparison["stretch_tracked"], width,
-           yerr=comparison["stretch_tracked_sd"], capsize=3, label="tracked (images)")
-    ax.bar(x - width * (nbar - 1) / 2 + width, comparison["stretch_simulated"], width,
-           yerr=comparison["stretch_simulated_sd"], capsize=3, label="simulated (estimate)")
+    bars = [
+        ("tracked (images)", comparison["stretch_tracked"].values, comparison["stretch_tracked_sd"].values),
+        ("simulated (estimate)", comparison["stretch_simulated"].values,
+         comparison["stretch_simulated_sd"].values),
+    ]
     if truth:
-        ax.bar(x + width, [truth.get(n, np.nan) for n in names], width, label="ground truth")
-    ax.axhline(1.0, color="0.3", lw=0.8)
+        bars.append(("ground truth", np.array([truth.get(n, np.nan) for n in names]), None))
+    width = 0.8 / len(bars)
+    for k, (label, mean, sd) in enumerate(bars):  # two or three bar groups
+        ax.bar(x + width * (k - (len(bars) - 1) / 2), 100.0 * (mean - 1.0), width,
+               yerr=None if sd is None else 100.0 * sd, capsize=3, label=label)
+    ax.axhline(0.0, color="0.3", lw=0.8)
     ax.set_xticks(x, names)
-    lo = float(np.nanmin(comparison["stretch_tracked"] - comparison["stretch_tracked_sd"]))
-    ax.set_ylim(min(0.95, lo - 0.02), 1.02)
-    ax.set_ylabel("mean fibre stretch λ")
+    ax.set_ylabel("mean fibre strain λ − 1 (%)")
     ax.set_title("fibre stretch per muscle")
     ax.legend(fontsize=8, loc="lower right")
     label = comparison["region_label"].values
