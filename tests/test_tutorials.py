@@ -13,10 +13,12 @@ TUTORIALS = sorted((Path(__file__).resolve().parents[1] / "tutorials").glob("*.p
 # measured values of each scene at its small size, with margin)
 EXPECTATIONS = {
     "01_phantom.py": {
-        # the FE result is within 0.3 mm mean of the truth and the archive round-trips
+        # the FE result is within 0.3 mm mean of the truth (measured 0.16) and the archive
+        # round-trips; conventional HARP tag-jumps where the edge steps 4.6 mm > half of
+        # the 6 mm tag period (measured 1.5 mm mean): at least 3 times worse
         "fe_error": lambda err: float(err.mean_all) < 0.3,
         "fe_error_reopened": lambda v: v < 0.3,
-        "harp_error": lambda err: float(err.mean_all) < 1.0,
+        "harp_error": lambda err: float(err.mean_all) > 0.9,
     },
 }
 

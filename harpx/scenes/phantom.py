@@ -42,14 +42,20 @@ class PhantomGeometry:
     n_circumferential: int
     n_radial: int
     n_axial: int
+    angle: float
+    rise_time: float
 
 
 GEOMETRIES: dict[str, PhantomGeometry] = {
     # the paper's acquisition (1.5 mm isotropic voxels); 48 x 6 rings + 12 x 12 core,
     # 10 layers: 4320 hexahedra
-    "paper": PhantomGeometry(60.0, 15.0, 13, 18.0, 13, 1.5, 160, 1.5, 8.0, 48, 6, 10),
-    # a reduced scene for tests and tutorials: same physics, fewer voxels and cells
-    "small": PhantomGeometry(24.0, 7.5, 5, 18.0, 7, 1.5, 48, 1.5, 8.0, 24, 3, 4),
+    # the container turns 0.2 rad over 72 ms: the edge moves 12 mm (1.5 tag periods),
+    # 4.2 mm (> half a period) in its fastest frame
+    "paper": PhantomGeometry(60.0, 15.0, 13, 18.0, 13, 1.5, 160, 1.5, 8.0, 48, 6, 10, 0.2, 72.0),
+    # a reduced scene for tests and tutorials with the same difficulty: 6 mm tags, the
+    # container turns 0.3 rad over 36 ms, so the edge steps 3.6 and 4.6 mm (> half a
+    # period) in consecutive frames
+    "small": PhantomGeometry(24.0, 7.5, 5, 18.0, 7, 1.5, 48, 1.5, 6.0, 24, 3, 4, 0.3, 36.0),
 }
 
 
@@ -106,8 +112,9 @@ def phantom(
     c1, kappa : float
         Material of the tracking model, kPa (paper: 1.0 and 120).
     motion : RotationalImpact, optional
-        Ground-truth motion; default: the container turns 0.2 rad (11.5°), so the edge of
-        the paper-size phantom moves 12 mm (1.5 tag periods), 4.2 mm in its fastest frame.
+        Ground-truth motion; default: for ``"paper"`` the container turns 0.2 rad (11.5°)
+        in 72 ms, so the edge moves 12 mm (1.5 tag periods), 4.2 mm in its fastest frame;
+        for ``"small"`` it turns 0.3 rad in 36 ms with 6 mm tags (edge steps of 4.6 mm).
     seed : int, default 0
         Seed of the image noise.
 
@@ -120,7 +127,9 @@ def phantom(
     g = GEOMETRIES[size]
     base = -g.height / 2
     if motion is None:
-        motion = RotationalImpact(radius=g.radius, base=base, height=g.height, angle=0.2)
+        motion = RotationalImpact(
+            radius=g.radius, base=base, height=g.height, angle=g.angle, rise_time=g.rise_time
+        )
     times = np.arange(g.frames) * g.repetition_time
     radius, z0, z1 = g.radius, base, base + g.height
 
