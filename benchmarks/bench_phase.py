@@ -17,8 +17,9 @@ forward and one inverse 2D FFT:
 * **numpy.fft** and **scipy.fft** (``workers`` = all cores) ``fft2`` + ``ifft2``.
 
 Every repeat runs all methods back to back (the machine may be shared) and the table shows
-medians over repeats of wall-clock time, plus the CPU-time ratio (user + system, all
-threads), which is less sensitive to other processes; the first ``phase()`` call, which
+medians over repeats of wall-clock time, plus user and system CPU time (all threads), which
+are less sensitive to other processes: user time is the computation, system time mostly the
+kernel providing fresh zeroed pages for new output arrays. The first ``phase()`` call, which
 plans the FFTs, is reported apart.
 Run ``python benchmarks/bench_phase.py`` (``--quick`` for the phantom case only, ``--repeats``).
 """
@@ -29,6 +30,7 @@ import argparse
 import gc
 import os
 import platform
+import resource
 import statistics
 import time
 
@@ -106,12 +108,18 @@ def timed(fn) -> float:
     return timed_both(fn)[0]
 
 
-def timed_both(fn) -> tuple[float, float]:
-    """(wall-clock, CPU) seconds of ``fn()``; CPU sums all threads, user + system."""
+def timed_both(fn) -> tuple[float, float, float]:
+    """(wall-clock, user CPU, system CPU) seconds of ``fn()``; CPU sums all threads.
+
+    System time is mostly the kernel zeroing fresh pages for new arrays (page faults).
+    """
     gc.collect()
-    wall, cpu = time.perf_counter(), time.process_time()
+    before = resource.getrusage(resource.RUSAGE_SELF)
+    wall = time.perf_counter()
     fn()
-    return time.perf_counter() - wall, time.process_time() - cpu
+    wall = time.perf_counter() - wall
+    after = resource.getrusage(resource.RUSAGE_SELF)
+    return wall, after.ru_utime - before.ru_utime, after.ru_stime - before.ru_stime
 
 
 def run_case(name: str, repeats: int, threads: int) -> dict:
@@ -128,10 +136,12 @@ def run_case(name: str, repeats: int, threads: int) -> dict:
 
     times: dict[str, list[float]] = {"phase": [], "pyfftw": [], "numpy": [], "scipy": []}
     cpu: dict[str, list[float]] = {k: [] for k in times}
+    system: dict[str, list[float]] = {k: [] for k in times}
 
-    def record(label: str, pairs: list[tuple[float, float]]) -> None:
+    def record(label: str, pairs: list[tuple[float, float, float]]) -> None:
         times[label].append(sum(p[0] for p in pairs))
         cpu[label].append(sum(p[1] for p in pairs))
+        system[label].append(sum(p[2] for p in pairs))
 
     for _ in range(repeats):
         record("phase", [timed_both(lambda: extract_phase(ds, upsample=UPSAMPLE))])
@@ -155,6 +165,7 @@ def run_case(name: str, repeats: int, threads: int) -> dict:
             record(label, pairs)
     med = {k: statistics.median(v) for k, v in times.items()}
     med_cpu = {k: statistics.median(v) for k, v in cpu.items()}
+    med_sys = {k: statistics.median(v) for k, v in system.items()}
     truth = None
     if name == "phantom":  # cardiac ground truth on the refined grid would need > 11 GB
         truth = statistics.median(
@@ -166,6 +177,7 @@ def run_case(name: str, repeats: int, threads: int) -> dict:
         "first": first,
         "median": med,
         "median_cpu": med_cpu,
+        "median_sys": med_sys,
         "all": times,
         "fft_elems": fft_elems,
         "out_elems": out_elems,
@@ -191,17 +203,19 @@ def main(argv: list[str] | None = None) -> None:
     print()
     print(
         "| case | FFT'd stacks (upsampled) | phase() s | pyfftw fwd+inv s | numpy.fft s | "
-        "scipy.fft s | phase / pyfftw | phase / numpy | phase / pyfftw (CPU s) | first phase() s |"
+        "scipy.fft s | phase / pyfftw | phase / numpy | user CPU s phase / pyfftw | "
+        "system CPU s phase / pyfftw | first phase() s |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in results:
-        m, c = r["median"], r["median_cpu"]
+        m, c, y = r["median"], r["median_cpu"], r["median_sys"]
         stacks = " + ".join("x".join(str(n) for n in s) for s in r["stacks"])
         print(
             f"| {r['name']} {r['input']} | {stacks} | {m['phase']:.3f} | {m['pyfftw']:.3f} | "
             f"{m['numpy']:.3f} | {m['scipy']:.3f} | {m['phase'] / m['pyfftw']:.2f} | "
             f"{m['phase'] / m['numpy']:.2f} | {c['phase']:.2f} / {c['pyfftw']:.2f} = "
-            f"{c['phase'] / c['pyfftw']:.2f} | {r['first']:.2f} |"
+            f"{c['phase'] / c['pyfftw']:.2f} | {y['phase']:.2f} / {y['pyfftw']:.2f} | "
+            f"{r['first']:.2f} |"
         )
     print()
     for r in results:
