@@ -161,6 +161,16 @@ def test_calibration_undoes_an_attenuating_measurement(two_muscles):
     np.testing.assert_allclose(same["chain_transfer"].values, 1.0, rtol=1e-6)
 
 
+def test_estimate_round_trips_through_netcdf(two_muscles, tmp_path):
+    from harpx.io.netcdf import open_dataset, to_netcdf
+
+    body, bcs, truth, U = two_muscles
+    tracked = _as_tracked(body, U)
+    est = correct_activation(estimate_activation(tracked, body), tracked, body, dirichlet=bcs)
+    back = open_dataset(to_netcdf(est, tmp_path / "activation.nc"))
+    xr.testing.assert_identical(back, est)  # exact: floats, strings and attrs round-trip
+
+
 def test_bad_inputs_are_named(two_muscles):
     body, bcs, truth, U = two_muscles
     tracked = _as_tracked(body, U)
