@@ -71,7 +71,7 @@ class HarpAccessor:
         epsilon: float = 0.05,
         penalty: float = 1.0,
         penalty_limit: float = 1e4,
-        ramp: int = 3,
+        ramp: int = 2,
         multiplier_tolerance: float = 0.1,
         max_updates: int = 10,
         predictor: Predictor = "linear",
