@@ -19,8 +19,6 @@ import argparse
 import time
 from pathlib import Path
 
-import numpy as np
-
 from harpx.imaging.harp import extract_phase
 from harpx.inverse.activation import (
     calibrate_activation,
@@ -53,30 +51,42 @@ def run(size: str, seed: int, settings: dict) -> str:
     grid = {d: scene.tagged[d] for d in ("z", "y", "x")}  # same grid up to round-off
     err = tracking_error(tracked.assign_coords(grid), scene.tagged)
     direct = timed("direct estimate", estimate_activation, tracked, body)
-    corrected = timed("equilibrium correction", correct_activation, direct, tracked, body, dirichlet=bcs)
+    corrected = timed(
+        "equilibrium correction", correct_activation, direct, tracked, body, dirichlet=bcs
+    )
 
     def measure(model, displacement):
         images = scene.acquire(model, displacement, seed=seed + 1000)
         return track(extract_phase(images), model, dirichlet=bcs, **settings)
 
     calibrated = timed(
-        "calibration (re-simulation + images + tracking)", calibrate_activation, corrected,
-        tracked, body, measure=measure, dirichlet=bcs,
+        "calibration (re-simulation + images + tracking)",
+        calibrate_activation,
+        corrected,
+        tracked,
+        body,
+        measure=measure,
+        dirichlet=bcs,
     )
-    comparison = timed("re-simulation", resimulate, body, calibrated.t_max, dirichlet=bcs, tracked=tracked)
+    comparison = timed(
+        "re-simulation", resimulate, body, calibrated.t_max, dirichlet=bcs, tracked=tracked
+    )
     true_stretch = scene.true_stretch_by_muscle(body)
     OUT.mkdir(exist_ok=True)
-    plot_stretch_agreement(comparison, path=OUT / f"tongue_scene_{size}_fig3c.png", truth=true_stretch)
+    plot_stretch_agreement(
+        comparison, path=OUT / f"tongue_scene_{size}_fig3c.png", truth=true_stretch
+    )
 
     names = [str(n) for n in calibrated.region.values]
     g = scene.info["geometry"]
+    attrs = scene.tagged.attrs
     lines = [
         f"# Tongue scene ({size}, seed {seed})",
         "",
-        f"Truth: {g.truth_divisions} {g.truth_element} forward simulation; tracking model: 280 hex20; "
-        f"CSPAMM {scene.tagged.attrs['coronal_slices']} coronal + {scene.tagged.attrs['sagittal_slices']} "
-        f"sagittal slices, {g.pixel} mm pixels, tag period {g.tag_period} mm, SNR {scene.info['snr']}, "
-        f"{scene.tagged.sizes['time']} frames; tracking {settings}.",
+        f"Truth: {g.truth_divisions} {g.truth_element} forward simulation; tracking model: "
+        f"280 hex20; CSPAMM {attrs['coronal_slices']} coronal + {attrs['sagittal_slices']} "
+        f"sagittal slices, {g.pixel} mm pixels, tag period {g.tag_period} mm, SNR "
+        f"{scene.info['snr']}, {scene.tagged.sizes['time']} frames; tracking {settings}.",
         "",
         "## T_max per muscle (kPa) and relative error",
         "",
@@ -89,7 +99,11 @@ def run(size: str, seed: int, settings: dict) -> str:
             f"{v:.3f} ({v / t - 1:+.1%})"
             for v in (direct.t_max.values[k], corrected.t_max.values[k], calibrated.t_max.values[k])
         ]
-        lines.append(f"| {m} | {t:.2f} | " + " | ".join(cells) + f" | {calibrated.chain_transfer.values[k]:.3f} |")
+        lines.append(
+            f"| {m} | {t:.2f} | "
+            + " | ".join(cells)
+            + f" | {calibrated.chain_transfer.values[k]:.3f} |"
+        )
     worst = max(abs(calibrated.t_max.values[k] / scene.t_max[m] - 1) for k, m in enumerate(names))
     lines += [
         "",
@@ -97,13 +111,15 @@ def run(size: str, seed: int, settings: dict) -> str:
         "",
         "## Mean fibre stretch per muscle (volume-weighted over the muscle's cells)",
         "",
-        "| muscle | truth | tracked | re-simulated | r (cells, tracked vs simulated) | mean abs diff (cells) |",
+        "| muscle | truth | tracked | re-simulated | r (cells, tracked vs simulated) "
+        "| mean abs diff (cells) |",
         "|---|---|---|---|---|---|",
     ]
     for k, m in enumerate(names):
         lines.append(
             f"| {m} | {true_stretch[m]:.4f} | {comparison.stretch_tracked.values[k]:.4f} | "
-            f"{comparison.stretch_simulated.values[k]:.4f} | {comparison.correlation.values[k]:.2f} | "
+            f"{comparison.stretch_simulated.values[k]:.4f} | "
+            f"{comparison.correlation.values[k]:.2f} | "
             f"{comparison.mean_abs_difference.values[k]:.4f} |"
         )
     lines += [
@@ -112,18 +128,21 @@ def run(size: str, seed: int, settings: dict) -> str:
         "",
         "## Tracking",
         "",
-        "| frame | time (ms) | ε (rad) | penalty | iterations | wall (s) | error mean ± sd (mm) | p95 (mm) |",
+        "| frame | time (ms) | ε (rad) | penalty | iterations | wall (s) "
+        "| error mean ± sd (mm) | p95 (mm) |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for n in range(tracked.sizes["time"]):
         lines.append(
             f"| {n} | {float(tracked.time[n]):.0f} | {tracked.epsilon.values[n]:.3f} | "
             f"{tracked.penalty.values[n]:.0f} | {int(tracked.iterations.values[n])} | "
-            f"{tracked.wall_time.values[n]:.1f} | {err['mean'].values[n]:.3f} ± {err['sd'].values[n]:.3f} | "
+            f"{tracked.wall_time.values[n]:.1f} | "
+            f"{err['mean'].values[n]:.3f} ± {err['sd'].values[n]:.3f} | "
             f"{err['p95'].values[n]:.3f} |"
         )
     lines += [
-        f"| all | | | | | | {float(err.mean_all):.3f} ± {float(err.sd_all):.3f} | {float(err.p95_all):.3f} |",
+        f"| all | | | | | | {float(err.mean_all):.3f} ± {float(err.sd_all):.3f} "
+        f"| {float(err.p95_all):.3f} |",
         "",
         f"Coverage of the body voxels: {float(err.coverage):.3f}.",
         "",

@@ -47,7 +47,7 @@ from harpx.scenes.tongue import tongue
 scene = tongue("small")  # scale up: tongue("paper")
 tagged = scene.tagged
 print("true activation (kPa):", scene.t_max)
-tagged
+tagged  # noqa: B018  (displayed in Jupyter)
 
 # %% [markdown]
 # The tracking model: 280 quadratic (20-node) bricks, neo-Hookean (C1 = 1 kPa, κ = 120 kPa),
@@ -64,10 +64,22 @@ centres = body.mesh.p[:, body.mesh.t].mean(axis=1).T  # cell centres (ncell, 3),
 mid = np.abs(centres[:, 1]) < 4.0  # the mid-sagittal column of cells
 for name, ids in body.regions.items():
     sel = np.intersect1d(ids, np.nonzero(mid)[0])
-    ax.quiver(centres[sel, 0], centres[sel, 2], body.fibers[sel, 0], body.fibers[sel, 2],
-              label=name, color=f"C{list(body.regions).index(name)}", pivot="mid", scale=20,
-              headwidth=1, headlength=0, headaxislength=0)  # fibres are axes: no arrowheads
-ax.set(xlabel="x (mm, to the tip)", ylabel="z (mm)", title="fibres, mid-sagittal plane", aspect="equal")
+    ax.quiver(
+        centres[sel, 0],
+        centres[sel, 2],
+        body.fibers[sel, 0],
+        body.fibers[sel, 2],
+        label=name,
+        color=f"C{list(body.regions).index(name)}",
+        pivot="mid",
+        scale=20,
+        headwidth=1,
+        headlength=0,
+        headaxislength=0,
+    )  # fibres are axes: no arrowheads
+ax.set(
+    xlabel="x (mm, to the tip)", ylabel="z (mm)", title="fibres, mid-sagittal plane", aspect="equal"
+)
 ax.legend(fontsize=7, ncols=5, loc="lower left")
 fig.savefig("tongue_fibres.png", dpi=120)
 plt.close(fig)
@@ -86,8 +98,10 @@ tracked = phase.harp.track(body, epsilon=0.05, penalty=16.0, ramp=1, dirichlet=a
 track_seconds = time.perf_counter() - start
 error = tracked.harp.error(tagged)
 print(f"tracking: ε per frame {np.round(tracked.epsilon.values, 3)}, {track_seconds:.1f} s")
-print(f"displacement error {float(error.mean_all):.3f} ± {float(error.sd_all):.3f} mm, "
-      f"p95 {float(error.p95_all):.3f} mm")
+print(
+    f"displacement error {float(error.mean_all):.3f} ± {float(error.sd_all):.3f} mm, "
+    f"p95 {float(error.p95_all):.3f} mm"
+)
 
 # %% [markdown]
 # ## The direct estimate (paper §4.3)
@@ -134,10 +148,18 @@ steps = {
     "+ calibration": estimate.t_max.values,
 }
 for label, values in steps.items():
-    print(f"{label:15s}", "  ".join(f"{m} {v:5.2f} ({v / t - 1:+.0%})"
-                                    for m, v, t in zip(estimate.region.values, values, truth)))
-t_max_error = {str(m): float(v / t - 1.0) for m, v, t in zip(estimate.region.values, estimate.t_max.values, truth)}
-t_max_error
+    print(
+        f"{label:15s}",
+        "  ".join(
+            f"{m} {v:5.2f} ({v / t - 1:+.0%})"
+            for m, v, t in zip(estimate.region.values, values, truth, strict=True)
+        ),
+    )
+t_max_error = {
+    str(m): float(v / t - 1.0)
+    for m, v, t in zip(estimate.region.values, estimate.t_max.values, truth, strict=True)
+}
+t_max_error  # noqa: B018  (displayed in Jupyter)
 
 # %% [markdown]
 # ## Re-simulation and fibre-stretch agreement (paper Fig. 3c)
@@ -148,7 +170,9 @@ t_max_error
 stretch_agreement = resimulate(body, estimate.t_max, dirichlet=attachments, tracked=tracked)
 true_stretch = scene.true_stretch_by_muscle(body)
 fig = plot_stretch_agreement(stretch_agreement, path="tongue_fig3c.png", truth=true_stretch)
-stretch_agreement[["stretch_tracked", "stretch_simulated", "correlation", "mean_abs_difference"]].to_dataframe()
+stretch_agreement[
+    ["stretch_tracked", "stretch_simulated", "correlation", "mean_abs_difference"]
+].to_dataframe()
 
 # %% [markdown]
 # The simulated shortening follows the ground truth; the tracked shortening is smaller

@@ -139,18 +139,42 @@ _ATTRS: dict[str, dict[str, str]] = {
     "fiber_stretch_simulated": {"units": "1", "long_name": "simulated fiber stretch"},
     "fiber_stretch_tracked": {"units": "1", "long_name": "tracked fiber stretch"},
     "displacement": standard_attrs("displacement"),
-    "stretch_simulated": {"units": "1", "long_name": "volume-weighted mean simulated fiber stretch"},
+    "stretch_simulated": {
+        "units": "1",
+        "long_name": "volume-weighted mean simulated fiber stretch",
+    },
     "stretch_tracked": {"units": "1", "long_name": "volume-weighted mean tracked fiber stretch"},
     "stretch_simulated_sd": {"units": "1", "long_name": "sd of the simulated cell fiber stretch"},
     "stretch_tracked_sd": {"units": "1", "long_name": "sd of the tracked cell fiber stretch"},
-    "correlation": {"units": "1", "long_name": "Pearson correlation of tracked and simulated cell stretch"},
-    "mean_abs_difference": {"units": "1", "long_name": "mean |tracked - simulated| cell fiber stretch"},
-    "stretch_sensitivity": {"units": "1/kPa", "long_name": "mean stretch change of region per kPa T_max of source_region"},
-    "stretch_recoil": {"units": "1", "long_name": "mean stretch change of region with every activation removed"},
+    "correlation": {
+        "units": "1",
+        "long_name": "Pearson correlation of tracked and simulated cell stretch",
+    },
+    "mean_abs_difference": {
+        "units": "1",
+        "long_name": "mean |tracked - simulated| cell fiber stretch",
+    },
+    "stretch_sensitivity": {
+        "units": "1/kPa",
+        "long_name": "mean stretch change of region per kPa T_max of source_region",
+    },
+    "stretch_recoil": {
+        "units": "1",
+        "long_name": "mean stretch change of region with every activation removed",
+    },
     "t_max_linear": {"units": "kPa", "long_name": "corrected T_max before clipping at 0"},
-    "t_max_uncalibrated": {"units": "kPa", "long_name": "T_max before the measurement-chain calibration"},
-    "t_max_calibration_run": {"units": "kPa", "long_name": "estimate from the measured re-simulation"},
-    "chain_transfer": {"units": "1", "long_name": "estimated / simulated T_max through the measurement chain"},
+    "t_max_uncalibrated": {
+        "units": "kPa",
+        "long_name": "T_max before the measurement-chain calibration",
+    },
+    "t_max_calibration_run": {
+        "units": "kPa",
+        "long_name": "estimate from the measured re-simulation",
+    },
+    "chain_transfer": {
+        "units": "1",
+        "long_name": "estimated / simulated T_max through the measurement chain",
+    },
     "region_label": {"units": "1", "long_name": "region index of cell (-1: none)"},
 }
 
@@ -320,7 +344,11 @@ def _active_copy(body: Body, law: ActiveContraction) -> Body:
 
 
 def _default_law(body: Body, law: ActiveContraction | None) -> ActiveContraction:
-    law = law if law is not None else (body.active if body.active is not None else ActiveContraction())
+    law = (
+        law
+        if law is not None
+        else (body.active if body.active is not None else ActiveContraction())
+    )
     if not hasattr(law, "t_max_for_tension") or not hasattr(law, "activation_factor"):
         raise TypeError(
             f"law must be an ActiveContraction-like law with t_max_for_tension and "
@@ -421,7 +449,11 @@ def estimate_activation(
             "t_max_cell": ("cell", t_cell, _attrs("t_max_cell")),
             "active_tension_cell": ("cell", T_cell, _attrs("active_tension_cell")),
             "fiber_stretch": ("cell", lam, _attrs("fiber_stretch")),
-            "region_label": ("cell", label, _attrs("region_label") | {"flag_meanings": " ".join(names)}),
+            "region_label": (
+                "cell",
+                label,
+                _attrs("region_label") | {"flag_meanings": " ".join(names)},
+            ),
             "t_max": ("region", agg, _attrs("t_max")),
             "t_max_mean": ("region", mean, _attrs("t_max_mean")),
             "t_max_q25": ("region", q25, _attrs("t_max_q25")),
@@ -630,7 +662,11 @@ def resimulate(
         {
             "fiber_stretch_simulated": ("cell", lam_sim, _attrs("fiber_stretch_simulated")),
             "displacement": (("node", "axis"), result.u.reshape(-1, 3), _attrs("displacement")),
-            "region_label": ("cell", label, _attrs("region_label") | {"flag_meanings": " ".join(names)}),
+            "region_label": (
+                "cell",
+                label,
+                _attrs("region_label") | {"flag_meanings": " ".join(names)},
+            ),
             "t_max": ("region", t_region, _attrs("t_max")),
             "cell_volume": ("cell", w, {"units": "mm3", "long_name": "reference cell volume"}),
         },
@@ -650,7 +686,9 @@ def resimulate(
             raise ValueError("'tracked' has no 'fiber_stretch'; track a body with fibers")
         lam_tr = np.asarray(tracked["fiber_stretch"].isel(time=index).values, dtype=np.float64)
         ds["fiber_stretch_tracked"] = ("cell", lam_tr, _attrs("fiber_stretch_tracked"))
-        tstats = np.array([_weighted_stats(lam_tr[body.regions[n]], w[body.regions[n]]) for n in names])
+        tstats = np.array(
+            [_weighted_stats(lam_tr[body.regions[n]], w[body.regions[n]]) for n in names]
+        )
         ds["stretch_tracked"] = ("region", tstats[:, 0], _attrs("stretch_tracked"))
         ds["stretch_tracked_sd"] = ("region", tstats[:, 1], _attrs("stretch_tracked_sd"))
         corr, mad = [], []
@@ -663,7 +701,9 @@ def resimulate(
         cells = np.concatenate([body.regions[n] for n in names])
         ds["correlation_all"] = ((), _pearson(lam_tr[cells], lam_sim[cells]), _attrs("correlation"))
         ds["mean_abs_difference_all"] = (
-            (), float(np.mean(np.abs(lam_tr[cells] - lam_sim[cells]))), _attrs("mean_abs_difference"),
+            (),
+            float(np.mean(np.abs(lam_tr[cells] - lam_sim[cells]))),
+            _attrs("mean_abs_difference"),
         )
         ds.attrs["time_index"] = index
     return ds
@@ -671,7 +711,9 @@ def resimulate(
 
 def _region_means(body: Body, names: list[str], values: FloatArray) -> FloatArray:
     w = body.cell_volume
-    return np.array([_weighted_stats(values[body.regions[n]], w[body.regions[n]])[0] for n in names])
+    return np.array(
+        [_weighted_stats(values[body.regions[n]], w[body.regions[n]])[0] for n in names]
+    )
 
 
 def _pearson(a: FloatArray, b: FloatArray) -> float:
@@ -763,7 +805,9 @@ def correct_activation(
             f"regions differ: estimate has {list(estimate['region'].values)!r}, the body "
             f"has {names!r}; pass the body the estimate was computed for"
         )
-    index = _time_index(tracked, int(estimate.attrs.get("time_index", -1)) if time is None else time)
+    index = _time_index(
+        tracked, int(estimate.attrs.get("time_index", -1)) if time is None else time
+    )
     u = _tracked_u(tracked, body, index)
     t0 = np.nan_to_num(np.asarray(estimate["t_max"].values, dtype=np.float64))
     active = _active_copy(body, law)
@@ -814,6 +858,7 @@ def correct_activation(
         "at the tracked configuration"
     )
     return out
+
 
 # --------------------------------------------------------------------------------------
 # 3. calibration through the measurement chain
@@ -867,8 +912,12 @@ def simulate_history(
     U = np.zeros((int(frames), body.ndof))
     for n in range(1, int(frames)):  # loop over frames, each continuing the last
         U[n] = simulate_activation(
-            active, {k: f[n] * v for k, v in values.items()}, loads=loads, steps=1,
-            u0=U[n - 1], t_start={k: f[n - 1] * v for k, v in values.items()},
+            active,
+            {k: f[n] * v for k, v in values.items()},
+            loads=loads,
+            steps=1,
+            u0=U[n - 1],
+            t_start={k: f[n - 1] * v for k, v in values.items()},
         ).u
     return U
 
@@ -951,8 +1000,12 @@ def calibrate_activation(
     t1 = np.nan_to_num(np.asarray(estimate["t_max"].values, dtype=np.float64))
     frames = int(tracked.sizes["time"])
     U = simulate_history(
-        body, dict(zip(names, t1.tolist(), strict=True)), frames, dirichlet=dirichlet,
-        terms=terms, law=law,
+        body,
+        dict(zip(names, t1.tolist(), strict=True)),
+        frames,
+        dirichlet=dirichlet,
+        terms=terms,
+        law=law,
     )
     observed = measure(body, U)
     if not isinstance(observed, xr.Dataset) or observed.sizes.get("time") != frames:
@@ -1019,7 +1072,9 @@ def plot_stretch_agreement(
         If ``comparison`` has no tracked stretch.
     """
     if "stretch_tracked" not in comparison:
-        raise ValueError("'comparison' has no tracked stretch; run resimulate(..., tracked=tracked)")
+        raise ValueError(
+            "'comparison' has no tracked stretch; run resimulate(..., tracked=tracked)"
+        )
     from matplotlib.figure import Figure
 
     names = [str(n) for n in comparison["region"].values]
@@ -1027,16 +1082,29 @@ def plot_stretch_agreement(
     ax, ax2 = fig.subplots(1, 2)
     x = np.arange(len(names))
     bars = [
-        ("tracked (images)", comparison["stretch_tracked"].values, comparison["stretch_tracked_sd"].values),
-        ("simulated (estimate)", comparison["stretch_simulated"].values,
-         comparison["stretch_simulated_sd"].values),
+        (
+            "tracked (images)",
+            comparison["stretch_tracked"].values,
+            comparison["stretch_tracked_sd"].values,
+        ),
+        (
+            "simulated (estimate)",
+            comparison["stretch_simulated"].values,
+            comparison["stretch_simulated_sd"].values,
+        ),
     ]
     if truth:
         bars.append(("ground truth", np.array([truth.get(n, np.nan) for n in names]), None))
     width = 0.8 / len(bars)
     for k, (label, mean, sd) in enumerate(bars):  # two or three bar groups
-        ax.bar(x + width * (k - (len(bars) - 1) / 2), 100.0 * (mean - 1.0), width,
-               yerr=None if sd is None else 100.0 * sd, capsize=3, label=label)
+        ax.bar(
+            x + width * (k - (len(bars) - 1) / 2),
+            100.0 * (mean - 1.0),
+            width,
+            yerr=None if sd is None else 100.0 * sd,
+            capsize=3,
+            label=label,
+        )
     ax.axhline(0.0, color="0.3", lw=0.8)
     ax.set_xticks(x, names)
     ax.set_ylabel("mean fibre strain λ − 1 (%)")

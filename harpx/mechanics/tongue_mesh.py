@@ -147,16 +147,25 @@ def _map_jacobian(ref: FloatArray, length: float, width: float, height: float) -
     hx = 1.0 - _TH * xi**2
     he = 1.0 - _THY * eta**2
     d_xi = np.column_stack(
-        [length * (1.0 - 2.0 * xi * a), 0.5 * width * eta * (-2.0 * _TW * xi) * wz,
-         height * zeta * (-2.0 * _TH * xi) * he]
+        [
+            length * (1.0 - 2.0 * xi * a),
+            0.5 * width * eta * (-2.0 * _TW * xi) * wz,
+            height * zeta * (-2.0 * _TH * xi) * he,
+        ]
     )
     d_eta = np.column_stack(
-        [length * (-(xi**2) * 2.0 * _RY * eta), 0.5 * width * wx * wz,
-         height * zeta * hx * (-2.0 * _THY * eta)]
+        [
+            length * (-(xi**2) * 2.0 * _RY * eta),
+            0.5 * width * wx * wz,
+            height * zeta * hx * (-2.0 * _THY * eta),
+        ]
     )
     d_zeta = np.column_stack(
-        [length * (-(xi**2) * 2.0 * _RZ * zeta), 0.5 * width * eta * wx * (-2.0 * _TWZ * zeta),
-         height * hx * he]
+        [
+            length * (-(xi**2) * 2.0 * _RZ * zeta),
+            0.5 * width * eta * wx * (-2.0 * _TWZ * zeta),
+            height * hx * he,
+        ]
     )
     return np.stack([d_xi, d_eta, d_zeta], axis=-1)
 
@@ -220,7 +229,14 @@ def tongue_reference(
         xi = np.clip(xi - d0, -1.0, 2.0)
         eta = np.clip(eta - d1, -2.0, 2.0)
         zeta = np.clip(zeta - d2, -1.0, 2.0)
-        if max(np.abs(d0).max(initial=0.0), np.abs(d1).max(initial=0.0), np.abs(d2).max(initial=0.0)) < 1e-13:
+        if (
+            max(
+                np.abs(d0).max(initial=0.0),
+                np.abs(d1).max(initial=0.0),
+                np.abs(d2).max(initial=0.0),
+            )
+            < 1e-13
+        ):
             break
     return np.column_stack([xi, eta, zeta])
 
@@ -252,14 +268,19 @@ def tongue_inside(
     out = np.zeros(x.shape[0], dtype=bool)
     # the body lies in its bounding box [0, L] x [-W/2, W/2] x [0, H]: only those need Newton
     near = np.nonzero(
-        (x[:, 0] >= -tol * length) & (x[:, 0] <= length * (1 + tol))
+        (x[:, 0] >= -tol * length)
+        & (x[:, 0] <= length * (1 + tol))
         & (np.abs(x[:, 1]) <= 0.5 * width * (1 + tol))
-        & (x[:, 2] >= -tol * height) & (x[:, 2] <= height * (1 + tol))
+        & (x[:, 2] >= -tol * height)
+        & (x[:, 2] <= height * (1 + tol))
     )[0]
     ref = tongue_reference(x[near], length, width, height)
     in_box = (
-        (ref[:, 0] >= -tol) & (ref[:, 0] <= 1 + tol) & (np.abs(ref[:, 1]) <= 1 + tol)
-        & (ref[:, 2] >= -tol) & (ref[:, 2] <= 1 + tol)
+        (ref[:, 0] >= -tol)
+        & (ref[:, 0] <= 1 + tol)
+        & (np.abs(ref[:, 1]) <= 1 + tol)
+        & (ref[:, 2] >= -tol)
+        & (ref[:, 2] <= 1 + tol)
     )
     residual = np.linalg.norm(tongue_map(ref, length, width, height) - x[near], axis=1)
     out[near] = in_box & (residual < 1e-6 * length)
@@ -302,8 +323,12 @@ def muscle_atlas(ref: NDArray[np.float64]) -> NDArray[np.str_]:
 
 
 def _fibers(
-    label: NDArray[np.str_], centres: FloatArray, ref_centres: FloatArray,
-    length: float, width: float, height: float,
+    label: NDArray[np.str_],
+    centres: FloatArray,
+    ref_centres: FloatArray,
+    length: float,
+    width: float,
+    height: float,
 ) -> FloatArray:
     jac = _map_jacobian(ref_centres, length, width, height)
     fibers = jac[:, :, 0].copy()  # longitudinal (SL, IL): along ξ
@@ -403,7 +428,8 @@ def tongue(
         "tip": facets_where(mesh, where(xi_ > 1.0 - tol)),
         "posterior": facets_where(mesh, where(xi_ < tol)),
         "lateral": np.union1d(
-            facets_where(mesh, where(eta_ < -1.0 + tol)), facets_where(mesh, where(eta_ > 1.0 - tol))
+            facets_where(mesh, where(eta_ < -1.0 + tol)),
+            facets_where(mesh, where(eta_ > 1.0 - tol)),
         ).astype(np.int64),
     }
     boundaries["hyoid"] = boundaries["base"]

@@ -118,12 +118,42 @@ class TongueGeometry:
 GEOMETRIES: dict[str, TongueGeometry] = {
     # the paper's protocol; truth on the 2x refined mesh (2240 hex20)
     "paper": TongueGeometry(
-        70.0, 50.0, 40.0, (10, 7, 4), (20, 14, 8), "hex20", 4, 60.0, 10, 8, 1.9, 256, 10.0, 6.0, 3, 1.0
+        70.0,
+        50.0,
+        40.0,
+        (10, 7, 4),
+        (20, 14, 8),
+        "hex20",
+        4,
+        60.0,
+        10,
+        8,
+        1.9,
+        256,
+        10.0,
+        6.0,
+        3,
+        1.0,
     ),
     # same protocol and tracking model; truth refined 2x along the length only (560 hex20),
     # coarser partial-volume sampling
     "small": TongueGeometry(
-        70.0, 50.0, 40.0, (10, 7, 4), (20, 7, 4), "hex20", 4, 60.0, 10, 8, 1.9, 256, 10.0, 6.0, 2, 1.5
+        70.0,
+        50.0,
+        40.0,
+        (10, 7, 4),
+        (20, 7, 4),
+        "hex20",
+        4,
+        60.0,
+        10,
+        8,
+        1.9,
+        256,
+        10.0,
+        6.0,
+        2,
+        1.5,
     ),
 }
 
@@ -169,7 +199,11 @@ class TongueScene:
         return Body(self.mesh, material if material is not None else self.material, element=element)
 
     def acquire(
-        self, body: Body, displacement: FloatArray, *, snr: float | None | str = "same",
+        self,
+        body: Body,
+        displacement: FloatArray,
+        *,
+        snr: float | None | str = "same",
         seed: int = 1,
     ) -> xr.Dataset:
         """Image any motion of a tongue model with this scene's CSPAMM protocol.
@@ -194,7 +228,9 @@ class TongueScene:
         g = self.info["geometry"]
         times = np.asarray(self.tagged["time"].values[: U.shape[0]], dtype=np.float64)
         level = self.info["snr"] if snr == "same" else snr
-        return _acquire(g, body, U, times, level, np.random.default_rng(seed), f"{self.info['size']}/acquired")
+        return _acquire(
+            g, body, U, times, level, np.random.default_rng(seed), f"{self.info['size']}/acquired"
+        )
 
     def track(self, body: Body, tagged: xr.Dataset | None = None, **settings: Any) -> xr.Dataset:
         """Phase extraction and tracking with the scene's settings (:data:`TRACKING`).
@@ -230,13 +266,17 @@ class TongueScene:
         The fine ground-truth displacement is interpolated at ``body``'s dof nodes: the
         stretch a perfect tracker would report on that model.
         """
-        values, inside = interpolate_displacement(self.truth_body, self.truth_displacement, body.dof_points)
+        values, inside = interpolate_displacement(
+            self.truth_body, self.truth_displacement, body.dof_points
+        )
         if not inside.all():  # nodes on the coarse boundary polygon just outside the fine one
             near = _nearest_inside(body.dof_points, inside)
             values[:, ~inside] = values[:, near]
         lam = np.stack([body.fiber_stretch(u.ravel()) for u in values])
         return xr.DataArray(
-            lam, dims=("time", "cell"), coords={"time": self.tagged["time"].values},
+            lam,
+            dims=("time", "cell"),
+            coords={"time": self.tagged["time"].values},
             attrs=standard_attrs("fiber_stretch"),
         )
 
@@ -258,7 +298,10 @@ def _nearest_inside(points: FloatArray, inside: np.ndarray) -> np.ndarray:
 
 
 def _ground_truth(
-    g: TongueGeometry, t_max: Mapping[str, float], material: Any, law: ActiveContraction,
+    g: TongueGeometry,
+    t_max: Mapping[str, float],
+    material: Any,
+    law: ActiveContraction,
     dirichlet: tuple[Any, ...],
 ) -> tuple[Body, FloatArray]:
     """Forward simulation of the activation ramp on the fine mesh: (body, U (frames, ndof)).
@@ -272,8 +315,11 @@ def _ground_truth(
 
 @functools.lru_cache(maxsize=4)
 def _ground_truth_cached(
-    g: TongueGeometry, t_max: tuple[tuple[str, float], ...], material: Any,
-    law: ActiveContraction, dirichlet: tuple[Any, ...],
+    g: TongueGeometry,
+    t_max: tuple[tuple[str, float], ...],
+    material: Any,
+    law: ActiveContraction,
+    dirichlet: tuple[Any, ...],
 ) -> tuple[Body, FloatArray]:
     spec = tongue_mesh(length=g.length, width=g.width, height=g.height, divisions=g.truth_divisions)
     body = Body(spec, material, element=g.truth_element, active=law, t_max=0.0)  # type: ignore[arg-type]
@@ -282,8 +328,12 @@ def _ground_truth_cached(
     for n in range(1, g.frames):  # each frame continues from the previous one
         f0, f1 = (n - 1) / (g.frames - 1), n / (g.frames - 1)
         result = simulate_activation(
-            body, {k: f1 * v for k, v in target.items()}, loads=dirichlet, steps=1,
-            u0=U[n - 1], t_start={k: f0 * v for k, v in target.items()},
+            body,
+            {k: f1 * v for k, v in target.items()},
+            loads=dirichlet,
+            steps=1,
+            u0=U[n - 1],
+            t_start={k: f0 * v for k, v in target.items()},
         )
         U[n] = result.u
     return body, U
@@ -305,7 +355,9 @@ def _smooth_extension(values: np.ndarray, inside: np.ndarray, width: float = 2.0
     return np.where(inside, filled, blurred)
 
 
-def _interpolate_truth(body: Body, U: FloatArray, points: FloatArray) -> tuple[FloatArray, np.ndarray]:
+def _interpolate_truth(
+    body: Body, U: FloatArray, points: FloatArray
+) -> tuple[FloatArray, np.ndarray]:
     """FE displacement (ntime, n, 3) at points, NaN outside; only points near the mesh located."""
     lo = body.nodes.min(axis=0) - 1e-6
     hi = body.nodes.max(axis=0) + 1e-6
@@ -328,7 +380,9 @@ def _slice_centres(lo: float, hi: float, count: int) -> tuple[FloatArray, float]
     return lo + spacing * (np.arange(count) + 0.5), spacing
 
 
-def _resample_stack(stack: xr.Dataset, dim: str, target: FloatArray) -> tuple[np.ndarray, np.ndarray]:
+def _resample_stack(
+    stack: xr.Dataset, dim: str, target: FloatArray
+) -> tuple[np.ndarray, np.ndarray]:
     """Linear interpolation of ``image`` (tag, time, z, y, x) along the slice axis ``dim``.
 
     Between slice centres: linear; from the outer slice centre to the slab face (half a
@@ -356,7 +410,9 @@ def _along(v: np.ndarray, axis: int, ndim: int) -> np.ndarray:
     return v.reshape(shape)
 
 
-def _density_grid(z: FloatArray, y: FloatArray, x: FloatArray, g: TongueGeometry, sub: int = 2) -> np.ndarray:
+def _density_grid(
+    z: FloatArray, y: FloatArray, x: FloatArray, g: TongueGeometry, sub: int = 2
+) -> np.ndarray:
     """Voxel-averaged tongue density on a grid (``sub``³ samples per voxel)."""
     step = g.pixel
     offs = step * ((np.arange(sub) + 0.5) / sub - 0.5)
@@ -371,8 +427,13 @@ def _density_grid(z: FloatArray, y: FloatArray, x: FloatArray, g: TongueGeometry
 
 
 def _acquire(
-    g: TongueGeometry, truth_body: Body, U: FloatArray, times: FloatArray, snr: float | None,
-    rng: np.random.Generator, size: str,
+    g: TongueGeometry,
+    truth_body: Body,
+    U: FloatArray,
+    times: FloatArray,
+    snr: float | None,
+    rng: np.random.Generator,
+    size: str,
 ) -> xr.Dataset:
     """Image the motion ``U`` of ``truth_body`` with the scene's CSPAMM protocol (tagged/1)."""
     # common 1.9 mm grid around the tongue and the two slice stacks
@@ -384,9 +445,14 @@ def _acquire(
     sag, dy_sag = _slice_centres(-0.5 * g.width - 2.0, 0.5 * g.width + 2.0, g.sagittal_slices)
 
     # the motion as a gridded field for the image synthesis, extended smoothly outside the mesh
-    fine = {d: _axis_lattice(lo, hi, g.field_spacing) for d, (lo, hi) in
-            {"x": (-m, g.length + m), "y": (-0.5 * g.width - m, 0.5 * g.width + m),
-             "z": (-m, g.height + m)}.items()}
+    fine = {
+        d: _axis_lattice(lo, hi, g.field_spacing)
+        for d, (lo, hi) in {
+            "x": (-m, g.length + m),
+            "y": (-0.5 * g.width - m, 0.5 * g.width + m),
+            "z": (-m, g.height + m),
+        }.items()
+    }
     Zf, Yf, Xf = np.meshgrid(fine["z"], fine["y"], fine["x"], indexing="ij")
     pts = np.column_stack([Xf.ravel(), Yf.ravel(), Zf.ravel()])
     uf, known = _interpolate_truth(truth_body, U, pts)
@@ -403,16 +469,31 @@ def _acquire(
         return tongue_inside(X, g.length, g.width, g.height).astype(np.float64)
 
     common = dict(
-        times=times, tag_period=g.tag_period, sequence="CSPAMM", snr=snr, body=density, rng=rng,
+        times=times,
+        tag_period=g.tag_period,
+        sequence="CSPAMM",
+        snr=snr,
+        body=density,
+        rng=rng,
         oversample=g.oversample,
     )
     coronal = synthesize_tagged(
-        field_, shape=(z.size, y.size, cor.size), spacing=(g.pixel, g.pixel, dx_cor),
-        origin=(z[0], y[0], cor[0]), tags=("y", "z"), slice_axis="x", **common,
+        field_,
+        shape=(z.size, y.size, cor.size),
+        spacing=(g.pixel, g.pixel, dx_cor),
+        origin=(z[0], y[0], cor[0]),
+        tags=("y", "z"),
+        slice_axis="x",
+        **common,
     )
     sagittal = synthesize_tagged(
-        field_, shape=(z.size, sag.size, x.size), spacing=(g.pixel, dy_sag, g.pixel),
-        origin=(z[0], sag[0], x[0]), tags=("x",), slice_axis="y", **common,
+        field_,
+        shape=(z.size, sag.size, x.size),
+        spacing=(g.pixel, dy_sag, g.pixel),
+        origin=(z[0], sag[0], x[0]),
+        tags=("x",),
+        slice_axis="y",
+        **common,
     )
     img_cor, cov_x = _resample_stack(coronal, "x", x)
     img_sag, cov_y = _resample_stack(sagittal, "y", y)
@@ -420,7 +501,11 @@ def _acquire(
     rho = _density_grid(z, y, x, g)
     inside = rho >= 0.5
     mask = np.stack(
-        [inside & cov_y[None, :, None], inside & cov_x[None, None, :], inside & cov_x[None, None, :]]
+        [
+            inside & cov_y[None, :, None],
+            inside & cov_x[None, None, :],
+            inside & cov_x[None, None, :],
+        ]
     )
     Z, Y, X = np.meshgrid(z, y, x, indexing="ij")
     vox = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
@@ -434,14 +519,26 @@ def _acquire(
             "image": (("tag", "time", "z", "y", "x"), image, standard_attrs("image")),
             "mask": (("tag", "z", "y", "x"), mask, standard_attrs("mask")),
             "body": (("z", "y", "x"), rho, standard_attrs("body")),
-            "displacement_true": (("time", "axis", "z", "y", "x"), truth, standard_attrs("displacement_true")),
+            "displacement_true": (
+                ("time", "axis", "z", "y", "x"),
+                truth,
+                standard_attrs("displacement_true"),
+            ),
         },
         coords={
             "tag": ("tag", np.array(tags, dtype=object), standard_attrs("tag")),
             "axis": ("axis", np.array(["x", "y", "z"], dtype=object), standard_attrs("axis")),
             "tag_direction": (("tag", "axis"), direction, standard_attrs("tag_direction")),
-            "tag_frequency": ("tag", np.full(3, 1.0 / g.tag_period), standard_attrs("tag_frequency")),
-            "slice_axis": ("tag", np.array(["y", "x", "x"], dtype=object), standard_attrs("slice_axis")),
+            "tag_frequency": (
+                "tag",
+                np.full(3, 1.0 / g.tag_period),
+                standard_attrs("tag_frequency"),
+            ),
+            "slice_axis": (
+                "tag",
+                np.array(["y", "x", "x"], dtype=object),
+                standard_attrs("slice_axis"),
+            ),
             "time": ("time", times, standard_attrs("time")),
             "z": ("z", z, standard_attrs("z")),
             "y": ("y", y, standard_attrs("y")),

@@ -30,7 +30,10 @@ def _as_tracked(body, U):
     return xr.Dataset(
         {
             "points": (("node", "axis"), body.dof_points),
-            "displacement": (("time", "node", "axis"), np.stack([body.nodal_displacement(u) for u in U])),
+            "displacement": (
+                ("time", "node", "axis"),
+                np.stack([body.nodal_displacement(u) for u in U]),
+            ),
             "fiber_stretch": (("time", "cell"), np.stack([body.fiber_stretch(u) for u in U])),
         },
         coords={"time": np.arange(len(U)) * 50.0, "axis": ["x", "y", "z"]},
@@ -69,7 +72,9 @@ def test_tension_is_objective_and_ignores_the_pressure(rng):
     [
         pytest.param(ActiveContraction(t_max=0.0), [1.0, 0.0, 0.0], 2.0, id="calcium-x"),
         pytest.param(ActiveContraction(t_max=0.0), [0.0, 0.0, 1.0], 1.3, id="calcium-z"),
-        pytest.param(ActiveContraction(t_max=0.0, law="prescribed"), [0.0, 1.0, 0.0], 0.7, id="prescribed-y"),
+        pytest.param(
+            ActiveContraction(t_max=0.0, law="prescribed"), [0.0, 1.0, 0.0], 0.7, id="prescribed-y"
+        ),
     ],
 )
 def test_homogeneous_block_recovers_t_max_exactly(law, fiber, t_true):
@@ -79,7 +84,9 @@ def test_homogeneous_block_recovers_t_max_exactly(law, fiber, t_true):
     u = simulate_activation(body, t_true, loads=SYMMETRY, steps=3).u
     lam = body.fiber_stretch(u)
     assert 0.75 < lam.mean() < 0.97  # a real contraction
-    passive = Body(body.mesh, MATERIAL, fibers=body.fibers, regions=body.regions, boundaries=body.boundaries)
+    passive = Body(
+        body.mesh, MATERIAL, fibers=body.fibers, regions=body.regions, boundaries=body.boundaries
+    )
     est = estimate_activation(_as_tracked(passive, [np.zeros(body.ndof), u]), passive, law=law)
     # Newton's relative tolerance 1e-8 bounds the equilibrium error
     np.testing.assert_allclose(est["t_max_cell"].values, t_true, rtol=1e-6)
@@ -100,7 +107,9 @@ def two_muscles():
     fibers[back, 1] = 1.0
     regions = {"A": front, "B": back}
     law = ActiveContraction(t_max=0.0)
-    active = Body(spec, MATERIAL, fibers=fibers, regions=regions, element="hex20", active=law, t_max=0.0)
+    active = Body(
+        spec, MATERIAL, fibers=fibers, regions=regions, element="hex20", active=law, t_max=0.0
+    )
     truth = {"A": 0.6, "B": 0.4}  # 5-7 % fibre shortening, as in the tongue scene
     bcs = [Fixed("left")]
     U = simulate_history(active, truth, 3, dirichlet=bcs)
@@ -131,7 +140,9 @@ def test_resimulation_with_the_truth_reproduces_the_tracked_stretch(two_muscles,
     tracked = _as_tracked(body, U)
     sim = resimulate(body, truth, dirichlet=bcs, tracked=tracked)
     # same model, same activation: the stretches agree to the Newton tolerance
-    np.testing.assert_allclose(sim["fiber_stretch_simulated"], sim["fiber_stretch_tracked"], atol=1e-7)
+    np.testing.assert_allclose(
+        sim["fiber_stretch_simulated"], sim["fiber_stretch_tracked"], atol=1e-7
+    )
     assert float(sim["mean_abs_difference_all"]) < 1e-7
     assert float(sim["correlation_all"]) > 0.999999
     assert body.active is None  # the tracking model is not modified
@@ -157,7 +168,9 @@ def test_calibration_undoes_an_attenuating_measurement(two_muscles):
     np.testing.assert_allclose(cal["t_max_uncalibrated"].values, est["t_max"].values)
     assert np.all(cal["chain_transfer"].values < 0.85)
     # an identity chain leaves the estimate unchanged (its own re-simulation is reproduced)
-    same = calibrate_activation(est, tracked, body, measure=lambda b, d: _as_tracked(b, d), dirichlet=bcs)
+    same = calibrate_activation(
+        est, tracked, body, measure=lambda b, d: _as_tracked(b, d), dirichlet=bcs
+    )
     np.testing.assert_allclose(same["chain_transfer"].values, 1.0, rtol=1e-6)
 
 

@@ -34,7 +34,9 @@ def test_paper_size_and_every_cell_in_exactly_one_muscle(spec):
         np.add.at(counts, ids, 1)
     np.testing.assert_array_equal(counts, 1)
     assert sorted(spec.regions) == sorted(MUSCLES)
-    assert all(len(ids) > 0 for ids in spec.regions.values()), {k: len(v) for k, v in spec.regions.items()}
+    assert all(len(ids) > 0 for ids in spec.regions.values()), {
+        k: len(v) for k, v in spec.regions.items()
+    }
 
 
 def test_fibres_are_unit_vectors_in_the_muscle_directions(spec):
@@ -124,8 +126,11 @@ def test_reference_inverts_the_map_and_inside_matches_the_mesh(rng):
 
 
 def test_atlas_labels():
-    labels = muscle_atlas(np.array([[0.3, 0.0, 0.2], [0.3, 0.0, 0.95], [0.95, 0.9, 0.4],
-                                    [0.2, 0.9, 0.1], [0.2, -0.9, 0.6]]))
+    labels = muscle_atlas(
+        np.array(
+            [[0.3, 0.0, 0.2], [0.3, 0.0, 0.95], [0.95, 0.9, 0.4], [0.2, 0.9, 0.1], [0.2, -0.9, 0.6]]
+        )
+    )
     assert labels.tolist() == ["GG", "SL", "T", "IL", "V"]
 
 

@@ -11,8 +11,8 @@ from harpx.inverse.activation import (
     estimate_activation,
     resimulate,
 )
-from harpx.schema import validate
 from harpx.scenes.tongue import ACTIVATIONS, tongue
+from harpx.schema import validate
 from harpx.tracking.results import tracking_error
 
 
@@ -36,7 +36,9 @@ def estimates(scene, body, tracked):
     bcs = list(scene.dirichlet)
     direct = estimate_activation(tracked, body)
     corrected = correct_activation(direct, tracked, body, dirichlet=bcs)
-    calibrated = calibrate_activation(corrected, tracked, body, measure=scene.measure, dirichlet=bcs)
+    calibrated = calibrate_activation(
+        corrected, tracked, body, measure=scene.measure, dirichlet=bcs
+    )
     return direct, corrected, calibrated
 
 
@@ -78,12 +80,16 @@ def test_activation_estimate_per_muscle_is_within_15_percent(scene, estimates):
     truth = np.array([scene.t_max[m] for m in calibrated.region.values])
     rel = calibrated.t_max.values / truth - 1.0
     # issue 5 must-show: every muscle within 15 %; measured -8 % (SL) to -1 % (GG, T, V)
-    assert np.all(np.abs(rel) <= 0.15), dict(zip(calibrated.region.values, rel.round(3)))
+    assert np.all(np.abs(rel) <= 0.15), dict(
+        zip(calibrated.region.values, rel.round(3), strict=True)
+    )
     # the steps are what the docs say: the paper's local estimate is biased low (by ~50 %),
     # the equilibrium correction removes part of it, the calibration the rest
     assert np.all(direct.t_max.values < 0.8 * truth), direct.t_max.values
     assert np.all(corrected.t_max.values > direct.t_max.values)
-    assert np.all((calibrated.chain_transfer.values > 0.4) & (calibrated.chain_transfer.values < 1.0))
+    assert np.all(
+        (calibrated.chain_transfer.values > 0.4) & (calibrated.chain_transfer.values < 1.0)
+    )
 
 
 def test_resimulation_agrees_with_the_true_fibre_stretch(scene, body, tracked, estimates):
