@@ -21,7 +21,8 @@ Each variant runs ``--repeats`` times (default 3) into fresh output directories
 wall-clock seconds on this machine; ``os.cpu_count()``, the load average and the machine's
 *parallel ceiling* (the speed-up it gives right now to the same number of pure-CPU
 processes, measured before and after) are printed with them, since a shared machine caps
-any process pool below its worker count.
+any process pool below its worker count. The table is also written to ``bench_batch.md`` and
+a bar chart to ``bench_batch.png`` in ``--out`` (default: the working directory).
 """
 
 from __future__ import annotations
@@ -81,6 +82,14 @@ def run_serial(paths: list[Path], out: Path) -> list[Path]:
     return [track_subject(p, output_path(p, out), body_factory, TRACK_KWARGS) for p in paths]
 
 
+def cpu_seconds() -> float:
+    """User + system CPU time of this process, all threads (s)."""
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
 def _spin(n: int = 15_000_000) -> None:
     s = 0
     for i in range(n):
@@ -108,12 +117,31 @@ def parallel_ceiling(workers: int) -> float:
     return workers * elapsed[0] / elapsed[1]
 
 
+def _plot(times: dict[str, list[float]], path: Path, args: argparse.Namespace) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.0, 3.0), layout="constrained")
+    names = list(times)
+    ax.bar(names, [statistics.median(times[k]) for k in names], color="0.8", label="median")
+    for k, name in enumerate(names):
+        ax.plot([k] * len(times[name]), times[name], "k.", label="runs" if k == 0 else None)
+    ax.set_ylabel("wall time (s)")
+    ax.set_title(f"{args.subjects} subjects, {args.workers} workers", fontsize=10)
+    ax.legend(frameon=False)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--subjects", type=int, default=8)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--quick", action="store_true", help="4 subjects, 2 repeats")
+    parser.add_argument("--out", default=".", help="folder of bench_batch.md and .png")
     args = parser.parse_args()
     if args.quick:
         args.subjects, args.repeats = 4, 2
@@ -136,18 +164,23 @@ def main() -> None:
 
         times: dict[str, list[float]] = {"serial": [], "cohort (warm)": [],
                                          "cohort (cold)": []}
+        cpu: dict[str, list[float]] = {"serial": [], "cohort (warm)": []}
         with local_cluster(args.workers) as cluster, Client(cluster) as client:
             track_many(paths[:1], body_factory, output_dir=root / "warm-up", client=client,
                        track_kwargs=TRACK_KWARGS, progress=False)  # worker imports: not timed
             for r in range(args.repeats):
-                start = time.perf_counter()
+                start, cpu0 = time.perf_counter(), cpu_seconds()
                 serial = run_serial(paths, root / f"serial{r}")
                 times["serial"].append(time.perf_counter() - start)
+                cpu["serial"].append(cpu_seconds() - cpu0)
 
-                start = time.perf_counter()
+                workers0 = sum(client.run(cpu_seconds).values())
+                start, cpu0 = time.perf_counter(), cpu_seconds()
                 track_many(paths, body_factory, output_dir=root / f"warm{r}", client=client,
                            track_kwargs=TRACK_KWARGS, overwrite=True, progress=False)
                 times["cohort (warm)"].append(time.perf_counter() - start)
+                cpu["cohort (warm)"].append(cpu_seconds() - cpu0
+                                            + sum(client.run(cpu_seconds).values()) - workers0)
 
                 # (the idle warm cluster stays up: the variants alternate within a repeat so
                 # that they see the same machine load)
@@ -169,16 +202,27 @@ def main() -> None:
         ceiling_after = parallel_ceiling(args.workers)
 
     med = {k: statistics.median(v) for k, v in times.items()}
-    print(f"\n{args.subjects} subjects, {args.workers} workers, median of {args.repeats} "
-          f"repeats (wall-clock s)\n")
-    print("| variant | median s | runs (s) | per subject s | speed-up vs serial |")
-    print("|---|---|---|---|---|")
+    table = [f"{args.subjects} subjects, {args.workers} workers, median of {args.repeats} "
+             "repeats (wall-clock s)", "",
+             "| variant | median s | runs (s) | per subject s | speed-up vs serial |",
+             "|---|---|---|---|---|"]
     for k, v in times.items():
         runs = ", ".join(f"{t:.2f}" for t in v)
-        print(f"| {k} | {med[k]:.2f} | {runs} | {med[k] / args.subjects:.2f} | "
-              f"{med['serial'] / med[k]:.2f} |")
+        table.append(f"| {k} | {med[k]:.2f} | {runs} | {med[k] / args.subjects:.2f} | "
+                     f"{med['serial'] / med[k]:.2f} |")
+    print("\n" + "\n".join(table))
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    (Path(args.out) / "bench_batch.md").write_text("\n".join(table) + "\n")
+    _plot(times, Path(args.out) / "bench_batch.png", args)
     print(f"\nwall-time ratio serial / cohort: cold {med['serial'] / med['cohort (cold)']:.2f}, "
           f"warm {med['serial'] / med['cohort (warm)']:.2f}")
+    cpu_serial = statistics.median(cpu["serial"]) / args.subjects
+    cpu_cohort = statistics.median(cpu["cohort (warm)"]) / args.subjects
+    print(f"CPU time per subject (user+sys, all threads, median): serial {cpu_serial:.2f} s, "
+          f"cohort {cpu_cohort:.2f} s (workers + this process). On an idle machine the warm "
+          f"cohort's speed-up would be about {args.workers} x {cpu_serial:.2f}/{cpu_cohort:.2f}"
+          f" = {args.workers * cpu_serial / cpu_cohort:.2f} (subjects split evenly; an "
+          "estimate, not a measurement)")
     print(f"FE tracking alone: {statistics.median(track_time):.2f} s per subject (median, last "
           f"serial run); the rest is phase extraction, mesh set-up and the archive write")
     print(f"1-min load average: {load_before:.2f} before, {load_after:.2f} after "
