@@ -110,7 +110,7 @@ class HarpAccessor:
 
         return track_harp(self._ds, points=points, iterations=iterations)
 
-    def error(self, truth: xr.Dataset) -> xr.Dataset:
+    def error(self, truth: xr.Dataset, *, where: xr.DataArray | None = None) -> xr.Dataset:
         """Displacement error of a tracked dataset against ground truth.
 
         See Also
@@ -119,7 +119,7 @@ class HarpAccessor:
         """
         from harpx.tracking.results import tracking_error
 
-        return tracking_error(self._ds, truth)
+        return tracking_error(self._ds, truth, where=where)
 
     def to_meshio(self, path: PathLike, *, series: Literal["vtu", "xdmf"] = "xdmf") -> list[Path]:
         """Write a tracked result as a ParaView time series (XDMF, or VTU files and a PVD).
