@@ -17,9 +17,10 @@ the clockwise side get the copies), so the ring has two coincident free faces. R
 motions are removed by a statically determinate 3-2-1 support on the radial line opposite
 the cut (one node fixed, a second node on the same radial line fixed across that line, a
 third node above them fixed against rotation about it), which adds (almost) no reaction
-to a self-equilibrated residual stress: only the small tilt of the line from A to B out of
-the short-axis plane makes the support slightly redundant. The *mid-line* of each face is the principal direction
-of its nodes projected on the short-axis plane, oriented outwards; the opening angle is the
+to a self-equilibrated residual stress: only the small tilt of the line from the first to
+the second node out of the short-axis plane makes the support slightly redundant. The
+*mid-line* of each face is the principal direction of its nodes projected on the
+short-axis plane, oriented outwards; the opening angle is the
 signed angle from the mid-line of the clockwise face to that of the counter-clockwise face
 (positive when the ring opens, 0 for the intact ring).
 
@@ -218,7 +219,9 @@ def release(
     target = body.growth_tensor.copy()
     done, step = 0.0, 1.0
     eye = np.eye(3)
-    solver = linear_solver if isinstance(linear_solver, LinearSolver) else LinearSolver(linear_solver)
+    solver = (
+        linear_solver if isinstance(linear_solver, LinearSolver) else LinearSolver(linear_solver)
+    )
     previous: tuple[float, FloatArray] | None = None
     try:
         while done < 1.0 - 1e-12:

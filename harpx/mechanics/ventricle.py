@@ -337,11 +337,14 @@ def _disc_ogrid(
     cidx = np.arange((m + 1) ** 2).reshape(m + 1, m + 1)
     quads = [
         np.column_stack(
-            [cidx[:-1, :-1].ravel(), cidx[:-1, 1:].ravel(), cidx[1:, 1:].ravel(), cidx[1:, :-1].ravel()]
+            [cidx[:-1, :-1].ravel(), cidx[:-1, 1:].ravel(), cidx[1:, 1:].ravel(),
+             cidx[1:, :-1].ravel()]
         )
     ]
     # counter-clockwise loop over the core boundary starting at the corner (+, -)
-    loop = np.concatenate([cidx[:, m][:-1], cidx[m, ::-1][:-1], cidx[::-1, 0][:-1], cidx[0, :][:-1]])
+    loop = np.concatenate(
+        [cidx[:, m][:-1], cidx[m, ::-1][:-1], cidx[::-1, 0][:-1], cidx[0, :][:-1]]
+    )
     nc = 4 * m
     angle = -0.25 * np.pi + 2.0 * np.pi * np.arange(nc) / nc
     circle = np.stack([np.cos(angle), np.sin(angle)], axis=1)
@@ -356,7 +359,9 @@ def _disc_ogrid(
     j = np.arange(nc)
     for k in range(1, len(rings)):
         inner, outer = rings[k - 1], rings[k]
-        quads.append(np.column_stack([inner[j], outer[j], outer[(j + 1) % nc], inner[(j + 1) % nc]]))
+        quads.append(
+            np.column_stack([inner[j], outer[j], outer[(j + 1) % nc], inner[(j + 1) % nc]])
+        )
     return np.concatenate(pts), np.concatenate(quads), rings[-1]
 
 
@@ -495,7 +500,8 @@ def ventricle(
     I_, J_ = np.meshgrid(np.arange(nl), j, indexing="ij")
     JN = (J_ + 1) % nc
     grid_quads = np.column_stack(
-        [grid[I_, J_].ravel(), grid[I_, JN].ravel(), grid[I_ + 1, JN].ravel(), grid[I_ + 1, J_].ravel()]
+        [grid[I_, J_].ravel(), grid[I_, JN].ravel(), grid[I_ + 1, JN].ravel(),
+         grid[I_ + 1, J_].ravel()]
     )
     quads = np.concatenate([disc_to_layer[cap_quads], grid_quads])
     offsets = per_layer * np.arange(nt)[:, None, None]
@@ -554,9 +560,9 @@ def cavity_volume(body: object, u: ArrayLike | None = None, *, base: float | Non
     from harpx.mechanics.kinematics import cofactor
 
     facets = body.facets("endo")  # type: ignore[attr-defined]
-    fb = skfem.FacetBasis(
-        body.mesh, body._scalar_element, facets=facets.astype(np.int32), intorder=4  # type: ignore[attr-defined]
-    )
+    mesh = body.mesh  # type: ignore[attr-defined]
+    element = body._scalar_element  # type: ignore[attr-defined]
+    fb = skfem.FacetBasis(mesh, element, facets=facets.astype(np.int32), intorder=4)
     nb = len(fb.basis)
     if u is None:
         u = np.zeros(body.ndof)  # type: ignore[attr-defined]
@@ -569,5 +575,5 @@ def cavity_volume(body: object, u: ArrayLike | None = None, *, base: float | Non
     x = np.asarray(fb.global_coordinates()).transpose(1, 2, 0) + np.einsum("fqa,fai->fqi", phi, ue)
     if base is None:
         base_facets = body.facets("base")  # type: ignore[attr-defined]
-        base = float(body.mesh.p[2, np.unique(body.mesh.facets[:, base_facets])].mean())  # type: ignore[attr-defined]
+        base = float(mesh.p[2, np.unique(mesh.facets[:, base_facets])].mean())
     return float(-np.sum((x[..., 2] - base) * nda[..., 2] * np.asarray(fb.dx)))

@@ -126,13 +126,15 @@ def test_helix_angle_is_plus_60_at_endo_and_minus_60_at_epi():
     # the meridian tangent is perpendicular to the surface normal (r/a², z/c²) of the layer
     pts = GEOM.surface_points(theta, 0.3, 0.0)
     _, e_l, _ = GEOM.local_basis(pts)
-    normal = np.column_stack([pts[:, 0] / INNER[0] ** 2, pts[:, 1] / INNER[0] ** 2, pts[:, 2] / INNER[1] ** 2])
+    normal = pts / np.array([INNER[0] ** 2, INNER[0] ** 2, INNER[1] ** 2])
     np.testing.assert_allclose(np.sum(e_l * normal, axis=1), 0.0, atol=1e-12)
     assert np.all(e_l[:, 2] > 0)  # towards the base
 
 
 def test_inside_indicator():
-    pts = np.array([[30.0, 0.0, 0.0], [0.0, 0.0, 0.0], [40.0, 0.0, 0.0], [30.0, 0.0, 11.0], [0, 0, -74.0]])
+    pts = np.array(
+        [[30.0, 0.0, 0.0], [0.0, 0.0, 0.0], [40.0, 0.0, 0.0], [30.0, 0.0, 11.0], [0, 0, -74.0]]
+    )
     np.testing.assert_array_equal(GEOM.inside(pts), [1.0, 0.0, 0.0, 0.0, 1.0])
 
 
