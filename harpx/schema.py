@@ -347,6 +347,7 @@ def validate(ds: xr.Dataset, kind: str | None = None) -> None:
 
     specs = SCHEMAS[schema]
     _check_layout(ds, specs, problems)
+    _check_dtypes(ds, problems)
     _check_attrs(ds, problems)
     present = {name for name in specs if name in ds.variables}
     if "axis" in present:
@@ -396,6 +397,19 @@ def _resolve_kind(ds: xr.Dataset, kind: str | None) -> str:
     if kind in SCHEMAS:
         return kind
     raise ValueError(f"kind={kind!r} is not a harpx schema; expected one of {sorted(KINDS)}")
+
+
+_NUMERIC = ("image", "phase", "magnitude", "displacement_true", "body", "tag_direction",
+            "tag_frequency", "points", "displacement", "green_strain", "fiber_stretch")
+
+
+def _check_dtypes(ds: xr.Dataset, problems: list[str]) -> None:
+    for name in _NUMERIC:
+        if name in ds.variables and ds.variables[name].dtype.kind not in "fiu":
+            problems.append(
+                f"{name!r} has dtype {str(ds.variables[name].dtype)!r}; expected real numbers; "
+                f"convert with ds[{name!r}] = ds[{name!r}].astype(float)"
+            )
 
 
 def _check_layout(ds: xr.Dataset, specs: Mapping[str, VarSpec], problems: list[str]) -> None:
@@ -618,8 +632,9 @@ def _check_range(
 def _check_phase_values(ds: xr.Dataset, problems: list[str]) -> None:
     if "phase" in ds.variables:
         data = _numpy_data(ds.variables["phase"])
-        if data is not None and data.size and data.dtype.kind == "f":
-            low, high = np.nanmin(data), np.nanmax(data)
+        finite = data[np.isfinite(data)] if data is not None and data.dtype.kind == "f" else None
+        if finite is not None and finite.size:
+            low, high = finite.min(), finite.max()
             if low < -np.pi or high >= np.pi:
                 problems.append(
                     f"'phase' has values in [{low:.6g}, {high:.6g}]; expected the wrapped range "
@@ -627,8 +642,9 @@ def _check_phase_values(ds: xr.Dataset, problems: list[str]) -> None:
                 )
     if "magnitude" in ds.variables:
         data = _numpy_data(ds.variables["magnitude"])
-        if data is not None and data.size and data.dtype.kind == "f":
-            low = np.nanmin(data)
+        finite = data[np.isfinite(data)] if data is not None and data.dtype.kind == "f" else None
+        if finite is not None and finite.size:
+            low = finite.min()
             if low < 0:
                 count = int(np.sum(data < 0))
                 problems.append(

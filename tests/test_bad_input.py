@@ -1,8 +1,5 @@
 """Bad input, nothing lost: malformed datasets, meshes and files raise clear errors and
 never leave a partial or corrupted output file behind.
-
-Cases marked ``xfail(strict=True)`` are known gaps (reported): they pin the clear error
-harpx should give, and turn into failures once the gap is closed, so the mark gets removed.
 """
 
 from __future__ import annotations
@@ -83,7 +80,6 @@ def _drop_attr(name: str) -> Callable[[xr.Dataset], xr.Dataset]:
     return change
 
 
-_GAP = "schema.validate does not check the dtype of data variables (reported)"
 
 BAD_TAGGED = [
     pytest.param(lambda ds: ds.assign(image=ds.image.transpose("time", "tag", "z", "y", "x")),
@@ -122,14 +118,13 @@ BAD_TAGGED = [
     pytest.param(lambda ds: ds.assign(image=ds.image.assign_attrs(units=None).drop_attrs()),
                  "'image' has no 'long_name' attribute", id="no-attrs"),
     pytest.param(_set("image", lambda ds: ds.image.values.astype(str)), "'image' has dtype",
-                 id="str-image", marks=pytest.mark.xfail(strict=True, reason=_GAP)),
+                 id="str-image"),
     pytest.param(_set("image", lambda ds: ds.image.values.astype(complex)), "'image' has dtype",
-                 id="complex-image", marks=pytest.mark.xfail(strict=True, reason=_GAP)),
+                 id="complex-image"),
     pytest.param(_set("image", lambda ds: ds.image.values > 1), "'image' has dtype",
-                 id="bool-image", marks=pytest.mark.xfail(strict=True, reason=_GAP)),
+                 id="bool-image"),
     pytest.param(_set("tag_frequency", lambda ds: ds.tag_frequency.values.astype(str)),
-                 "'tag_frequency' has dtype", id="str-frequency",
-                 marks=pytest.mark.xfail(strict=True, reason=_GAP)),
+                 "'tag_frequency' has dtype", id="str-frequency"),
 ]
 
 
@@ -150,10 +145,7 @@ def test_malformed_tagged_is_named_and_never_written(
         pytest.param(_set("phase", lambda ds: np.where(ds.x.values > 8, np.nan, ds.phase)),
                      "'phase' has .* non-finite values", id="nan-phase"),
         pytest.param(_set("phase", lambda ds: ds.phase.values * np.nan),
-                     "'phase' has .* non-finite values", id="all-nan-phase",
-                     marks=pytest.mark.xfail(strict=True, raises=RuntimeWarning, reason=(
-                         "validate's np.nanmin on an all-NaN phase warns 'All-NaN slice' "
-                         "from harpx.schema (an error under the test config; reported)"))),
+                     "'phase' has .* non-finite values", id="all-nan-phase"),
         pytest.param(_drop_attr("upsample"), "missing dataset attribute 'upsample'",
                      id="no-filter-settings"),
     ],
@@ -320,9 +312,6 @@ def test_bad_cells_in_a_mesh_file_are_named(tmp_path: Path, corrupt, cells: str)
         read_body_mesh(path)
 
 
-@pytest.mark.xfail(strict=True, reason="Body does not check cell orientation/degeneracy "
-                   "(reported): an inverted or bow-tie hexahedron is accepted silently and a "
-                   "collapsed one raises skfem's bare 'Zero Jacobian determinant'")
 @pytest.mark.parametrize(("corrupt", "cells"), BAD_CELLS)
 def test_bad_cells_given_to_body_are_named(corrupt, cells: str) -> None:
     points, vtk = _box_vtk()

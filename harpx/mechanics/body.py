@@ -68,6 +68,35 @@ def _read_mesh(path: str | os.PathLike[str]) -> tuple[skfem.MeshHex1, FloatArray
     return mesh, fibers
 
 
+# reference corners and centre of the unit hexahedron, where the geometry Jacobian is checked
+_CHECK_POINTS = np.array(
+    [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 0, 1], [0, 1, 1], [1, 1, 1],
+     [0.5, 0.5, 0.5]], dtype=np.float64,
+).T
+
+
+def _check_cells(mesh: skfem.MeshHex1) -> None:
+    """Raise if any hexahedron is inverted, twisted or collapsed.
+
+    The Jacobian determinant of the trilinear map is evaluated at the 8 corners and the
+    centre of every cell; a valid mesh has one sign everywhere (skfem's reference
+    orientation makes it negative for positively ordered cells). A cell with the opposite
+    sign somewhere (inverted or bow-tie) or with a vanishing determinant (collapsed) is
+    named.
+    """
+    det = mesh._mapping().detDF(_CHECK_POINTS)  # (ncell, 9), mm³
+    scale = np.abs(det).max()
+    negative = np.count_nonzero(det.mean(axis=1) < 0)
+    sign = -1.0 if 2 * negative >= det.shape[0] else 1.0  # the majority orientation
+    bad = np.nonzero(np.any(det * sign <= 1e-10 * scale, axis=1))[0]
+    if bad.size:
+        raise ValueError(
+            f"mesh has {bad.size} inverted or degenerate hexahedra: cells {bad[:10].tolist()} "
+            "(the Jacobian of the cell map changes sign or vanishes at a corner); fix the "
+            "vertex order or the geometry of those cells"
+        )
+
+
 class Body:
     """A hyperelastic body discretised with hexahedral finite elements.
 
@@ -196,6 +225,7 @@ class Body:
         self.active = active
         self.ncell = int(mesh.nelements)
 
+        _check_cells(mesh)
         factory, intorder, nqp = ELEMENTS[element]
         self._scalar_element = factory()
         self._intorder = intorder

@@ -65,10 +65,48 @@ def hex_mesh(points: NDArray[np.float64], cells_vtk: NDArray[np.int64]) -> skfem
     Returns
     -------
     skfem.MeshHex1
+
+    Raises
+    ------
+    ValueError
+        If a cell is inverted, twisted (bow-tie) or collapsed: its corner Jacobian
+        det[e1, e2, e3] (edges to the three neighbouring corners) is not positive.
     """
-    p = np.ascontiguousarray(np.asarray(points, dtype=np.float64).T)
-    t = np.ascontiguousarray(np.asarray(cells_vtk)[:, _VTK_TO_SKFEM].T.astype(np.int32))
+    points = np.asarray(points, dtype=np.float64)
+    cells_vtk = np.asarray(cells_vtk)
+    check_hexahedra(points, cells_vtk)
+    p = np.ascontiguousarray(points.T)
+    t = np.ascontiguousarray(cells_vtk[:, _VTK_TO_SKFEM].T.astype(np.int32))
     return skfem.MeshHex1(p, t)
+
+
+# neighbours of each VTK hexahedron corner along its three edges, right-handed for a valid cell
+_CORNER_EDGES = np.array(
+    [[1, 3, 4], [2, 0, 5], [3, 1, 6], [0, 2, 7], [7, 5, 0], [4, 6, 1], [5, 7, 2], [6, 4, 3]]
+)
+
+
+def check_hexahedra(points: NDArray[np.float64], cells_vtk: NDArray[np.int64]) -> None:
+    """Raise a ValueError naming VTK-ordered hexahedra with a non-positive corner Jacobian.
+
+    Parameters
+    ----------
+    points : ndarray, shape (npoint, 3)
+        Vertex coordinates in mm.
+    cells_vtk : ndarray, shape (ncell, 8)
+        Vertex ids per cell in VTK order.
+    """
+    xyz = points[cells_vtk]  # (ncell, 8, 3)
+    edges = xyz[:, _CORNER_EDGES] - xyz[:, :, None, :]  # (ncell, 8 corners, 3 edges, 3)
+    det = np.linalg.det(edges)  # (ncell, 8), mm³
+    scale = max(float(np.abs(det).max()), np.finfo(float).tiny)
+    bad = np.nonzero(np.any(det <= 1e-10 * scale, axis=1))[0]
+    if bad.size:
+        raise ValueError(
+            f"mesh has {bad.size} inverted or degenerate hexahedra: cells {bad[:10].tolist()} "
+            "(a corner Jacobian is not positive); fix the vertex order (VTK hexahedron) or "
+            "the geometry of those cells"
+        )
 
 
 def facets_where(

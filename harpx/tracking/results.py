@@ -197,7 +197,10 @@ def tracking_error(
         est.sizes[d] == true.sizes[d] and np.allclose(est[d].values, true[d].values)
         for d in ("z", "y", "x")
     )
-    if not same:
+    if same:
+        # rebuilt sub-voxel means differ from the acquired coordinates by rounding only
+        est = est.assign_coords(z=true.z, y=true.y, x=true.x)
+    else:
         # linear interpolation from the (finer) tracked grid; where a neighbour lies outside
         # the mesh (faces of the body), fall back to the nearest tracked voxel centre
         linear = est.interp(z=true.z, y=true.y, x=true.x)
