@@ -30,6 +30,13 @@ EXPECTATIONS = {
         "opening_angle_sfr": lambda deg: abs(deg) < 1.0,
         "opening_angle_psr": lambda deg: deg > 30.0,
     },
+    "03_tongue.py": {
+        # every muscle within 15 % after the equilibrium correction and the one-pass
+        # calibration (measured -8 % .. -1 %); per-element re-simulated vs tracked fibre
+        # stretch correlate (measured r = 0.88)
+        "t_max_error": lambda e: max(abs(v) for v in e.values()) <= 0.15,
+        "stretch_agreement": lambda c: float(c.correlation_all) > 0.7,
+    },
 }
 
 
