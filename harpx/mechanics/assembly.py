@@ -371,7 +371,9 @@ def cauchy_stress(body: object, u: ArrayLike) -> FloatArray:
     return np.matmul(P, np.swapaxes(F, -1, -2)) / J[..., None, None]
 
 
-def internal_forces(body: object, u: ArrayLike, *, tangent: bool = True) -> Internal:
+def internal_forces(
+    body: object, u: ArrayLike, *, tangent: bool = True, pressure_stiffness: bool = True
+) -> Internal:
     """Internal force vector and consistent tangent of the body's stored energy.
 
     Parameters
@@ -382,6 +384,13 @@ def internal_forces(body: object, u: ArrayLike, *, tangent: bool = True) -> Inte
         Displacement, mm.
     tangent : bool, default True
         Assemble the tangent too.
+    pressure_stiffness : bool, default True
+        Include the initial-stress (geometric) stiffness of the volumetric pressure,
+        (p/J)(cof F ⊗ cof F − cof F ⊙ cof F) (module notes). False gives a
+        Gauss–Newton-type tangent (the residual is unchanged): far from equilibrium a nearly
+        incompressible body (κ ≫ C1) can carry pressures p ≫ μ after a large step, which make
+        the consistent tangent indefinite; without that term the tangent stays positive on
+        the isochoric modes and the next step restores the volume instead of diverging.
 
     Returns
     -------
@@ -415,9 +424,12 @@ def internal_forces(body: object, u: ArrayLike, *, tangent: bool = True) -> Inte
     #   Σ_q (p/J) (cof ⊗ cof - cof ⊙ cof) dV → M_{p/J}[(a,i),(b,k)] - M_{p/J}[(a,k),(b,i)],
     #   pointwise U''-term (U''/Jg) cof ⊗ cof dV → M_{U''/Jg}.
     Bq = np.matmul(G, np.swapaxes(cof, -1, -2)).reshape(nel, nq, 3 * nb)  # (e, q, (a, i))
-    w_geo = p / J * dV
-    Mg = np.matmul(np.swapaxes(Bq, 1, 2), Bq * w_geo[..., None]).reshape(nel, nb, 3, nb, 3)
-    Kvol = Mg - Mg.transpose(0, 1, 4, 3, 2)  # (e, a, i, b, k)
+    if pressure_stiffness:
+        w_geo = p / J * dV
+        Mg = np.matmul(np.swapaxes(Bq, 1, 2), Bq * w_geo[..., None]).reshape(nel, nb, 3, nb, 3)
+        Kvol = Mg - Mg.transpose(0, 1, 4, 3, 2)  # (e, a, i, b, k)
+    else:
+        Kvol = np.zeros((nel, nb, 3, nb, 3))
     if "d2U" in extra:
         w_u = extra["d2U"] * dV
         Kvol += np.matmul(np.swapaxes(Bq, 1, 2), Bq * w_u[..., None]).reshape(nel, nb, 3, nb, 3)
