@@ -127,6 +127,17 @@ def track(
         ``tracked/1`` with displacement, strain, fibre stretch (if fibres), and per-frame
         diagnostics ``epsilon``, ``epsilon_cell``, ``penalty``, ``iterations``,
         ``wall_time``, ``target_reached``; ``displacement_grid`` on the phase grid.
+        Constraint points outside the field of view or the mask carry no force; cells
+        with none left have ``epsilon_cell`` NaN and follow the mechanics.
+
+    Raises
+    ------
+    SchemaError
+        If no constraint point lies in the image data at frame 0, or a later frame has
+        no valid phase at any of them (an all-zero or fully masked frame).
+    ElementInversionError
+        If a Gauss–Newton step inverts elements even after step halving (names the
+        frame and the cells).
 
     Notes
     -----
@@ -186,6 +197,12 @@ def track(
             outcome = track_frame_augmented(
                 body, constraint, u0, multiplier_tolerance=multiplier_tolerance,
                 max_updates=int(max_updates), **common,
+            )
+        if not np.isfinite(outcome.epsilon):  # no constraint point saw data: ε is 0/0
+            raise SchemaError(
+                f"frame {n} (time={float(phase['time'][n])!r} ms) has no valid phase at any "
+                "constraint point of the body (all-zero, fully masked or out-of-view images); "
+                f"drop the frame (ds.drop_isel(time={n})) or fix its images"
             )
         U[n] = outcome.u
         eps[n] = outcome.epsilon
