@@ -21,12 +21,55 @@ Method = Literal["penalty", "augmented-lagrangian"]
 Predictor = Literal["none", "linear"]
 
 
+class PlotMethods:
+    """``ds.harp.plot``: matplotlib pictures of harpx datasets (see :mod:`harpx.plotting`)."""
+
+    def __init__(self, ds: xr.Dataset) -> None:
+        self._ds = ds
+
+    def tag_image(self, **kwargs: Any) -> Any:
+        """One slice of a tagged image. See Also: harpx.plotting.tag_image."""
+        from harpx.plotting import tag_image
+
+        return tag_image(self._ds, **kwargs)
+
+    def phase(self, **kwargs: Any) -> Any:
+        """One slice of a harmonic phase. See Also: harpx.plotting.phase_map."""
+        from harpx.plotting import phase_map
+
+        return phase_map(self._ds, **kwargs)
+
+    def displacement(self, **kwargs: Any) -> Any:
+        """Tracked displacement on a slice. See Also: harpx.plotting.displacement_map."""
+        from harpx.plotting import displacement_map
+
+        return displacement_map(self._ds, **kwargs)
+
+    def strain(self, **kwargs: Any) -> Any:
+        """Green–Lagrange strain per cell near a slice. See Also: harpx.plotting.strain_map."""
+        from harpx.plotting import strain_map
+
+        return strain_map(self._ds, **kwargs)
+
+    def fiber_stretch(self, **kwargs: Any) -> Any:
+        """Fibre stretch per region. See Also: harpx.plotting.fiber_stretch_by_region."""
+        from harpx.plotting import fiber_stretch_by_region
+
+        return fiber_stretch_by_region(self._ds, **kwargs)
+
+
 @xr.register_dataset_accessor("harp")
 class HarpAccessor:
     """harpx methods on an :class:`xarray.Dataset` (``ds.harp``)."""
 
     def __init__(self, ds: xr.Dataset) -> None:
         self._ds = ds
+
+    @property
+    def plot(self) -> PlotMethods:
+        """Pictures: ``ds.harp.plot.tag_image()``, ``.phase()``, ``.displacement()``,
+        ``.strain()``, ``.fiber_stretch()`` (see :mod:`harpx.plotting`)."""
+        return PlotMethods(self._ds)
 
     def validate(self, kind: str | None = None) -> None:
         """Check the dataset against the harpx conventions.
