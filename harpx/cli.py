@@ -1,8 +1,9 @@
 """The ``harpx`` command line.
 
 Subcommands: ``demo`` (the phantom scene end to end), ``phase`` (tagged archive → phase
-archive), ``track`` (phase archive + mesh → tracked archive), ``report`` (summary of a tracked
-archive, optionally against ground truth). Errors print as one line (``--debug`` for the
+archive), ``track`` (phase archive + mesh → tracked archive), ``dicom`` (tagged cine DICOM
+series → tagged archive), ``report`` (summary of a tracked archive, optionally against
+ground truth). Errors print as one line (``--debug`` for the
 traceback); exit codes: 0 success, 1 harpx or input error, 2 usage error.
 """
 
@@ -105,6 +106,29 @@ def _report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _dicom(args: argparse.Namespace) -> int:
+    from harpx.io.dicom import read_tagged
+    from harpx.io.netcdf import to_netcdf
+
+    directions: dict[str, list[tuple[str, Any]]] = {}
+    for item in args.tag:
+        try:
+            series, label, direction = item.split(":")
+        except ValueError:
+            raise ValueError(
+                f"--tag {item!r} must be SERIES:LABEL:DIRECTION, e.g. 'SA tagging:x:row'"
+            ) from None
+        vector = [float(v) for v in direction.split(",")] if "," in direction else direction
+        directions.setdefault(series, []).append((label, vector))
+    ds = read_tagged(
+        args.input, tag_period=args.tag_period, tag_directions=directions,
+        sequence=args.sequence, spacing=args.spacing,
+    )
+    to_netcdf(ds, args.output)
+    print(f"wrote {args.output}: {dict(ds.sizes)}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``harpx`` command."""
     parser = argparse.ArgumentParser(prog="harpx", description=__doc__.splitlines()[0])
@@ -139,6 +163,17 @@ def build_parser() -> argparse.ArgumentParser:
     trk.add_argument("--epsilon", type=float, default=0.05, help="target tracking residual, rad")
     trk.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
     trk.set_defaults(func=_track)
+
+    dcm = sub.add_parser("dicom", help="tagged cine DICOM series -> tagged archive")
+    dcm.add_argument("input", nargs="+", help="DICOM files or folders")
+    dcm.add_argument("output", help="tagged/1 NetCDF archive to write")
+    dcm.add_argument("--tag", action="append", required=True, metavar="SERIES:LABEL:DIRECTION",
+                     help="tag of a series (SeriesDescription, number or UID): label and "
+                          "direction 'row', 'column' or 'x,y,z'; repeat for each tag")
+    dcm.add_argument("--tag-period", type=float, required=True, help="tag spacing, mm")
+    dcm.add_argument("--sequence", choices=["SPAMM", "CSPAMM"])
+    dcm.add_argument("--spacing", type=float, help="isotropic output voxel size, mm")
+    dcm.set_defaults(func=_dicom)
 
     rep = sub.add_parser("report", help="summarise a tracked archive")
     rep.add_argument("archive")

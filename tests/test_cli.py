@@ -38,3 +38,23 @@ def test_demo_small_writes_archives_figures_and_table(tmp_path, capsys):
     # the archive it wrote is a valid tracked/1 result with the same diagnostics
     assert main(["report", str(out / "phantom_hex8.nc")]) == 0
     assert "epsilon" in capsys.readouterr().out
+
+
+def test_dicom_subcommand_writes_a_tagged_archive(tmp_path, capsys):
+    from harpx.io.netcdf import open_dataset
+    from tests.io.test_dicom import SA, write_classic
+
+    write_classic(tmp_path / "sa", SA)
+    out = tmp_path / "tagged.nc"
+    code = main(["dicom", str(tmp_path / "sa"), str(out), "--tag", f"{SA.uid}:x:row",
+                 "--tag", f"{SA.uid}:y:column", "--tag-period", "8", "--sequence", "CSPAMM"])
+    assert code == 0, capsys.readouterr().err
+    ds = open_dataset(out)
+    assert ds.attrs["harpx_schema"] == "tagged/1" and list(ds.tag.values) == ["x", "y"]
+
+
+def test_dicom_subcommand_bad_tag_is_one_line(tmp_path, capsys):
+    code = main(["dicom", str(tmp_path), str(tmp_path / "o.nc"), "--tag", "nonsense",
+                 "--tag-period", "8"])
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and "SERIES:LABEL:DIRECTION" in err and len(err.splitlines()) == 1
