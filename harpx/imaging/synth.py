@@ -133,30 +133,34 @@ def invert_motion(
     X = x.copy() if start is None else np.array(start, dtype=np.float64)
     h = 1e-7 * max(1.0, float(np.max(np.abs(x)))) if x.size else 1e-7
     history: list[float] = []
-    active = np.arange(x.shape[0])
+    # compact working set: points still iterating, written back to X as they converge
+    index = np.arange(x.shape[0])
+    Xa, xa = X.copy(), x
     precond: NDArray[np.float64] | None = None
     previous = np.inf
     for _ in range(max_iter):
-        if active.size == 0:
+        if index.size == 0:
             return X
-        Xa = X[active]
-        r = Xa + displacement(Xa, t) - x[active]
-        err = np.max(np.abs(r), axis=1)
-        worst = float(err.max())
+        r = Xa + displacement(Xa, t) - xa
+        err2 = np.einsum("ij,ij->i", r, r)
+        worst = float(np.sqrt(err2.max()))
         history.append(worst)
-        keep = err >= tol
-        if not keep.all():
-            active, Xa, r = active[keep], Xa[keep], r[keep]
+        done = err2 < tol * tol
+        if done.any():
+            X[index[done]] = Xa[done]
+            keep = ~done
+            index, Xa, xa, r = index[keep], Xa[keep], xa[keep], r[keep]
             if precond is not None:
                 precond = precond[keep]
-        if active.size == 0:
-            return X
+            if index.size == 0:
+                return X
         if worst > 0.25 * previous:  # slow contraction: (re)build the preconditioner here
             precond = _jacobian_inverse(displacement, Xa, t, h)
         previous = worst
-        X[active] = Xa - (r if precond is None else np.einsum("nij,nj->ni", precond, r))
+        Xa -= r if precond is None else np.einsum("nij,nj->ni", precond, r)
+    X[index] = Xa
     raise ConvergenceError(
-        f"inverting the motion at t={t!r} ms failed for {active.size} of {x.shape[0]} points "
+        f"inverting the motion at t={t!r} ms failed for {index.size} of {x.shape[0]} points "
         f"after {max_iter} iterations (max |X + u(X) - x| = {history[-1]:.3g} mm > "
         f"tol={tol:g} mm); the motion may fold (det(I + grad u) <= 0) or be too large for "
         "the iteration; pass inverse=callable(x, t) with the exact inverse",
@@ -290,17 +294,21 @@ def _offsets(n: int, width: float) -> NDArray[np.float64]:
 def _lattice_blocks(
     centres: Sequence[NDArray[np.float64]], offsets: Sequence[NDArray[np.float64]]
 ) -> list[tuple[slice, NDArray[np.float64]]]:
-    """Split the sample lattice into z slabs: (voxel slice along z, points (n, 3) x-y-z)."""
+    """Split the sample lattice into z slabs: (voxel slice along z, points (n, 3) x-y-z).
+
+    Points are ordered (sub-z, sub-y, sub-x, z, y, x) so that a voxel average is a mean over
+    the leading axis of contiguous rows (:func:`_voxel_mean`).
+    """
     cz, cy, cx = centres
     oz, oy, ox = offsets
     per_z = len(oz) * cy.size * len(oy) * cx.size * len(ox)
     bz = max(1, BLOCK_POINTS // max(per_z, 1))
-    py = (cy[:, None] + oy[None, :])[None, None, :, :, None, None]
-    px = (cx[:, None] + ox[None, :])[None, None, None, None, :, :]
+    py = (oy[:, None] + cy[None, :])[None, :, None, None, :, None]
+    px = (ox[:, None] + cx[None, :])[None, None, :, None, None, :]
     blocks = []
     for z0 in range(0, cz.size, bz):
         zs = slice(z0, min(cz.size, z0 + bz))
-        pz = (cz[zs, None] + oz[None, :])[:, :, None, None, None, None]
+        pz = (oz[:, None] + cz[None, zs])[:, None, None, :, None, None]
         shape = np.broadcast_shapes(pz.shape, py.shape, px.shape)
         pts = np.empty((*shape, 3))
         pts[..., 0] = px
@@ -312,9 +320,8 @@ def _lattice_blocks(
 
 def _voxel_mean(values: NDArray[np.float64], nvox_z: int, centres, offsets) -> NDArray:
     _, cy, cx = centres
-    oz, oy, ox = offsets
-    shaped = values.reshape(nvox_z, len(oz), cy.size, len(oy), cx.size, len(ox))
-    return shaped.mean(axis=(1, 3, 5))
+    nsub = int(np.prod([len(o) for o in offsets]))
+    return values.reshape(nsub, -1).mean(axis=0).reshape(nvox_z, cy.size, cx.size)
 
 
 def _crop_kspace(volume: NDArray[np.float64], plane: tuple[int, int], fraction: float) -> NDArray:
