@@ -90,6 +90,7 @@ def _track(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
+    import harpx.accessor  # noqa: F401  (ds.harp)
     from harpx.io.netcdf import open_dataset
     from harpx.tracking.results import tracking_error
 
@@ -100,6 +101,13 @@ def _report(args: argparse.Namespace) -> int:
     print("|---" * (len(cols) + 1) + "|")
     for i, t in enumerate(ds.time.values):
         print(f"| {t:.0f} | " + " | ".join(f"{float(ds[c][i]):.4g}" for c in cols) + " |")
+    if args.figure:
+        import matplotlib.pyplot as plt
+
+        ax = ds.harp.plot.displacement()
+        ax.figure.savefig(args.figure, dpi=110)
+        plt.close(ax.figure)
+        print(f"wrote {args.figure}")
     if args.truth:
         err = tracking_error(ds, open_dataset(args.truth))
         print(f"error against truth: mean {float(err.mean_all):.3f} ± {float(err.sd_all):.3f} mm, p95 {float(err.p95_all):.3f} mm, max {float(err.max_all):.3f} mm")
@@ -178,6 +186,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="summarise a tracked archive")
     rep.add_argument("archive")
     rep.add_argument("--truth", help="tagged archive with displacement_true")
+    rep.add_argument("--figure", help="write a displacement map of the last frame (PNG)")
     rep.set_defaults(func=_report)
     return parser
 

@@ -36,8 +36,10 @@ def test_demo_small_writes_archives_figures_and_table(tmp_path, capsys):
     for name in ("phantom_hex8.nc", "phantom_harp.nc", "phantom_displacement_maps.png", "phantom_error_vs_runtime.png"):
         assert (out / name).stat().st_size > 0, name
     # the archive it wrote is a valid tracked/1 result with the same diagnostics
-    assert main(["report", str(out / "phantom_hex8.nc")]) == 0
+    figure = tmp_path / "map.png"
+    assert main(["report", str(out / "phantom_hex8.nc"), "--figure", str(figure)]) == 0
     assert "epsilon" in capsys.readouterr().out
+    assert figure.stat().st_size > 0
 
 
 def test_dicom_subcommand_writes_a_tagged_archive(tmp_path, capsys):
