@@ -21,12 +21,12 @@ EXPECTATIONS = {
         "harp_error": lambda err: float(err.mean_all) > 0.9,
     },
     "02_left_ventricle.py": {
-        # both references track the small LV to ε = 0.2 rad within 0.65 mm mean (measured
-        # SFR 0.50, PSR 0.46 mm; tests/scenes/test_lv.py explains the bound); the radial cut
+        # both references track the small LV to ε = 0.2 rad within 0.8 mm mean (measured
+        # SFR 0.61, PSR 0.59 mm; tests/scenes/test_lv.py explains the bound); the radial cut
         # leaves the stress-free ring closed (exactly 0°) and opens the prestretched one
         # (measured 139°)
-        "sfr_error": lambda err: float(err.mean_all) < 0.65,
-        "psr_error": lambda err: float(err.mean_all) < 0.65,
+        "sfr_error": lambda err: float(err.mean_all) < 0.8,
+        "psr_error": lambda err: float(err.mean_all) < 0.8,
         "opening_angle_sfr": lambda deg: abs(deg) < 1.0,
         "opening_angle_psr": lambda deg: deg > 30.0,
     },

@@ -87,9 +87,7 @@ results = {}
 for reference in ("stress-free", "prestretched"):
     body = scene.body(reference)
     start = time.perf_counter()
-    tracked = phase.harp.track(
-        body, epsilon=0.2, dirichlet=scene.dirichlet(), predictor="none"
-    )
+    tracked = phase.harp.track(body, epsilon=0.2, dirichlet=scene.dirichlet())
     seconds = time.perf_counter() - start
     error = tracked.harp.error(tagged)
     results[reference] = (body, tracked, error)

@@ -17,10 +17,11 @@ tracker never shares the truth's discretisation (DESIGN §5):
 * the base held in z (``Fixed("base", (2,))``) and pinned in-plane at four mid-wall points
   (x-pins at ±y, y-pins at ±x), which removes the in-plane rigid motions.
 
-Frame ``n`` of ``N`` has the activation level :math:`a_n = (n/(N-1))^{p}` (exponent ``p``),
-active tension :math:`a_n t_{max}` and pressure :math:`a_n p_{es}`; frame 0 is the
-stress-free, unloaded reference (the images' reference geometry). The fine-mesh equilibrium
-is followed by Newton continuation in the activation level.
+The activation level :math:`a` (active tension :math:`a\,t_{max}`, cavity pressure
+:math:`a\,p_{es}`) is continued from 0 to 1 by Newton's method on the fine mesh; the frame
+levels are then chosen so that the ejected volume follows a smooth ejection curve
+:math:`(1 - \cos \pi s)/2` over equally spaced frames (:func:`simulate_systole`). Frame 0
+is the stress-free, unloaded reference (the images' reference geometry).
 
 Images
 ------
@@ -114,8 +115,24 @@ GEOMETRY = VentricleGeometry(inner=(25.0, 70.0), outer=(35.0, 78.0), truncation=
 
 
 def myocardium(kappa: float = 350.0) -> Guccione:
-    """Passive myocardium of Guccione et al. (1991, 1995): C = 0.88 kPa, bf = 18.5, bt = 3.58,
-    bfs = 1.63, with bulk modulus ``kappa`` (kPa)."""
+    """Passive canine myocardium of Guccione et al. (1991, 1995).
+
+    Parameters
+    ----------
+    kappa : float, default 350
+        Bulk modulus in kPa (typical values 100--350 kPa keep ``κ/C`` in the hundreds).
+
+    Returns
+    -------
+    Guccione
+        ``C = 0.88 kPa, bf = 18.5, bt = 3.58, bfs = 1.63``.
+
+    Examples
+    --------
+    >>> from harpx.scenes.lv import myocardium
+    >>> myocardium().c, myocardium().bf
+    (0.88, 18.5)
+    """
     return Guccione(c=0.88, bf=18.5, bt=3.58, bfs=1.63, kappa=kappa)
 
 
@@ -167,7 +184,19 @@ SIZES: dict[str, LVSize] = {
 
 
 def base_conditions(geometry: VentricleGeometry = GEOMETRY) -> list[Any]:
-    """Base held in z plus four in-plane pins at mid-wall (removes rigid motions)."""
+    """Base held in z plus four in-plane pins at mid-wall (removes the rigid motions).
+
+    Parameters
+    ----------
+    geometry : VentricleGeometry
+        The ventricle (base plane and mid-wall radius there), mm.
+
+    Returns
+    -------
+    list
+        ``[Fixed("base", (2,)), NodeFixed(...)]``: u_y = 0 at the mid-wall base nodes on
+        ±x, u_x = 0 at those on ±y.
+    """
     a, c = (float(v) for v in geometry.semi_axes(0.5))
     zb = geometry.truncation
     r = a * np.sqrt(max(0.0, 1.0 - (zb / c) ** 2))
@@ -910,8 +939,8 @@ def lv(
     seed : int, default 0
         Seed of the image noise.
     systole : Systole, optional
-        Loading of the forward simulation (default ``Systole()``: 60 kPa, 8 kPa,
-        exponent 3).
+        Loading of the forward simulation (default ``Systole()``: active tension parameter
+        60 kPa, end-systolic pressure 8 kPa).
     linear_solver : str, default "auto"
         Linear solver of the forward simulation.
 
