@@ -75,7 +75,8 @@ def run(size: str, rows: list[str]) -> list[dict]:
             label = f"HARP (upsample {upsample})"
             extra = {}
         else:
-            material = NeoHookean(c1=1.0 * cfg.get("c1_scale", 1.0), kappa=120.0 * cfg.get("c1_scale", 1.0))
+            # only C1 changes: κ stays 120 kPa (a different material, not a rescaled one)
+            material = NeoHookean(c1=1.0 * cfg.get("c1_scale", 1.0), kappa=120.0)
             body = Body(_mesh(size, cfg.get("coarse", False)), material, element=cfg["element"])
             method = cfg.get("method", "penalty")
             out = track(phase, body, method=method, epsilon=0.05)
