@@ -30,8 +30,10 @@ are reached and :math:`\|R_F\| \le \max(\mathrm{tol}\cdot\rho, \mathrm{atol})`, 
 force scale :math:`\rho` = the larger of the free residual at the start and the reaction
 norm :math:`\|R_D\|`. A step that diverges (``‖R_F‖`` grows four times in a row), stalls
 (no new smallest ``‖R_F‖`` in six iterations, or ``max_iterations``), produces NaN or inverts
-an element is retried with half the load increment, at most ``max_cutbacks`` times in a row;
-after a converged step the increment doubles again up to ``1/steps``.
+an element is retried with half the load increment, at most ``max_cutbacks`` times in a row
+and never below ``1/(steps · 2**max_cutbacks)`` (otherwise, near a limit point, a converged
+tiny step between failures would reset the count and the load factor would creep towards it
+forever); after a converged step the increment doubles again up to ``1/steps``.
 """
 
 from __future__ import annotations
@@ -487,7 +489,8 @@ def solve(
         Safeguarded line search (see the module docstring): halve steps that invert
         elements; energy-slope line search after two consecutive residual increases.
     max_cutbacks : int, default 6
-        Consecutive halvings of a failing increment before giving up.
+        Consecutive halvings of a failing increment before giving up; the increment never
+        falls below ``1/(steps · 2**max_cutbacks)`` either.
     linear_solver : str or LinearSolver, default "auto"
         See :mod:`harpx.mechanics.linsolve`.
     raise_on_failure : bool, default True
@@ -555,11 +558,14 @@ def solve(
         consecutive += 1
         if out.reason == "inverted":
             inverted = (out.cells, s, out.history)
-        if consecutive > max_cutbacks:
+        # give up after max_cutbacks halvings in a row, or once the increment would fall
+        # below its floor: converged tiny steps near a limit point must not reset the
+        # count forever (the load factor would creep towards the limit point)
+        if consecutive > max_cutbacks or 0.5 * ds < nominal * 0.5**max_cutbacks:
             if inverted is not None:  # an inversion in this failure chain is the root cause
-                err = _failure("inverted", inverted[0], inverted[1], inverted[2], consecutive - 1)
+                err = _failure("inverted", inverted[0], inverted[1], inverted[2], res.cutbacks)
             else:
-                err = _failure(out.reason, out.cells, s, out.history, consecutive - 1)
+                err = _failure(out.reason, out.cells, s, out.history, res.cutbacks)
             res.u, res.min_jacobian, res.message = u, min_j, str(err)
             res.iterations, res.time_assembly, res.time_solve = (
                 nt.iterations,
