@@ -1,0 +1,277 @@
+"""Fast subset of the stability report (benchmarks/stability.py, issue 7).
+
+Stiff materials, large per-frame motion, extreme penalties, near-inversion and degenerate
+data each end in a finite result or a clear, named error — never NaN and never a hang.
+Scenes are small (coarse meshes, 1.5 mm voxels, 1–5 frames) so the file runs in well under a
+minute; the full sweeps with their timings live in the benchmark.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from harpx.errors import ConvergenceError, ElementInversionError, HarpxError, SchemaError
+from harpx.imaging.harp import extract_phase
+from harpx.imaging.harptrack import track_harp
+from harpx.mechanics.body import Body
+from harpx.mechanics.linsolve import LinearSolver
+from harpx.mechanics.loads import Fixed, Pressure
+from harpx.mechanics.materials import NeoHookean
+from harpx.mechanics.mesh import box
+from harpx.mechanics.newton import solve
+from harpx.scenes._rigid import RigidRotation, Translation, cylinder_scene, frame_profile
+from harpx.scenes.phantom import phantom
+from harpx.tracking.constraint import PhaseConstraint
+from harpx.tracking.equilibrium import equilibrate
+from harpx.tracking.results import tracking_error
+from harpx.tracking.track import track
+
+PERIOD = 8.0  # tag period, mm
+FRAME = 18.0  # ms
+
+
+@contextlib.contextmanager
+def deadline(seconds: float) -> Iterator[None]:
+    """Fail (instead of hanging the suite) if the block runs longer than ``seconds``."""
+
+    def expire(signum: int, frame: object) -> None:
+        raise TimeoutError(f"still running after {seconds} s: the solver hangs")
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def translation(step: float, frames: int = 5, ramp: int = 0):
+    """12 mm cylinder translating along the x tag, ``step`` tag periods per frame."""
+    times = np.arange(frames) * FRAME
+    offsets = frame_profile(step * PERIOD, frames, ramp=ramp)
+    motion = Translation(times=tuple(times), offsets=tuple(offsets))
+    return cylinder_scene(motion, times=times, travel=float(offsets[-1]))
+
+
+def rotation(step: float, frames: int = 2, snr: float | None = None):
+    """24 mm cylinder turning rigidly; its edge moves ``step`` tag periods per frame."""
+    times = np.arange(frames) * FRAME
+    angles = frame_profile(step * PERIOD / 24.0, frames)
+    motion = RigidRotation(times=tuple(times), angles=tuple(angles))
+    return cylinder_scene(motion, times=times, radius=24.0, n_radial=3, n_circumferential=24,
+                          snr=snr)
+
+
+def mean_error(tracked, tagged) -> float:
+    err = tracking_error(tracked, tagged)
+    values = err["mean"].values[1:]
+    assert np.all(np.isfinite(values)), f"NaN in the per-frame error {values}"
+    return float(err.mean_all)
+
+
+# ----------------------------------------------------------------------------- stiffness
+@pytest.fixture(scope="module")
+def small_phantom():
+    scene = phantom("small")
+    return scene, extract_phase(scene.tagged)
+
+
+def test_nearly_incompressible_model_tracks_like_a_moderate_one(small_phantom):
+    scene, phase = small_phantom
+    errors = {}
+    for ratio in (1e2, 1e5):
+        body = scene.body("hex8", material=NeoHookean(c1=1.0, kappa=ratio))
+        out = track(phase, body)
+        assert np.isfinite(out.epsilon.values).all() and out.target_reached.all(), (
+            ratio, out.epsilon.values)
+        errors[ratio] = mean_error(out, scene.tagged)
+    # the issue's criterion: κ/C1 = 1e5 within 10 % of κ/C1 = 1e2 (measured 0.200 vs
+    # 0.197 mm; with the consistent pressure stiffness in the Gauss–Newton tangent it was
+    # 3.0 mm: the tangent turned indefinite after the first step and the model diverged)
+    assert abs(errors[1e5] - errors[1e2]) <= 0.1 * errors[1e2], errors
+
+
+# ----------------------------------------------------------------------------- large motion
+@pytest.mark.parametrize(
+    ("make", "carrier"),
+    [
+        # one frame of a rigid rotation: no history, so no predictor; the slower centre
+        # and the mechanics that couple it to the edge carry the edge past the wrap
+        pytest.param(lambda: rotation(0.75), "mechanics + slower centre", id="rotation"),
+        # a uniform translation reaching 0.75 period per frame after a two-frame ramp:
+        # nothing moves less, the motion predictor carries it
+        pytest.param(lambda: translation(0.75, ramp=2), "predictor", id="translation"),
+    ],
+)
+def test_fe_holds_three_quarter_period_steps_where_harp_jumps(make, carrier):
+    scene = make()
+    phase = extract_phase(scene.tagged)
+    fe = mean_error(track(phase, scene.body()), scene.tagged)
+    harp = float(tracking_error(track_harp(phase, points=scene.tagged), scene.tagged).mean_all)
+    # noise-free images: FE measured 0.08 mm (rotation) and 0.001 mm (translation), bounded
+    # by the issue's 0.5 mm (a third of a voxel); HARP starts each point from its last
+    # position and lands a tag (8 mm) away wherever the step exceeds half a period
+    # (measured 3.0 and 4.0 mm mean), bounded below by the issue's 2 mm
+    assert fe < 0.5, (carrier, fe)
+    assert harp > 2.0, (carrier, harp)
+
+
+def test_uniform_translation_needs_the_predictor():
+    scene = translation(0.75, ramp=2)
+    phase = extract_phase(scene.tagged)
+    without = mean_error(track(phase, scene.body(), predictor="none"), scene.tagged)
+    # wrapped phase cannot tell +0.75 from −0.25 period and a rigid translation costs the
+    # mechanics nothing either way: without the predictor the model jumps a tag like HARP
+    # (measured 6.3 mm), so the predictor, not the mechanics, carries the uniform case
+    assert without > 2.0, without
+
+
+# ----------------------------------------------------------------------------- penalty
+def test_epsilon_does_not_rise_with_a_pinned_penalty():
+    scene = rotation(0.25, snr=10.0)
+    phase = extract_phase(scene.tagged)
+    eps = []
+    for lam in (0.1, 1.0, 10.0, 100.0, 1e4):
+        # penalty = penalty_limit pins λ; an unreachable target makes every frame end there
+        out = track(phase, scene.body(), penalty=lam, penalty_limit=lam, epsilon=1e-6)
+        assert np.isfinite(out.displacement.values).all(), lam
+        eps.append(float(out.epsilon.values[1]))
+    # a stiffer data term can only lower the misfit it penalises (measured 0.041, 0.033,
+    # 0.020, 0.013, 0.011 rad); 1e-3 rad of slack allows for the Gauss–Newton stopping
+    # tolerance (0.01 mm × |k| ≈ 0.008 rad at a point, averaged over thousands of points)
+    # where ε saturates at the noise floor. On the small phantom, whose edge steps exceed
+    # half a period, ε rises beyond 10³ × the default λ (the data overpower the mechanics
+    # across the wrap): that limit is reported by the benchmark, not hidden here
+    assert np.all(np.diff(eps) <= 1e-3), eps
+
+
+# ----------------------------------------------------------------------------- bounded runs
+@pytest.mark.parametrize(
+    ("make", "kwargs"),
+    [
+        pytest.param(lambda: translation(0.25, frames=3), {"penalty": 1e-3, "penalty_limit": 1e-3},
+                     id="penalty-1e-3"),
+        pytest.param(lambda: translation(0.25, frames=3), {"penalty": 1e6, "penalty_limit": 1e6},
+                     id="penalty-1e6"),
+        pytest.param(lambda: translation(1.0, frames=3), {}, id="full-period-steps"),
+        pytest.param(lambda: rotation(0.5, snr=3.0), {}, id="snr-3"),
+    ],
+)
+def test_extreme_cases_end_in_a_finite_result_or_a_named_error(make, kwargs):
+    scene = make()
+    phase = extract_phase(scene.tagged)
+    start = time.perf_counter()
+    with deadline(60.0):  # measured ≤ 4 s; a hang fails here instead of stalling the suite
+        try:
+            out = track(phase, scene.body(), **kwargs)
+        except HarpxError as exc:  # a clear error is an accepted ending
+            assert str(exc), type(exc)
+            return
+    # a result: no NaN anywhere in what the user reads
+    for name in ("displacement", "epsilon", "penalty", "green_strain"):
+        assert np.isfinite(out[name].values).all(), name
+    assert time.perf_counter() - start < 60.0
+
+
+# ----------------------------------------------------------------------------- near-inversion
+def test_pressed_cube_near_a_limit_point_fails_clearly_and_promptly():
+    body = Body(box((10.0, 10.0, 10.0), (3, 3, 3)), NeoHookean(c1=1.0, kappa=100.0))
+    # 100 C1 of follower pressure has a limit point near s = 0.05; the cut-back loop once
+    # crept towards it forever (tiny converged steps reset the cut-back count)
+    with deadline(60.0), pytest.raises(ConvergenceError, match=r"at load factor s="):
+        solve(body, [Fixed("bottom"), Pressure("top", 100.0)], steps=4)
+    with deadline(60.0), pytest.raises(ElementInversionError, match=r"cells \[") as info:
+        solve(body, [Fixed("bottom"), Pressure("top", 1000.0)], steps=4)
+    assert info.value.cells, "the inverted cells are named"
+
+
+def test_tracking_step_that_inverts_names_the_frame_and_cells():
+    scene = translation(0.0, frames=2)  # static images
+    phase = extract_phase(scene.tagged)
+    body = scene.body()
+    constraint = PhaseConstraint(body, phase)
+    constraint.set_frame(1)
+    constraint.penalty = constraint.penalty_scale()
+    squeeze = [Pressure("top", 100.0), Pressure("bottom", 100.0)]
+    # without halvings the crushing step must raise, naming the frame and the cells
+    with pytest.raises(ElementInversionError, match=r"of frame 1 inverts cells \[") as info:
+        equilibrate(body, constraint, np.zeros(body.ndof), terms=squeeze,
+                    solver=LinearSolver(), max_halvings=0, max_iterations=20)
+    assert info.value.cells
+    # with the default halvings the same load is survived: J stays positive
+    res = equilibrate(body, constraint, np.zeros(body.ndof), terms=squeeze,
+                      solver=LinearSolver(), max_iterations=20)
+    assert np.isfinite(res.u).all() and body.jacobian(res.u).min() > 0.0
+
+
+# ----------------------------------------------------------------------------- degenerate data
+@pytest.fixture(scope="module")
+def moving():
+    return translation(0.25, frames=4)
+
+
+def _empty_mask(ds):
+    ds["mask"][:] = False
+
+
+def _one_tag_masked(ds):
+    ds["mask"][2] = False
+
+
+def _zero_frame(ds):
+    ds["image"][:, 2] = 0.0
+
+
+def _nan_slice(ds):
+    ds["image"][0, :, 2] = np.nan
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        pytest.param(_empty_mask, "no constraint point of the body lies inside", id="empty-mask"),
+        pytest.param(_one_tag_masked, "no constraint point of the body lies inside",
+                     id="one-tag-masked"),
+        pytest.param(_zero_frame, r"frame 2 \(time=36.0 ms\) has no valid phase", id="zero-frame"),
+        pytest.param(_nan_slice, "'image' has .* non-finite values", id="nan-slice"),
+    ],
+)
+def test_degenerate_data_raise_named_errors(moving, edit, match):
+    ds = moving.tagged.copy(deep=True)
+    edit(ds)
+    with pytest.raises(SchemaError, match=match):
+        track(ds, moving.body())
+
+
+def test_tiny_mask_tracks_what_it_sees_and_reports_the_rest():
+    scene = rotation(0.25)
+    ds = scene.tagged.copy(deep=True)
+    ds["mask"][:] = False
+    cz, cy, cx = (ds.sizes[d] // 2 for d in ("z", "y", "x"))
+    ds["mask"][:, cz - 1:cz + 1, cy - 1:cy + 1, cx - 1:cx + 1] = True  # 8 voxels at the axis
+    out = track(ds, scene.body())
+    assert np.isfinite(out.displacement.values).all()
+    no_data = np.isnan(out.epsilon_cell.values[1]).sum()
+    # the 8 voxels lie within 2.1 mm of the axis, which move 0.18 mm in the frame, so they
+    # keep their points; every other cell has no data and is reported as such (NaN ε_cell,
+    # measured 208 of 216 cells), not silently fitted
+    assert no_data > 0.9 * out.sizes["cell"], no_data
+    assert np.isfinite(out.epsilon.values).all()
+
+
+def test_mesh_partly_outside_the_field_of_view_is_reported(moving):
+    cropped = moving.tagged.sel(x=slice(None, 4.0))  # a third of the body is cut off
+    out = track(cropped, moving.body())
+    assert np.isfinite(out.displacement.values).all()
+    outside = np.isnan(out.epsilon_cell.values[1:]).all(axis=0)
+    # cells beyond the field of view carry no constraint: NaN ε_cell (measured 32 of 96)
+    # and a finite displacement from the mechanics; the others still meet the ε target
+    assert outside.any() and not outside.all(), outside.sum()
+    assert out.target_reached.values[1:].all(), out.epsilon.values
