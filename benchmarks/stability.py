@@ -309,6 +309,7 @@ def motion_cases() -> Iterable[Case]:
                     per_frame = {k: float(e[k].values[n]) for k in ("mean", "p95", "max")}
                     per_frame["epsilon"] = float(o.epsilon.values[n])
                     per_frame["iterations"] = int(o.iterations.values[n])
+                    per_frame["wall_time"] = float(o.wall_time.values[n])
                     if "target_reached" in o:
                         reached = bool(o.target_reached.values[n])
                         per_frame["status"] = "converged" if reached else "not reached"
@@ -684,10 +685,11 @@ def plot(rows: list[Row], out: Path) -> list[Path]:
         if swept and r.get("mean") is not None:
             groups.setdefault(str(r["group"]), []).append(r)
     for group, members in groups.items():
-        fig, (ax_e, ax_t) = plt.subplots(1, 2, figsize=(11, 4), layout="constrained")
         series: dict[str, list[Row]] = {}
         for r in members:
             series.setdefault(f"{r['case']} — {r.get('method', '')}", []).append(r)
+        height = 4.0 + 0.17 * ((len(series) + 1) // 2)
+        fig, (ax_e, ax_t) = plt.subplots(1, 2, figsize=(11, height), layout="constrained")
         for label, rs in series.items():
             rs = sorted(rs, key=lambda r: float(r["value"]))
             x = [float(r["value"]) for r in rs]
@@ -707,7 +709,8 @@ def plot(rows: list[Row], out: Path) -> list[Path]:
         ax_t.set_ylabel("wall time (s)")
         ax_e.set_title(f"{group}: error against truth", fontsize=10)
         ax_t.set_title(f"{group}: run time", fontsize=10)
-        ax_e.legend(fontsize=6, loc="best")
+        handles, labels = ax_e.get_legend_handles_labels()
+        fig.legend(handles, labels, fontsize=7, loc="outside lower center", ncol=2)
         path = out / f"stability_{group.replace(' ', '_')}.png"
         fig.savefig(path, dpi=110)
         plt.close(fig)
@@ -715,13 +718,36 @@ def plot(rows: list[Row], out: Path) -> list[Path]:
     return written
 
 
+def read_csv(path: Path) -> list[Row]:
+    """Rows of a ``stability.csv`` with numbers parsed back (for ``--replot``)."""
+    rows = []
+    with open(path, newline="") as fh:
+        for raw in csv.DictReader(fh):
+            row: Row = {}
+            for key, text in raw.items():
+                if text in ("", None):
+                    continue
+                try:
+                    row[key] = int(text) if text.lstrip("-").isdigit() else float(text)
+                except ValueError:
+                    row[key] = text
+            rows.append(row)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--groups", nargs="+", choices=list(GROUPS), default=list(GROUPS))
     parser.add_argument("--timeout", type=float, default=240.0, help="wall-time bound per case, s")
     parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument("--replot", action="store_true",
+                        help="redraw the PNGs from an existing stability.csv")
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.replot:
+        for path in plot(read_csv(args.out / "stability.csv"), args.out):
+            print("wrote", path)
+        return
     start = time.perf_counter()
     rows: list[Row] = []
     for group in args.groups:
