@@ -278,13 +278,15 @@ class Internal:
     Attributes
     ----------
     r : ndarray, shape (ndof,) or None
-        Internal force vector ``∂Π/∂u`` (mN = kPa·mm²); None if elements inverted.
+        Internal force vector ``∂Π/∂u`` (mN = kPa·mm²); None if elements inverted (or
+        their stress overflowed).
     K : scipy.sparse.csr_matrix or None
         Consistent tangent on ``sparsity(body)``.
     min_jacobian : float
         Smallest ``det F`` over all Gauss points.
     inverted_cells : ndarray of int
-        Cells with ``det F <= 0`` at some Gauss point.
+        Cells with ``det F <= 0`` at some Gauss point, or else cells whose stress or
+        tangent is not finite (an exponential law overflowed at extreme strain).
     """
 
     r: FloatArray | None
@@ -395,8 +397,8 @@ def internal_forces(
     Returns
     -------
     Internal
-        ``r`` and ``K`` are None when some Gauss point has ``det F <= 0`` (then
-        ``inverted_cells`` lists the cells).
+        ``r`` and ``K`` are None when some Gauss point has ``det F <= 0``, or some cell's
+        stress or tangent is not finite (then ``inverted_cells`` lists the cells).
     """
     F = body.deformation_gradient(u)  # type: ignore[attr-defined]
     Jq, _ = _det_cof(F)
@@ -407,6 +409,13 @@ def internal_forces(
     P, A = material_response(body, F, tangent=tangent)
     p, cof, J, extra = _volumetric(body, F)
     P = P + p[..., None, None] * cof
+    # an exponential law (Guccione) overflows at extreme strain before det F reaches 0: such
+    # a state is as inadmissible as an inverted one (the caller halves its step)
+    finite = np.isfinite(P.reshape(P.shape[0], -1).sum(axis=1))
+    if A is not None:
+        finite &= np.isfinite(A.reshape(A.shape[0], -1).sum(axis=1))
+    if not finite.all():
+        return Internal(None, None, min_j, np.nonzero(~finite)[0])
     G = body.grad_N  # type: ignore[attr-defined]  (e, q, a, J)
     dV = body.dV  # type: ignore[attr-defined]
     ed = body.element_dofs  # type: ignore[attr-defined]

@@ -179,6 +179,7 @@ def equilibrate(
         else:
             raise ElementInversionError(
                 f"Gauss-Newton step {iteration} of frame {constraint.frame} inverts cells "
+                "(det F <= 0 or a non-finite stress) "
                 f"{internal_trial.inverted_cells[:10].tolist()} even after {max_halvings} "
                 "halvings; lower the penalty or track with more frames",
                 internal_trial.inverted_cells,

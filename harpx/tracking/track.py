@@ -18,6 +18,7 @@ import xarray as xr
 from tqdm.auto import tqdm
 
 from harpx.errors import SchemaError
+from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.schema import validate
 from harpx.tracking.augmented import track_frame_augmented
@@ -48,8 +49,8 @@ def _predict(body: Any, constraint: PhaseConstraint, last: np.ndarray, before: n
     best, best_eps = last, np.inf
     for alpha in PREDICTOR_FACTORS:  # three candidates, each one image sampling
         guess = last + alpha * (last - before)
-        if alpha and body.jacobian(guess).min() <= 0.0:  # folds the mesh: not a candidate
-            continue
+        if alpha and internal_forces(body, guess, tangent=False).r is None:
+            continue  # folds the mesh (or overstretches it): not a candidate
         eps = constraint.state(guess).epsilon()
         if eps < best_eps:
             best, best_eps = guess, eps
