@@ -406,7 +406,8 @@ def internal_forces(
     bad = np.nonzero(~(Jq > 0.0).all(axis=1))[0]
     if bad.size or not np.isfinite(min_j):
         return Internal(None, None, min_j, bad)
-    P, A = material_response(body, F, tangent=tangent)
+    with np.errstate(over="ignore", invalid="ignore"):  # checked just below
+        P, A = material_response(body, F, tangent=tangent)
     p, cof, J, extra = _volumetric(body, F)
     P = P + p[..., None, None] * cof
     # an exponential law (Guccione) overflows at extreme strain before det F reaches 0: such

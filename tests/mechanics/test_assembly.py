@@ -188,3 +188,18 @@ def test_inverted_cells_are_reported():
     res = internal_forces(body, u)
     assert res.r is None and res.K is None and res.min_jacobian <= 0
     np.testing.assert_array_equal(res.inverted_cells, [1])
+
+
+def test_overflowing_stress_is_inadmissible_like_inversion():
+    # Guccione's exp(Q) overflows at fibre stretch ~4 with bf = 18.5 (Q = bf E_ff² > 709)
+    # while det F stays positive: the state must be rejected by cell, not returned as NaN
+    body = Body(box((1.0, 1.0, 1.0), (2, 1, 1)), Guccione(c=0.88, bf=18.5, bt=3.58, bfs=1.63,
+                kappa=350.0), fibers=np.tile([1.0, 0.0, 0.0], (2, 1)))  # fmt: skip
+    u = np.zeros(body.ndof)
+    u[body.facet_dofs("right", (0,))] = 3.0  # right cell stretched by 7 along the fibres
+    res = internal_forces(body, u)
+    assert res.r is None and res.K is None and res.min_jacobian > 0
+    np.testing.assert_array_equal(res.inverted_cells, [1])
+    u[body.facet_dofs("right", (0,))] = 0.1  # moderate stretch: admissible and finite
+    res = internal_forces(body, u)
+    assert res.r is not None and np.isfinite(res.r).all() and np.isfinite(res.K.data).all()
