@@ -237,7 +237,7 @@ def _nan_slice(ds):
     ("edit", "match"),
     [
         pytest.param(_empty_mask, "no constraint point of the body lies inside", id="empty-mask"),
-        pytest.param(_one_tag_masked, "no constraint point of the body lies inside",
+        pytest.param(_one_tag_masked, r"tag \['z'\] has no data at any constraint point",
                      id="one-tag-masked"),
         pytest.param(_zero_frame, r"frame 2 \(time=36.0 ms\) has no valid phase", id="zero-frame"),
         pytest.param(_nan_slice, "'image' has .* non-finite values", id="nan-slice"),

@@ -225,7 +225,7 @@ class PhaseSampler:
 
     # ------------------------------------------------------------------------------------
     def sample(
-        self, points: ArrayLike
+        self, points: ArrayLike, *, per_tag: bool = False
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
         """Phase and phase gradient of every tag at physical points.
 
@@ -233,6 +233,10 @@ class PhaseSampler:
         ----------
         points : array_like, shape (n, 3)
             Positions in mm, columns (x, y, z).
+        per_tag : bool, default False
+            Report validity per tag, shape (n, ntag): a point inside one stack's slab
+            (e.g. short-axis slices) but outside another's (long-axis slices) keeps the
+            tags it has.
 
         Returns
         -------
@@ -240,12 +244,15 @@ class PhaseSampler:
             Wrapped harmonic phase in rad, in [-π, π).
         grad : numpy.ndarray, shape (n, ntag, 3)
             Spatial phase gradient in rad/mm, columns (x, y, z).
-        valid : numpy.ndarray of bool, shape (n,)
+        valid : numpy.ndarray of bool, shape (n,) or (n, ntag)
             Inside the field of view, inside every tag's mask (if any) and above the
-            magnitude floor for every tag. Invalid points get ``phi = 0`` and ``grad = 0``.
+            magnitude floor for every tag (``per_tag``: inside that tag's mask, and above
+            the floor for every tag whose mask holds the point). Invalid points (or
+            point–tag pairs) get ``phi = 0`` and ``grad = 0``.
         """
         pts = _as_points(points)
-        demod, deriv, valid = self._evaluate(pts, derivatives=True)
+        demod, deriv, valid_tags = self._evaluate(pts, derivatives=True)
+        valid = valid_tags if per_tag else valid_tags.all(axis=1)
         phi = self._remodulate(pts, demod)
         grad = np.zeros((pts.shape[0], self._ntag, 3))
         power = np.abs(demod) ** 2
@@ -254,14 +261,16 @@ class PhaseSampler:
             grad[:, :, column] = self._k_active[:, j] + (
                 np.imag(np.conj(demod) * deriv[:, j]) / safe
             )
-        phi[~valid] = 0.0
-        grad[~valid] = 0.0
+        invalid = ~(valid_tags if per_tag else valid_tags.all(axis=1, keepdims=True))
+        phi[np.broadcast_to(invalid, phi.shape)] = 0.0
+        grad[np.broadcast_to(invalid, phi.shape)] = 0.0
         return phi, grad, valid
 
     def phase(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         """Phase only (cheaper than :meth:`sample`): ``(phi (n, ntag), valid (n,))``."""
         pts = _as_points(points)
-        demod, _, valid = self._evaluate(pts, derivatives=False)
+        demod, _, valid_tags = self._evaluate(pts, derivatives=False)
+        valid = valid_tags.all(axis=1)
         phi = self._remodulate(pts, demod)
         phi[~valid] = 0.0
         return phi, valid
@@ -273,8 +282,8 @@ class PhaseSampler:
         are still reported invalid); points outside the field of view get 0.
         """
         pts = _as_points(points)
-        demod, _, valid = self._evaluate(pts, derivatives=False)
-        return np.abs(demod), valid
+        demod, _, valid_tags = self._evaluate(pts, derivatives=False)
+        return np.abs(demod), valid_tags.all(axis=1)
 
     # ------------------------------------------------------------------------------------
     def _remodulate(self, pts: NDArray[np.float64], demod: NDArray[np.complex128]) -> Any:
@@ -293,22 +302,29 @@ class PhaseSampler:
         inside = np.all(np.isfinite(u), axis=1)
         inside &= np.all((u >= -_FOV_TOL) & (u <= self._shape - 1 + _FOV_TOL), axis=1)
         u = np.clip(np.where(inside[:, None], u, 0.0), 0.0, self._shape - 1)
+        tag_ok = np.repeat(inside[:, None], ntag, axis=1)  # (n, ntag)
         if self._mask is not None and inside.any():
             nearest = tuple(np.rint(u[inside]).astype(np.int64).T)
-            inside[inside] = np.all(self._mask[(slice(None), *nearest)], axis=0)
+            tag_ok[inside] = self._mask[(slice(None), *nearest)].T
+        needed = tag_ok.any(axis=1)
         nq = 1 + d if derivatives else 1
-        if inside.all():
+        if needed.all():
             values = self._spline(u, nq)
         else:
             values = np.zeros((n, nq, 2 * ntag))
-            index = np.flatnonzero(inside)
+            index = np.flatnonzero(needed)
             if index.size:
                 values[index] = self._spline(u[index], nq)
         demod = values[:, 0, :ntag] + 1j * values[:, 0, ntag:]
         deriv = (values[:, 1:, :ntag] + 1j * values[:, 1:, ntag:]) / self._spacing[: nq - 1, None]
         size = np.abs(demod)
-        valid = inside & np.all((size >= self._floor) & (size > 0), axis=1)
-        return demod, deriv, valid
+        # the masks say which tags were acquired where (per tag); the magnitude floor says
+        # whether there is tissue signal at all, so it holds for every acquired tag at once
+        # (near an edge one tag's magnitude can pass while another's fails: such a point
+        # is background-contaminated for all of them)
+        signal = np.all(((size >= self._floor) & (size > 0)) | ~tag_ok, axis=1)
+        valid_tags = tag_ok & signal[:, None]
+        return demod, deriv, valid_tags
 
     def _spline(self, u: NDArray[np.float64], nq: int) -> NDArray[np.float64]:
         """Spline value (q=0) and derivatives along each active axis (q=1..d) at ``u``."""

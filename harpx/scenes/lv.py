@@ -37,8 +37,9 @@ stack spans the cavity, from its apex to the base; the apical cap below it (AHA 
 which short-axis analyses leave out) is imaged by the LA slices only. There SA slices would
 cut the nearly horizontal wall obliquely: averaged over the slice thickness, its x and y
 tag phases are off by 0.6--1.4 rad at end systole (measured at paper size), enough to fold
-the model's apex under a high penalty. Since a constraint point needs every tag, the
-model's apical cap then follows the mechanics rather than the data. The
+the model's apex under a high penalty. The model's apical cap is then pulled by the
+long-axis tag alone where LA slices image it (a constraint point keeps the tags whose masks
+hold it) and otherwise follows the mechanics. The
 paper's 256 × 256 matrix (320 mm field of view) is cropped to the region around the heart
 (same pixel size and hence same resolution; the rest of the field of view is empty).
 ``displacement_true`` is the fine-mesh displacement at the voxel centres, NaN outside.

@@ -114,21 +114,26 @@ class ConstraintState:
     residual : ndarray, shape (nq, ntag)
         Wrapped phase mismatch W(φ(x, t) − φ0(X)), rad (0 where not valid).
     gradient : ndarray, shape (nq, ntag, 3)
-        Spatial phase gradient ∇φ at the current positions, rad/mm.
+        Spatial phase gradient ∇φ at the current positions, rad/mm (0 where not valid).
     weight : ndarray, shape (nq,)
-        Quadrature weight times data mask, mm³.
+        Quadrature weight of points with data for at least one tag, mm³ (0 elsewhere).
+    tag_valid : ndarray of bool, shape (nq, ntag)
+        Which tags have data at each point (inside that tag's mask and field of view, in
+        the reference and the current frame).
     """
 
     residual: FloatArray
     gradient: FloatArray
     weight: FloatArray
+    tag_valid: np.ndarray
 
     def epsilon(self) -> float:
-        """Tracking residual ε: weighted mean of |W(φ − φ0)| over points and tags, rad."""
-        total = self.weight.sum()
+        """Tracking residual ε: weighted mean of |W(φ − φ0)| over valid points and tags, rad."""
+        w = self.weight[:, None] * self.tag_valid
+        total = w.sum()
         if total <= 0:
             return float("nan")
-        return float((self.weight * np.abs(self.residual).mean(axis=1)).sum() / total)
+        return float((w * np.abs(self.residual)).sum() / total)
 
 
 class PhaseConstraint:
@@ -157,8 +162,10 @@ class PhaseConstraint:
         Reference volume of each point, mm³.
     reference_phase : ndarray, shape (nq, ntag)
         φ0 at the points, rad.
-    reference_valid : ndarray of bool, shape (nq,)
-        Points inside the field of view and the data mask in the reference frame.
+    reference_valid : ndarray of bool, shape (nq, ntag)
+        Which tags have data at each point in the reference frame (inside the field of
+        view, the tag's mask and above its magnitude floor). A point keeps the tags it has:
+        e.g. where only long-axis slices image the apex, only their tag pulls it.
     penalty : float
         Current penalty λ, kPa/rad² (absolute).
     multipliers : ndarray, shape (nq, ntag)
@@ -199,7 +206,7 @@ class PhaseConstraint:
         self._cell_dofs = body.element_dofs  # type: ignore[attr-defined]  (ncell, nb, 3)
         self.spline_order = int(spline_order)
         reference = PhaseSampler(phase, 0, order=self.spline_order)
-        phi0, _, valid0 = reference.sample(self.points)
+        phi0, _, valid0 = reference.sample(self.points, per_tag=True)
         self.reference_phase = phi0
         self.reference_valid = valid0
         self.ntag = phi0.shape[1]
@@ -234,10 +241,11 @@ class PhaseConstraint:
         """Phase mismatch, gradients and weights at displacement ``u`` (ndof,) mm."""
         if self._sampler is None:
             raise RuntimeError("call set_frame(time_index) before evaluating the constraint")
-        phi, grad, valid = self._sampler.sample(self.current_points(u))
-        ok = valid & self.reference_valid
-        residual = np.where(ok[:, None], wrap(phi - self.reference_phase), 0.0)
-        return ConstraintState(residual, grad, self.volume * ok)
+        phi, grad, valid = self._sampler.sample(self.current_points(u), per_tag=True)
+        ok = valid & self.reference_valid  # (nq, ntag)
+        residual = np.where(ok, wrap(phi - self.reference_phase), 0.0)
+        grad = np.where(ok[..., None], grad, 0.0)
+        return ConstraintState(residual, grad, self.volume * ok.any(axis=1), ok)
 
     def residual_tangent(
         self, body: object, u: FloatArray, s: float = 1.0
@@ -268,7 +276,7 @@ class PhaseConstraint:
         N = self.shape_values  # (c, q, a)
         ncell, npc, nb = N.shape
         lam = s * self.penalty
-        drive = lam * st.residual + s * self.multipliers * (st.weight > 0)[:, None]
+        drive = lam * st.residual + s * self.multipliers * st.tag_valid
         force = np.einsum("qt,qti->qi", drive, st.gradient) * st.weight[:, None]
         fe = np.matmul(N.transpose(0, 2, 1), force.reshape(ncell, npc, 3))  # (c, a, i)
         ndof = int(self.body.ndof)  # type: ignore[attr-defined]
@@ -290,7 +298,7 @@ class PhaseConstraint:
 
     def update_multipliers(self, st: ConstraintState) -> float:
         """Augmented-Lagrangian update Λ ← Λ + λ r; returns the relative change of Λ."""
-        step = self.penalty * st.residual * (st.weight > 0)[:, None]
+        step = self.penalty * st.residual * st.tag_valid
         new = self.multipliers + step
         norm = float(np.linalg.norm(new))
         change = float(np.linalg.norm(step)) / norm if norm > 0 else 0.0
@@ -298,10 +306,11 @@ class PhaseConstraint:
         return change
 
     def epsilon_cell(self, st: ConstraintState) -> FloatArray:
-        """Per-cell tracking residual: weighted mean |W(φ − φ0)| over the cell's points, rad."""
+        """Per-cell tracking residual: weighted mean |W(φ − φ0)| over the cell's points and
+        their valid tags, rad (NaN for cells without data)."""
         ncell, npc = self.shape_values.shape[:2]
-        w = st.weight.reshape(ncell, npc)
-        e = np.abs(st.residual).mean(axis=1).reshape(ncell, npc)
+        w = (st.weight[:, None] * st.tag_valid).reshape(ncell, -1)
+        e = np.abs(st.residual).reshape(ncell, -1)
         total = w.sum(axis=1)
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(total > 0, (w * e).sum(axis=1) / total, np.nan)

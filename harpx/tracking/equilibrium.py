@@ -179,9 +179,9 @@ def equilibrate(
         else:
             raise ElementInversionError(
                 f"Gauss-Newton step {iteration} of frame {constraint.frame} inverts cells "
-                "(det F <= 0 or a non-finite stress) "
-                f"{internal_trial.inverted_cells[:10].tolist()} even after {max_halvings} "
-                "halvings; lower the penalty or track with more frames",
+                f"{internal_trial.inverted_cells[:10].tolist()} (det F <= 0 or a non-finite "
+                f"stress) even after {max_halvings} halvings; lower the penalty or track "
+                "with more frames",
                 internal_trial.inverted_cells,
                 result.step_norms,
             )

@@ -128,14 +128,17 @@ def track(
         ``tracked/1`` with displacement, strain, fibre stretch (if fibres), and per-frame
         diagnostics ``epsilon``, ``epsilon_cell``, ``penalty``, ``iterations``,
         ``wall_time``, ``target_reached``; ``displacement_grid`` on the phase grid.
-        Constraint points outside the field of view or the mask carry no force; cells
-        with none left have ``epsilon_cell`` NaN and follow the mechanics.
+        Constraint points outside the field of view or the mask carry no force; a point
+        inside some tags' masks only (e.g. short-axis but not long-axis slices) is pulled
+        by those tags alone. Cells with no data left have ``epsilon_cell`` NaN and follow
+        the mechanics.
 
     Raises
     ------
     SchemaError
-        If no constraint point lies in the image data at frame 0, or a later frame has
-        no valid phase at any of them (an all-zero or fully masked frame).
+        If no constraint point lies in the image data at frame 0, a tag has data at none
+        of them, or a later frame has no valid phase at any of them (an all-zero or fully
+        masked frame).
     ElementInversionError
         If a Gauss–Newton step inverts elements even after step halving (names the
         frame and the cells).
@@ -164,6 +167,14 @@ def track(
         raise SchemaError(
             "no constraint point of the body lies inside the image data in frame 0; "
             "check that the mesh (mm) and the image grid (coords x, y, z) overlap"
+        )
+    blind = [str(t) for t, seen in zip(phase["tag"].values, constraint.reference_valid.any(axis=0),
+                                       strict=True) if not seen]  # fmt: skip
+    if blind:
+        raise SchemaError(
+            f"tag {blind!r} has no data at any constraint point of the body in frame 0 (its "
+            "mask or field of view misses the mesh), so the body could not be tracked along "
+            f"it; fix the tag's mask or drop it (ds.drop_sel(tag={blind!r}))"
         )
     solver = LinearSolver(linear_solver)
     timings = Timings()

@@ -173,6 +173,13 @@ def test_outside_fov_masked_and_faded_points_are_invalid() -> None:
     assert np.all(phi[~valid] == 0) and np.all(grad[~valid] == 0)
     corner = PhaseSampler(ds.drop_vars("mask").assign(magnitude=xr.ones_like(ds.magnitude)), 0)
     assert corner.sample(points[-1:])[2].tolist() == [True]
+    # per tag: the point outside tag "y"'s mask keeps tag "x"; a faded tag still voids
+    # every tag of its point (no tissue signal there), as does leaving the field of view
+    phi_t, grad_t, valid_t = PhaseSampler(ds, 0).sample(points, per_tag=True)
+    assert valid_t.tolist() == [[True, True], [False, False], [False, False], [False, False],
+                                [True, False], [False, False], [False, False]]  # fmt: skip
+    np.testing.assert_array_equal(phi_t[valid], phi[valid])
+    assert phi_t[4, 1] == 0 and np.all(grad_t[4, 1] == 0) and np.any(grad_t[4, 0] != 0)
 
 
 def test_linear_order_is_second_order(rng: np.random.Generator) -> None:
