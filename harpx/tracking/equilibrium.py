@@ -33,15 +33,28 @@ from harpx.tracking.constraint import ConstraintState, PhaseConstraint
 
 @dataclass
 class Timings:
-    """Wall time spent in each part of the tracking solves, s."""
+    """Wall time spent in each part of tracking, s.
+
+    ``sampling``, ``assembly`` and ``solve`` are the Gauss–Newton iterations' image
+    sampling, residual/tangent assembly (with step-halving checks) and linear solves;
+    ``phase`` validates (or extracts) the phase images, ``setup`` builds the constraint
+    points and samples the reference frame, ``prefilter`` prepares each frame's images for
+    interpolation, ``prediction`` picks each frame's starting guess and ``output`` builds the
+    ``tracked/1`` dataset (strain, resampling onto the image grid).
+    """
 
     sampling: float = 0.0
     assembly: float = 0.0
     solve: float = 0.0
+    phase: float = 0.0
+    setup: float = 0.0
+    prefilter: float = 0.0
+    prediction: float = 0.0
+    output: float = 0.0
 
     def as_attrs(self) -> dict[str, float]:
         """The timings as dataset attributes (``time_sampling`` …), s."""
-        return {f"time_{k}": round(v, 3) for k, v in vars(self).items()}
+        return {f"time_{k}": round(float(v), 3) for k, v in vars(self).items()}
 
 
 @dataclass

@@ -159,9 +159,12 @@ def track(
         raise ValueError(f"penalty_limit={penalty_limit!r} is below penalty={penalty!r}")
     if int(ramp) < 1:
         raise ValueError(f"ramp={ramp!r} must be at least 1")
+    timings = Timings()
+    clock = _time.perf_counter()
     phase = _as_phase(ds)
     ntime = phase.sizes["time"]
     setup_start = _time.perf_counter()
+    timings.phase = setup_start - clock
     constraint = PhaseConstraint(body, phase, intorder=intorder)
     if not constraint.reference_valid.any():
         raise SchemaError(
@@ -177,7 +180,6 @@ def track(
             f"it; fix the tag's mask or drop it (ds.drop_sel(tag={blind!r}))"
         )
     solver = LinearSolver(linear_solver)
-    timings = Timings()
     U = np.zeros((ntime, body.ndof))
     eps = np.zeros(ntime)
     eps_cell = np.full((ntime, body.ncell), np.nan)
@@ -191,13 +193,17 @@ def track(
     eps[0] = st0.epsilon()
     eps_cell[0] = constraint.epsilon_cell(st0)
     wall[0] = _time.perf_counter() - setup_start
+    timings.setup = wall[0]
     lam = float(penalty)
     for n in tqdm(range(1, ntime), disable=not progress, desc="tracking", unit="frame"):
         start = _time.perf_counter()
         constraint.set_frame(n)
+        clock = _time.perf_counter()
+        timings.prefilter += clock - start
         u0 = U[n - 1]
         if predictor == "linear" and n >= 2:
             u0 = _predict(body, constraint, U[n - 1], U[n - 2])
+        timings.prediction += _time.perf_counter() - clock
         common = dict(
             target=epsilon, penalty=lam, penalty_limit=penalty_limit, solver=solver,
             dirichlet=dirichlet, terms=terms, timings=timings, tolerance=tolerance,
@@ -225,6 +231,7 @@ def track(
         stages[n] = outcome.stages
         reached[n] = outcome.reached
         wall[n] = _time.perf_counter() - start
+    clock = _time.perf_counter()
     settings = {
         "method": method,
         "epsilon_target": float(epsilon),
@@ -250,4 +257,7 @@ def track(
         "target_reached": reached,
         "wall_time": wall,
     }
-    return tracked_dataset(body, U, phase, diagnostics, settings)
+    out = tracked_dataset(body, U, phase, diagnostics, settings)
+    timings.output = _time.perf_counter() - clock
+    out.attrs.update(timings.as_attrs())
+    return out
