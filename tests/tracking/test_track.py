@@ -47,6 +47,15 @@ def test_tracked_dataset_follows_the_schema(tracked):
     np.testing.assert_array_equal(tracked.displacement.isel(time=0).values, 0.0)
 
 
+def test_time_split_accounts_for_the_whole_run(tracked):
+    parts = {k: v for k, v in tracked.attrs.items() if k.startswith("time_")}
+    assert set(parts) >= {"time_sampling", "time_assembly", "time_solve", "time_prefilter"}
+    # the per-frame wall times cover set-up and frames; phase validation and output lie
+    # outside them. Timer reads between the parts cost microseconds: 2 % + 10 ms of slack
+    total = float(tracked.wall_time.sum()) + parts["time_phase"] + parts["time_output"]
+    assert abs(sum(parts.values()) - total) <= 0.02 * total + 0.01, (parts, total)
+
+
 def test_penalty_reaches_epsilon_every_frame(tracked):
     eps = tracked.epsilon.values[1:]
     assert tracked.target_reached.all(), f"epsilon per frame {eps}"
