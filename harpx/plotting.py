@@ -90,7 +90,9 @@ def error_vs_runtime(rows: Sequence[Mapping[str, Any]], *, path: PathLike | None
     -------
     matplotlib.figure.Figure
     """
-    fig, ax = plt.subplots(figsize=(5.5, 4))
+    rows = list(rows)
+    # the legend sits below the axes (one line per row) so it never hides a point
+    fig, ax = plt.subplots(figsize=(6.5, 3.8 + 0.2 * len(rows)), layout="constrained")
     for row in rows:
         ax.errorbar(
             row["seconds"], row["mean"], yerr=[[0], [row["p95"] - row["mean"]]], fmt="o", capsize=3,
@@ -99,9 +101,9 @@ def error_vs_runtime(rows: Sequence[Mapping[str, Any]], *, path: PathLike | None
     ax.set_xscale("log")
     ax.set_xlabel("wall time (s)")
     ax.set_ylabel("displacement error (mm): mean, bar to p95")
-    ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
+    if rows:
+        fig.legend(fontsize=8, loc="outside lower center", ncol=1)
     if path is not None:
         fig.savefig(path, dpi=110)
     return fig
