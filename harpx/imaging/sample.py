@@ -72,6 +72,41 @@ def wrap(a: ArrayLike) -> NDArray[np.float64]:
     return np.where(out >= np.pi, out - _TWO_PI, out)
 
 
+def _demodulated_taps(
+    phase: NDArray[np.float64],
+    magnitude: NDArray[np.float64],
+    carrier: NDArray[np.float64],
+    squeeze: tuple[int, ...],
+) -> NDArray[np.float64]:
+    """Real and imaginary parts of ``|H| exp(i(φ − k·x))`` per tag, padded by one voxel.
+
+    Returns an array of shape ``(*active grid shape + 2, 2 ntag)``: channels ``0..ntag-1``
+    hold the real parts, ``ntag..2 ntag-1`` the imaginary parts, and every active axis has
+    one reflected voxel (``mode="reflect"``: index −1 mirrors index 1) at each end.
+    """
+    ntag = phase.shape[0]
+    keep = [a for a in range(3) if a + 1 not in squeeze]
+    shape = tuple(phase.shape[a + 1] for a in keep)
+    out = np.empty(tuple(n + 2 for n in shape) + (2 * ntag,))
+    inner = (slice(1, -1),) * len(shape)
+    for t in range(ntag):
+        theta = phase[t] - np.broadcast_to(carrier[t], phase[t].shape)
+        mag = magnitude[t]
+        if squeeze:
+            theta = theta.squeeze(axis=tuple(a - 1 for a in squeeze))
+            mag = mag.squeeze(axis=tuple(a - 1 for a in squeeze))
+        np.multiply(mag, np.cos(theta), out=out[(*inner, t)])
+        np.multiply(mag, np.sin(theta), out=out[(*inner, ntag + t)])
+    for axis, n in enumerate(shape):  # reflect borders, one axis after the other
+        lead = [slice(None)] * out.ndim
+        src = [slice(None)] * out.ndim
+        lead[axis], src[axis] = 0, 2 if n > 1 else 1
+        out[tuple(lead)] = out[tuple(src)]
+        lead[axis], src[axis] = -1, -3 if n > 1 else -2
+        out[tuple(lead)] = out[tuple(src)]
+    return out
+
+
 class PhaseSampler:
     """Phase, phase gradient and magnitude of one frame of a ``phase/1`` dataset at points.
 
@@ -185,32 +220,36 @@ class PhaseSampler:
             * grid[g].reshape([-1 if i == g else 1 for i in range(3)])
             for g, d in enumerate(GRID_DIMS)
         )
-        demod = magnitude * np.exp(1j * (phase - carrier))
         squeeze = tuple(a + 1 for a in range(3) if a not in self._active)
-        demod = demod.squeeze(axis=squeeze) if squeeze else demod
+        ntag = len(self.tags)
+        self._ntag = ntag
+        if order == 1:
+            # trilinear taps need no prefilter: write cos/sin of the demodulated phase
+            # straight into the padded tap array (no complex temporaries, one pass per tag)
+            self._padded = _demodulated_taps(phase, magnitude, carrier, squeeze)
+        else:
+            demod = magnitude * np.exp(1j * (phase - carrier))
+            demod = demod.squeeze(axis=squeeze) if squeeze else demod
         # Extend D by odd reflection (2 D[0] - D[k]), which keeps value and slope continuous
         # at the border, before prefiltering: the spline's own mirror boundary (a slope
         # discontinuity) then sits `edge` voxels outside the field of view, where its error
         # has decayed by 0.268**edge.
         edge = _EDGE if order == 3 else 0
         self._edge = np.minimum(edge, self._shape - 1)
-        demod = np.pad(
-            demod,
-            [(0, 0)] + [(int(e), int(e)) for e in self._edge],
-            mode="reflect",
-            reflect_type="odd",
-        )
-        coefficients = [
-            ndimage.spline_filter(image, order=3, mode="mirror", output=np.complex128)
-            if order == 3
-            else image
-            for image in demod
-        ]
-        ntag = len(self.tags)
-        stacked = np.stack([c.real for c in coefficients] + [c.imag for c in coefficients], -1)
-        pad = [(1, 1)] * len(self._active) + [(0, 0)]
-        self._padded = np.ascontiguousarray(np.pad(stacked, pad, mode="reflect"))
-        self._ntag = ntag
+        if order == 3:
+            demod = np.pad(
+                demod,
+                [(0, 0)] + [(int(e), int(e)) for e in self._edge],
+                mode="reflect",
+                reflect_type="odd",
+            )
+            coefficients = [
+                ndimage.spline_filter(image, order=3, mode="mirror", output=np.complex128)
+                for image in demod
+            ]
+            stacked = np.stack([c.real for c in coefficients] + [c.imag for c in coefficients], -1)
+            pad = [(1, 1)] * len(self._active) + [(0, 0)]
+            self._padded = np.ascontiguousarray(np.pad(stacked, pad, mode="reflect"))
 
         mask = None
         if "mask" in phase_ds.variables:
