@@ -305,13 +305,19 @@ class PhaseSampler:
         grad[np.broadcast_to(invalid, phi.shape)] = 0.0
         return phi, grad, valid
 
-    def phase(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-        """Phase only (cheaper than :meth:`sample`): ``(phi (n, ntag), valid (n,))``."""
+    def phase(
+        self, points: ArrayLike, *, per_tag: bool = False
+    ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """Phase only (cheaper than :meth:`sample`): ``(phi (n, ntag), valid)``.
+
+        ``valid`` has shape (n,), or (n, ntag) with ``per_tag`` (as in :meth:`sample`).
+        """
         pts = _as_points(points)
         demod, _, valid_tags = self._evaluate(pts, derivatives=False)
-        valid = valid_tags.all(axis=1)
+        valid = valid_tags if per_tag else valid_tags.all(axis=1)
         phi = self._remodulate(pts, demod)
-        phi[~valid] = 0.0
+        invalid = ~(valid_tags if per_tag else valid_tags.all(axis=1, keepdims=True))
+        phi[np.broadcast_to(invalid, phi.shape)] = 0.0
         return phi, valid
 
     def magnitude(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:

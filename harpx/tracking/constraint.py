@@ -247,6 +247,18 @@ class PhaseConstraint:
         grad = np.where(ok[..., None], grad, 0.0)
         return ConstraintState(residual, grad, self.volume * ok.any(axis=1), ok)
 
+    def epsilon_at(self, u: FloatArray) -> float:
+        """Tracking residual ε at displacement ``u`` (phase only, no gradients), rad."""
+        if self._sampler is None:
+            raise RuntimeError("call set_frame(time_index) before evaluating the constraint")
+        phi, valid = self._sampler.phase(self.current_points(u), per_tag=True)
+        ok = valid & self.reference_valid
+        w = self.volume[:, None] * ok
+        total = w.sum()
+        if total <= 0:
+            return float("nan")
+        return float((w * np.abs(np.where(ok, wrap(phi - self.reference_phase), 0.0))).sum() / total)
+
     def residual_tangent(
         self, body: object, u: FloatArray, s: float = 1.0
     ) -> tuple[FloatArray, object]:

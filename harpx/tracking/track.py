@@ -51,7 +51,7 @@ def _predict(body: Any, constraint: PhaseConstraint, last: np.ndarray, before: n
         guess = last + alpha * (last - before)
         if alpha and internal_forces(body, guess, tangent=False).r is None:
             continue  # folds the mesh (or overstretches it): not a candidate
-        eps = constraint.state(guess).epsilon()
+        eps = constraint.epsilon_at(guess)
         if eps < best_eps:
             best, best_eps = guess, eps
     return best

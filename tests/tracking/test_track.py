@@ -130,3 +130,16 @@ def test_a_tag_masked_over_part_of_the_body_still_pulls_with_the_others(scene):
     # measured 0.40 mm kept vs 0.66 mm dropped (0.22 mm with every tag everywhere): the
     # x and z tags on the unmasked half are worth keeping; 0.5 mm is a third of a voxel
     assert kept < 0.5 and kept < 0.75 * dropped, (kept, dropped)
+
+
+def test_phase_only_epsilon_matches_the_full_state(scene, rng):
+    from harpx.tracking.constraint import PhaseConstraint
+
+    ds, mesh = scene
+    body = Body(mesh, NeoHookean(c1=1.0, kappa=120.0))
+    constraint = PhaseConstraint(body, ds)
+    constraint.set_frame(2)
+    u = rng.normal(0.0, 0.5, body.ndof)
+    # the predictor ranks its candidates with the cheaper phase-only ε: it must be the same
+    # number as the full state's (same samples, same weights; rounding only)
+    assert constraint.epsilon_at(u) == pytest.approx(constraint.state(u).epsilon(), rel=1e-12)
