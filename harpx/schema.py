@@ -629,12 +629,27 @@ def _check_range(
         )
 
 
+def _finite_extremes(data: np.ndarray | None) -> tuple[float, float] | None:
+    """Smallest and largest finite value of a float array (None if it has none).
+
+    Two streaming passes when every value is finite (the common case); only arrays with
+    NaN or inf pay for the compaction of their finite values.
+    """
+    if data is None or data.dtype.kind != "f" or data.size == 0:
+        return None
+    low, high = data.min(), data.max()
+    if np.isfinite(low) and np.isfinite(high):
+        return float(low), float(high)
+    finite = data[np.isfinite(data)]
+    return (float(finite.min()), float(finite.max())) if finite.size else None
+
+
 def _check_phase_values(ds: xr.Dataset, problems: list[str]) -> None:
     if "phase" in ds.variables:
         data = _numpy_data(ds.variables["phase"])
-        finite = data[np.isfinite(data)] if data is not None and data.dtype.kind == "f" else None
-        if finite is not None and finite.size:
-            low, high = finite.min(), finite.max()
+        extremes = _finite_extremes(data)
+        if extremes is not None:
+            low, high = extremes
             if low < -np.pi or high >= np.pi:
                 problems.append(
                     f"'phase' has values in [{low:.6g}, {high:.6g}]; expected the wrapped range "
@@ -642,9 +657,9 @@ def _check_phase_values(ds: xr.Dataset, problems: list[str]) -> None:
                 )
     if "magnitude" in ds.variables:
         data = _numpy_data(ds.variables["magnitude"])
-        finite = data[np.isfinite(data)] if data is not None and data.dtype.kind == "f" else None
-        if finite is not None and finite.size:
-            low = finite.min()
+        extremes = _finite_extremes(data)
+        if extremes is not None:
+            low = extremes[0]
             if low < 0:
                 count = int(np.sum(data < 0))
                 problems.append(
