@@ -35,6 +35,7 @@ from harpx.mechanics.body import Body
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import cylinder
 from harpx.plotting import error_vs_runtime
+from harpx.scenes.lv import TRACKING as LV_TRACKING
 from harpx.scenes.lv import lv
 from harpx.scenes.phantom import GEOMETRIES, phantom
 from harpx.scenes.tongue import TRACKING as TONGUE_TRACKING
@@ -160,7 +161,7 @@ def run_lv(size: str, rows: list[str], cache: Path | None) -> list[dict]:
             label = f"LV: FE {short} hex8 {body.ncell} cells, eps {cfg['epsilon']:g}"
             try:
                 out = track(phase, body, epsilon=cfg["epsilon"], dirichlet=scene.dirichlet(),
-                            tolerance=LV_TOLERANCE)  # fmt: skip
+                            tolerance=LV_TOLERANCE, **LV_TRACKING)  # fmt: skip
             except HarpxError as exc:
                 print({"row": name, "method": label, "failed": str(exc)[:200]}, flush=True)
                 continue

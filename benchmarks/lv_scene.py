@@ -36,7 +36,7 @@ import numpy as np
 from harpx.errors import HarpxError
 from harpx.imaging.harp import extract_phase
 from harpx.mechanics.cut import opening_angle
-from harpx.scenes.lv import fiber_shortening, lv
+from harpx.scenes.lv import TRACKING, fiber_shortening, lv
 from harpx.tracking.results import tracking_error
 from harpx.tracking.track import track
 
@@ -50,6 +50,9 @@ def main() -> None:
     parser.add_argument("--radius", type=float, default=0.7)
     parser.add_argument("--upsample", type=int, default=1)
     parser.add_argument("--snr", type=float, default=20.0)
+    parser.add_argument("--penalty", type=float, default=TRACKING["penalty"],
+                        help="relative penalty at the top of the first frame's ramp "
+                        "(harpx.scenes.lv.TRACKING; the tracker's own default is 1)")
     parser.add_argument("--tolerance", type=float, default=1e-3,
                         help="Gauss-Newton increment tolerance of the tracker, mm")
     parser.add_argument(
@@ -65,6 +68,8 @@ def main() -> None:
         print(f"- {text}", flush=True)
 
     note(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")
+    note(f"tracking: penalty start {args.penalty:g} (relative), increment tolerance "
+         f"{args.tolerance:g} mm")
     start = time.perf_counter()
     if args.cache is not None and args.cache.exists():
         with args.cache.open("rb") as f:
@@ -109,7 +114,7 @@ def main() -> None:
             try:
                 tracked = track(
                     phase, bodies[reference], epsilon=eps, dirichlet=scene.dirichlet(),
-                    tolerance=args.tolerance,
+                    tolerance=args.tolerance, penalty=args.penalty,
                 )
             except HarpxError as exc:  # report the failure as a row, keep benchmarking
                 rows.append(f"| {label} | {eps:g} | failed: {str(exc)[:90]} | | | | "
