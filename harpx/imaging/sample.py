@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
 from harpx.errors import SchemaError
+from harpx.imaging._kernels import wrap
 from harpx.schema import AXES, GRID_DIMS
 
 __all__ = ["PhaseSampler", "reference_phase", "wrap"]
@@ -47,29 +48,6 @@ _TWO_PI = 2.0 * np.pi
 _FOV_TOL = 1e-9
 # Voxels of smooth extension beyond the field of view before cubic prefiltering.
 _EDGE = 4
-
-
-def wrap(a: ArrayLike) -> NDArray[np.float64]:
-    """Wrap angles to [-π, π): :math:`W(a) = \\operatorname{angle}(e^{ia})`.
-
-    Parameters
-    ----------
-    a : array_like
-        Angles in rad.
-
-    Returns
-    -------
-    numpy.ndarray
-        Wrapped angles in rad, in [-π, π) (π itself maps to -π).
-
-    Examples
-    --------
-    >>> wrap([np.pi, -np.pi, 3 * np.pi / 2]).tolist() == [-np.pi, -np.pi, -np.pi / 2]
-    True
-    """
-    out = np.mod(np.asarray(a, dtype=np.float64) + np.pi, _TWO_PI) - np.pi
-    # np.mod of a tiny negative number can round up to exactly 2π
-    return np.where(out >= np.pi, out - _TWO_PI, out)
 
 
 def _demodulated_taps(
