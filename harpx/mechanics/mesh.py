@@ -21,7 +21,7 @@ import skfem
 from numpy.typing import NDArray
 from skfem.io.meshio import HEX_MAPPING
 
-__all__ = ["MeshSpec", "box", "cylinder", "tube", "hex_mesh", "facets_where"]
+__all__ = ["MeshSpec", "box", "cylinder", "tube", "hex_mesh", "facets_where", "labelled_spec"]
 
 #: skfem local vertex k of a hexahedron is VTK vertex ``_VTK_TO_SKFEM[k]``.
 _VTK_TO_SKFEM = np.array([HEX_MAPPING[:8].index(i) for i in range(8)])
@@ -149,13 +149,40 @@ def _finish(
         for name, (test, only) in boundary_tests.items()
     }
     regions = {k: np.asarray(v, dtype=np.int64) for k, v in regions.items()}
-    mesh = skfem.MeshHex1(
+    return labelled_spec(mesh, regions, boundaries)
+
+
+def labelled_spec(
+    mesh: skfem.MeshHex1,
+    regions: Mapping[str, NDArray[np.int64]],
+    boundaries: Mapping[str, NDArray[np.int64]],
+    fibers: NDArray[np.float64] | None = None,
+) -> MeshSpec:
+    """A :class:`MeshSpec` whose skfem mesh also carries the named facets and cell regions.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshHex1
+        The hexahedral mesh (mm).
+    regions : mapping of str to int arrays
+        Cell indices per named region.
+    boundaries : mapping of str to int arrays
+        Facet indices per named boundary.
+    fibers : ndarray, shape (ncell, 3), optional
+        Unit fibre direction per cell.
+
+    Returns
+    -------
+    MeshSpec
+    """
+    labelled = skfem.MeshHex1(
         mesh.p,
         mesh.t,
-        _boundaries={k: v.astype(np.int32) for k, v in boundaries.items()},
-        _subdomains={k: v.astype(np.int32) for k, v in regions.items()} or None,
+        _boundaries={k: np.asarray(v).astype(np.int32) for k, v in boundaries.items()},
+        _subdomains={k: np.asarray(v).astype(np.int32) for k, v in regions.items()} or None,
     )
-    return MeshSpec(mesh=mesh, regions=regions, fibers=None, boundaries=boundaries)
+    return MeshSpec(mesh=labelled, regions=dict(regions), fibers=fibers,
+                    boundaries=dict(boundaries))  # fmt: skip
 
 
 def _extrude(

@@ -71,11 +71,10 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-import skfem
 from numpy.typing import NDArray
 
 from harpx._typing import FloatArray
-from harpx.mechanics.mesh import MeshSpec, facets_where, hex_mesh
+from harpx.mechanics.mesh import MeshSpec, facets_where, hex_mesh, labelled_spec
 
 __all__ = [
     "ATLAS_DIVISIONS",
@@ -437,10 +436,4 @@ def tongue(
     boundaries["floor"] = np.setdiff1d(
         all_floor, np.union1d(boundaries["mandible"], boundaries["base"])
     ).astype(np.int64)
-    mesh = skfem.MeshHex1(
-        mesh.p,
-        mesh.t,
-        _boundaries={k: v.astype(np.int32) for k, v in boundaries.items()},
-        _subdomains={k: v.astype(np.int32) for k, v in regions.items()},
-    )
-    return MeshSpec(mesh=mesh, regions=regions, fibers=fibers, boundaries=boundaries)
+    return labelled_spec(mesh, regions, boundaries, fibers)

@@ -69,7 +69,7 @@ import skfem
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
-from harpx.mechanics.mesh import MeshSpec, facets_where, hex_mesh
+from harpx.mechanics.mesh import MeshSpec, facets_where, hex_mesh, labelled_spec
 
 __all__ = ["VentricleGeometry", "cavity_volume", "ventricle"]
 
@@ -527,13 +527,7 @@ def ventricle(
             np.sin(theta_nodes[quads]).mean(axis=1), np.cos(theta_nodes[quads]).mean(axis=1)
         )
         regions |= _aha_segments(np.tile(quad_theta, nt), np.tile(quad_sigma, nt), sigma_cap)
-    mesh = skfem.MeshHex1(
-        mesh.p,
-        mesh.t,
-        _boundaries={k: v.astype(np.int32) for k, v in boundaries.items()},
-        _subdomains={k: v.astype(np.int32) for k, v in regions.items()},
-    )
-    return MeshSpec(mesh=mesh, regions=regions, fibers=fibers, boundaries=boundaries)
+    return labelled_spec(mesh, regions, boundaries, fibers)
 
 
 def cavity_volume(body: object, u: ArrayLike | None = None, *, base: float | None = None) -> float:
