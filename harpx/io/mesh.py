@@ -56,6 +56,7 @@ import xarray as xr
 
 from harpx._typing import FloatArray, IntArray, PathLike
 from harpx.errors import ArchiveError, SchemaError
+from harpx.io.netcdf import _fsync_directory
 from harpx.mechanics.mesh import MeshSpec, hex_mesh
 from harpx.schema import validate
 
@@ -365,19 +366,6 @@ def _staging(directory: Path, name: str) -> Iterator[Path]:
 def _fsync(path: Path) -> None:
     with open(path, "rb+") as fh:
         os.fsync(fh.fileno())
-
-
-def _fsync_directory(directory: Path) -> None:
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 # --- import ------------------------------------------------------------------------------
