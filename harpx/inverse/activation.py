@@ -258,6 +258,17 @@ def _check_body(body: Any) -> None:
         )
 
 
+def _matching_regions(estimate: xr.Dataset, body: Any) -> list[str]:
+    """The body's region names, checked against those of an activation estimate."""
+    names = list(body.regions)
+    if list(estimate["region"].values) != names:
+        raise ValueError(
+            f"regions differ: estimate has {list(estimate['region'].values)!r}, the body "
+            f"has {names!r}; pass the body the estimate was computed for"
+        )
+    return names
+
+
 def _time_index(tracked: xr.Dataset, time: int) -> int:
     n = tracked.sizes.get("time", 0)
     if not isinstance(time, int | np.integer) or not -n <= int(time) < n:
@@ -799,12 +810,7 @@ def correct_activation(
     """
     _check_body(body)
     law = _default_law(body, law)
-    names = list(body.regions)
-    if list(estimate["region"].values) != names:
-        raise ValueError(
-            f"regions differ: estimate has {list(estimate['region'].values)!r}, the body "
-            f"has {names!r}; pass the body the estimate was computed for"
-        )
+    names = _matching_regions(estimate, body)
     index = _time_index(
         tracked, int(estimate.attrs.get("time_index", -1)) if time is None else time
     )
@@ -990,12 +996,7 @@ def calibrate_activation(
     """
     _check_body(body)
     law = _default_law(body, law)
-    names = list(body.regions)
-    if list(estimate["region"].values) != names:
-        raise ValueError(
-            f"regions differ: estimate has {list(estimate['region'].values)!r}, the body "
-            f"has {names!r}; pass the body the estimate was computed for"
-        )
+    names = _matching_regions(estimate, body)
     index = int(estimate.attrs.get("time_index", tracked.sizes["time"] - 1))
     t1 = np.nan_to_num(np.asarray(estimate["t_max"].values, dtype=np.float64))
     frames = int(tracked.sizes["time"])
