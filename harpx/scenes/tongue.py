@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -118,44 +118,17 @@ class TongueGeometry:
 GEOMETRIES: dict[str, TongueGeometry] = {
     # the paper's protocol; truth on the 2x refined mesh (2240 hex20)
     "paper": TongueGeometry(
-        70.0,
-        50.0,
-        40.0,
-        (10, 7, 4),
-        (20, 14, 8),
-        "hex20",
-        4,
-        60.0,
-        10,
-        8,
-        1.9,
-        256,
-        10.0,
-        6.0,
-        3,
-        1.0,
-    ),
-    # same protocol and tracking model; truth refined 2x along the length only (560 hex20),
-    # coarser partial-volume sampling
-    "small": TongueGeometry(
-        70.0,
-        50.0,
-        40.0,
-        (10, 7, 4),
-        (20, 7, 4),
-        "hex20",
-        4,
-        60.0,
-        10,
-        8,
-        1.9,
-        256,
-        10.0,
-        6.0,
-        2,
-        1.5,
-    ),
+        length=70.0, width=50.0, height=40.0, divisions=(10, 7, 4),
+        truth_divisions=(20, 14, 8), truth_element="hex20", frames=4, frame_interval=60.0,
+        coronal_slices=10, sagittal_slices=8, pixel=1.9, matrix=256, margin=10.0,
+        tag_period=6.0, oversample=3, field_spacing=1.0,
+    ),  # fmt: skip
 }
+# same protocol and tracking model; truth refined 2x along the length only (560 hex20),
+# coarser partial-volume sampling
+GEOMETRIES["small"] = replace(
+    GEOMETRIES["paper"], truth_divisions=(20, 7, 4), oversample=2, field_spacing=1.5
+)
 
 
 @dataclass
