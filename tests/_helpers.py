@@ -6,6 +6,7 @@ import contextlib
 from collections.abc import Iterator
 
 import dask
+import numpy as np
 
 
 class _CountingScheduler:
@@ -30,3 +31,18 @@ def raise_if_dask_computes(max_computes: int = 0) -> Iterator[None]:
     scheduler = _CountingScheduler(max_computes)
     with dask.config.set(scheduler=scheduler):
         yield
+
+
+def still(X, t):  # type: ignore[no-untyped-def]
+    """No motion: u(X, t) = 0 (mm)."""
+    return np.zeros_like(X)
+
+
+def shear(X, t):  # type: ignore[no-untyped-def]
+    """Translation plus smooth shear (mm): |u| up to 8.2 mm, gradients <= 0.25 at t = 100 ms."""
+    s = t / 100.0
+    u = np.empty_like(X)
+    u[:, 0] = s * (5.0 + 1.5 * np.sin(2 * np.pi * X[:, 1] / 50))
+    u[:, 1] = s * (3.0 + 2.0 * np.cos(2 * np.pi * X[:, 0] / 50))
+    u[:, 2] = s * np.sin(2 * np.pi * X[:, 0] / 50)
+    return u

@@ -20,7 +20,7 @@ from harpx.imaging._kernels import wrap
 from harpx.imaging.harp import extract_phase, refinement_factors
 from harpx.imaging.synth import invert_motion, synthesize_tagged
 from harpx.schema import validate
-from tests._helpers import raise_if_dask_computes
+from tests._helpers import raise_if_dask_computes, shear, still
 
 PERIOD = 7.0
 RADIUS, HALF_HEIGHT = 22.0, 9.0
@@ -36,20 +36,6 @@ def inside(X, margin):
     return (np.hypot(X[:, 0], X[:, 1]) <= RADIUS - margin) & (
         np.abs(X[:, 2]) <= HALF_HEIGHT - margin
     )
-
-
-def still(X, t):
-    return np.zeros_like(X)
-
-
-def shear(X, t):
-    """Translation plus smooth shear: |u| up to 8.2 mm (> one tag period) at t = 100 ms."""
-    s = t / 100.0
-    u = np.empty_like(X)
-    u[:, 0] = s * (5.0 + 1.5 * np.sin(2 * np.pi * X[:, 1] / 50))
-    u[:, 1] = s * (3.0 + 2.0 * np.cos(2 * np.pi * X[:, 0] / 50))
-    u[:, 2] = s * np.sin(2 * np.pi * X[:, 0] / 50)
-    return u
 
 
 def grid_points(ds):

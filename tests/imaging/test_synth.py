@@ -9,22 +9,9 @@ import xarray as xr
 from harpx.errors import ConvergenceError
 from harpx.imaging.synth import gridded_displacement, invert_motion, synthesize_tagged
 from harpx.schema import validate
+from tests._helpers import shear, still
 
 PERIOD = 7.0
-
-
-def still(X, t):
-    return np.zeros_like(X)
-
-
-def shear(X, t):
-    """Smooth non-rigid motion: up to ~8 mm displacement, gradients <= 0.25 at t = 100 ms."""
-    s = t / 100.0
-    u = np.empty_like(X)
-    u[:, 0] = s * (5.0 + 1.5 * np.sin(2 * np.pi * X[:, 1] / 50))
-    u[:, 1] = s * (3.0 + 2.0 * np.cos(2 * np.pi * X[:, 0] / 50))
-    u[:, 2] = s * np.sin(2 * np.pi * X[:, 0] / 50)
-    return u
 
 
 def swirl(X, t):
