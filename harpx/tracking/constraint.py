@@ -129,11 +129,16 @@ class ConstraintState:
 
     def epsilon(self) -> float:
         """Tracking residual ε: weighted mean of |W(φ − φ0)| over valid points and tags, rad."""
-        w = self.weight[:, None] * self.tag_valid
-        total = w.sum()
-        if total <= 0:
-            return float("nan")
-        return float((w * np.abs(self.residual)).sum() / total)
+        return _epsilon(self.weight, self.tag_valid, self.residual)
+
+
+def _epsilon(weight: FloatArray, tag_valid: np.ndarray, residual: FloatArray) -> float:
+    """Weighted mean of |residual| over the valid (point, tag) pairs (NaN if none)."""
+    w = weight[:, None] * tag_valid
+    total = w.sum()
+    if total <= 0:
+        return float("nan")
+    return float((w * np.abs(residual)).sum() / total)
 
 
 class PhaseConstraint:
@@ -253,11 +258,7 @@ class PhaseConstraint:
             raise RuntimeError("call set_frame(time_index) before evaluating the constraint")
         phi, valid = self._sampler.phase(self.current_points(u), per_tag=True)
         ok = valid & self.reference_valid
-        w = self.volume[:, None] * ok
-        total = w.sum()
-        if total <= 0:
-            return float("nan")
-        return float((w * np.abs(np.where(ok, wrap(phi - self.reference_phase), 0.0))).sum() / total)
+        return _epsilon(self.volume, ok, np.where(ok, wrap(phi - self.reference_phase), 0.0))
 
     def residual_tangent(
         self, body: object, u: FloatArray, s: float = 1.0
