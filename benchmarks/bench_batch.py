@@ -48,8 +48,9 @@ def body_factory(ds):  # noqa: ANN001, ANN201 - top-level so that dask can ship 
     from harpx.mechanics.materials import NeoHookean
     from harpx.mechanics.mesh import cylinder
 
-    mesh = cylinder(RADIUS, HEIGHT, n_radial=2, n_circumferential=16, n_axial=2,
-                    center=(0.0, 0.0, -HEIGHT / 2))
+    mesh = cylinder(
+        RADIUS, HEIGHT, n_radial=2, n_circumferential=16, n_axial=2, center=(0.0, 0.0, -HEIGHT / 2)
+    )
     return Body(mesh, NeoHookean(c1=1.0, kappa=120.0))
 
 
@@ -66,11 +67,24 @@ def make_cohort(folder: Path, n: int) -> list[Path]:
     paths = []
     for k in range(n):  # one subject each
         edge = 3.0 + 0.5 * k  # mm of edge displacement
-        motion = RotationalImpact(radius=RADIUS, base=-HEIGHT / 2, height=HEIGHT,
-                                  angle=edge / RADIUS, rise_time=40.0, lag=20.0)
-        ds = synthesize_tagged(motion, shape=SHAPE, spacing=SPACING,
-                               times=np.arange(NFRAMES) * 15.0, body=inside,
-                               inverse=motion.inverse, snr=20.0, rng=k)
+        motion = RotationalImpact(
+            radius=RADIUS,
+            base=-HEIGHT / 2,
+            height=HEIGHT,
+            angle=edge / RADIUS,
+            rise_time=40.0,
+            lag=20.0,
+        )
+        ds = synthesize_tagged(
+            motion,
+            shape=SHAPE,
+            spacing=SPACING,
+            times=np.arange(NFRAMES) * 15.0,
+            body=inside,
+            inverse=motion.inverse,
+            snr=20.0,
+            rng=k,
+        )
         paths.append(to_netcdf(ds, folder / f"subject{k:02d}.nc"))
     return paths
 
@@ -156,18 +170,26 @@ def main() -> None:
         (root / "in").mkdir()
         start = time.perf_counter()
         paths = make_cohort(root / "in", args.subjects)
-        print(f"# cohort: {args.subjects} subjects written in {time.perf_counter() - start:.1f} s"
-              f"; cpu_count={os.cpu_count()}, workers={args.workers}", file=sys.stderr)
+        print(
+            f"# cohort: {args.subjects} subjects written in {time.perf_counter() - start:.1f} s"
+            f"; cpu_count={os.cpu_count()}, workers={args.workers}",
+            file=sys.stderr,
+        )
         load_before = os.getloadavg()[0]
         ceiling_before = parallel_ceiling(args.workers)
         run_serial(paths[:1], root / "warmup")  # imports, FFT plans, MKL: not timed
 
-        times: dict[str, list[float]] = {"serial": [], "cohort (warm)": [],
-                                         "cohort (cold)": []}
+        times: dict[str, list[float]] = {"serial": [], "cohort (warm)": [], "cohort (cold)": []}
         cpu: dict[str, list[float]] = {"serial": [], "cohort (warm)": []}
         with local_cluster(args.workers) as cluster, Client(cluster) as client:
-            track_many(paths[:1], body_factory, output_dir=root / "warm-up", client=client,
-                       track_kwargs=TRACK_KWARGS, progress=False)  # worker imports: not timed
+            track_many(
+                paths[:1],
+                body_factory,
+                output_dir=root / "warm-up",
+                client=client,
+                track_kwargs=TRACK_KWARGS,
+                progress=False,
+            )  # worker imports: not timed
             for r in range(args.repeats):
                 start, cpu0 = time.perf_counter(), cpu_seconds()
                 serial = run_serial(paths, root / f"serial{r}")
@@ -176,24 +198,43 @@ def main() -> None:
 
                 workers0 = sum(client.run(cpu_seconds).values())
                 start, cpu0 = time.perf_counter(), cpu_seconds()
-                track_many(paths, body_factory, output_dir=root / f"warm{r}", client=client,
-                           track_kwargs=TRACK_KWARGS, overwrite=True, progress=False)
+                track_many(
+                    paths,
+                    body_factory,
+                    output_dir=root / f"warm{r}",
+                    client=client,
+                    track_kwargs=TRACK_KWARGS,
+                    overwrite=True,
+                    progress=False,
+                )
                 times["cohort (warm)"].append(time.perf_counter() - start)
-                cpu["cohort (warm)"].append(cpu_seconds() - cpu0
-                                            + sum(client.run(cpu_seconds).values()) - workers0)
+                cpu["cohort (warm)"].append(
+                    cpu_seconds() - cpu0 + sum(client.run(cpu_seconds).values()) - workers0
+                )
 
                 # (the idle warm cluster stays up: the variants alternate within a repeat so
                 # that they see the same machine load)
                 start = time.perf_counter()
-                cold = track_many(paths, body_factory, output_dir=root / f"cold{r}",
-                                  n_workers=args.workers, track_kwargs=TRACK_KWARGS,
-                                  overwrite=True, progress=False)
+                cold = track_many(
+                    paths,
+                    body_factory,
+                    output_dir=root / f"cold{r}",
+                    n_workers=args.workers,
+                    track_kwargs=TRACK_KWARGS,
+                    overwrite=True,
+                    progress=False,
+                )
                 times["cohort (cold)"].append(time.perf_counter() - start)
 
         # the cohort computes what the loop computes
         worst = max(
-            float(np.max(np.abs(open_dataset(a).displacement.values
-                                - open_dataset(b).displacement.values)))
+            float(
+                np.max(
+                    np.abs(
+                        open_dataset(a).displacement.values - open_dataset(b).displacement.values
+                    )
+                )
+            )
             for a, b in zip(serial, cold, strict=True)
         )
         eps = [float(open_dataset(p).epsilon.values[1:].max()) for p in [*serial, *cold]]
@@ -202,39 +243,54 @@ def main() -> None:
         ceiling_after = parallel_ceiling(args.workers)
 
     med = {k: statistics.median(v) for k, v in times.items()}
-    table = [f"{args.subjects} subjects, {args.workers} workers, median of {args.repeats} "
-             "repeats (wall-clock s)", "",
-             "| variant | median s | runs (s) | per subject s | speed-up vs serial |",
-             "|---|---|---|---|---|"]
+    table = [
+        f"{args.subjects} subjects, {args.workers} workers, median of {args.repeats} "
+        "repeats (wall-clock s)",
+        "",
+        "| variant | median s | runs (s) | per subject s | speed-up vs serial |",
+        "|---|---|---|---|---|",
+    ]
     for k, v in times.items():
         runs = ", ".join(f"{t:.2f}" for t in v)
-        table.append(f"| {k} | {med[k]:.2f} | {runs} | {med[k] / args.subjects:.2f} | "
-                     f"{med['serial'] / med[k]:.2f} |")
+        table.append(
+            f"| {k} | {med[k]:.2f} | {runs} | {med[k] / args.subjects:.2f} | "
+            f"{med['serial'] / med[k]:.2f} |"
+        )
     print("\n" + "\n".join(table))
     Path(args.out).mkdir(parents=True, exist_ok=True)
     (Path(args.out) / "bench_batch.md").write_text("\n".join(table) + "\n")
     _plot(times, Path(args.out) / "bench_batch.png", args)
-    print(f"\nwall-time ratio serial / cohort: cold {med['serial'] / med['cohort (cold)']:.2f}, "
-          f"warm {med['serial'] / med['cohort (warm)']:.2f}")
+    print(
+        f"\nwall-time ratio serial / cohort: cold {med['serial'] / med['cohort (cold)']:.2f}, "
+        f"warm {med['serial'] / med['cohort (warm)']:.2f}"
+    )
     cpu_serial = statistics.median(cpu["serial"]) / args.subjects
     cpu_cohort = statistics.median(cpu["cohort (warm)"]) / args.subjects
-    print(f"CPU time per subject (user+sys, all threads, median): serial {cpu_serial:.2f} s, "
-          f"cohort {cpu_cohort:.2f} s (workers + this process). On an idle machine the warm "
-          f"cohort's speed-up would be about {args.workers} x {cpu_serial:.2f}/{cpu_cohort:.2f}"
-          f" = {args.workers * cpu_serial / cpu_cohort:.2f} (subjects split evenly; an "
-          "estimate, not a measurement)")
-    print(f"FE tracking alone: {statistics.median(track_time):.2f} s per subject (median, last "
-          f"serial run); the rest is phase extraction, mesh set-up and the archive write")
-    print(f"1-min load average: {load_before:.2f} before, {load_after:.2f} after "
-          f"(cpu_count={os.cpu_count()}); parallel ceiling of this machine for "
-          f"{args.workers} processes (pure-CPU spin, {args.workers} vs 1 process): "
-          f"{ceiling_before:.2f} before, {ceiling_after:.2f} after. A ceiling below "
-          f"{args.workers} means other processes shared the cores during the run.")
-    print(f"max |u_cohort - u_serial| = {worst:.2e} mm over all subjects and frames: the "
-          "workers run PARDISO and pyFFTW on 1 thread, the loop on all cores; such rounding "
-          "differences can flip a discrete stop of the penalty loop (ε <= target), so results "
-          f"agree to the tracking tolerance, not to rounding; ε per subject <= {max(eps):.3f} "
-          "rad in both")
+    print(
+        f"CPU time per subject (user+sys, all threads, median): serial {cpu_serial:.2f} s, "
+        f"cohort {cpu_cohort:.2f} s (workers + this process). On an idle machine the warm "
+        f"cohort's speed-up would be about {args.workers} x {cpu_serial:.2f}/{cpu_cohort:.2f}"
+        f" = {args.workers * cpu_serial / cpu_cohort:.2f} (subjects split evenly; an "
+        "estimate, not a measurement)"
+    )
+    print(
+        f"FE tracking alone: {statistics.median(track_time):.2f} s per subject (median, last "
+        f"serial run); the rest is phase extraction, mesh set-up and the archive write"
+    )
+    print(
+        f"1-min load average: {load_before:.2f} before, {load_after:.2f} after "
+        f"(cpu_count={os.cpu_count()}); parallel ceiling of this machine for "
+        f"{args.workers} processes (pure-CPU spin, {args.workers} vs 1 process): "
+        f"{ceiling_before:.2f} before, {ceiling_after:.2f} after. A ceiling below "
+        f"{args.workers} means other processes shared the cores during the run."
+    )
+    print(
+        f"max |u_cohort - u_serial| = {worst:.2e} mm over all subjects and frames: the "
+        "workers run PARDISO and pyFFTW on 1 thread, the loop on all cores; such rounding "
+        "differences can flip a discrete stop of the penalty loop (ε <= target), so results "
+        f"agree to the tracking tolerance, not to rounding; ε per subject <= {max(eps):.3f} "
+        "rad in both"
+    )
 
 
 if __name__ == "__main__":

@@ -148,7 +148,7 @@ def part_peer(element: str, divisions, iterations: int) -> dict:
     c, sn = np.cos(th), np.sin(th)
     Y = X - centre[:, None]
     R = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
-    target = (R @ Y - Y + np.array([[0.0], [0.0], [LIFT]]))
+    target = R @ Y - Y + np.array([[0.0], [0.0], [LIFT]])
     u = np.zeros(basis.N)
     # dof k of an ElementVector basis carries component k % 3 at doflocs[:, k]; half the
     # load (the first of the three load steps), applied through the linearised predictor
@@ -277,13 +277,18 @@ def main() -> None:
     rows = []
     for element in ("hex8", "hex20"):
         ours = _run("ours", element, divisions, [])
-        peer_its = ["--peer-iterations", str(args.peer_iterations or (3 if element == "hex8" else 1))]
+        peer_its = [
+            "--peer-iterations",
+            str(args.peer_iterations or (3 if element == "hex8" else 1)),
+        ]
         peer = _run("peer", element, divisions, peer_its)
         solvers = _run("solvers", element, divisions, ["--no-amg"] if args.no_amg else [])
         rows.append((element, ours, peer, solvers))
     print(f"\nBox {divisions} cells, twist {TWIST_DEG}° + lift {LIFT} mm, three load steps\n")
-    print("| element | dofs | who | assembly / it [s] | solve / it [s] | Newton it [s] "
-          "| assembly share | its | peak RSS [MB] |")
+    print(
+        "| element | dofs | who | assembly / it [s] | solve / it [s] | Newton it [s] "
+        "| assembly share | its | peak RSS [MB] |"
+    )
     print("|---|---|---|---|---|---|---|---|---|")
     for element, ours, peer, _ in rows:
         for who, r in (("harpx", ours), ("skfem forms (peer)", peer)):
@@ -291,15 +296,19 @@ def main() -> None:
             print(f"| {element} | {r['ndof']} | {who} | {r['assembly_per_iteration']:.3f} | "
                   f"{r['solve_per_iteration']:.3f} | {r['per_iteration']:.3f} | {share:.0%} | "
                   f"{r['iterations']} | {r['peak_mb']:.0f} |")  # fmt: skip
-    print("\n| element | pattern (once) [s] | body set-up [s] | one tangent assembly [s] "
-          "| Newton it speed-up vs peer | assembly speed-up |")
+    print(
+        "\n| element | pattern (once) [s] | body set-up [s] | one tangent assembly [s] "
+        "| Newton it speed-up vs peer | assembly speed-up |"
+    )
     print("|---|---|---|---|---|---|")
     for element, ours, peer, _ in rows:
         print(f"| {element} | {ours['pattern']:.3f} | {ours['body_setup']:.3f} | "
               f"{ours['assembly_one']:.3f} | {peer['per_iteration'] / ours['per_iteration']:.1f}x | "
               f"{peer['assembly_per_iteration'] / ours['assembly_one']:.0f}x |")  # fmt: skip
-    print("\nLinear solvers on the tangent (Dirichlet eliminated), seconds per solve "
-          "(relative residual):\n")
+    print(
+        "\nLinear solvers on the tangent (Dirichlet eliminated), seconds per solve "
+        "(relative residual):\n"
+    )
     names = ["pardiso_first", "pardiso_reuse", "superlu_colamd", "superlu_mmd_sym",
              "amg_cg_rbm", "amg_cg_default"]  # fmt: skip
     print("| element | dofs | nnz | " + " | ".join(names) + " |")

@@ -79,26 +79,37 @@ def _mesh(size: str, coarse: bool):
     scale = 2 if coarse else 1
     n_circ = max(8, 4 * round(g.n_circumferential / scale / 4))
     return cylinder(
-        g.radius, g.height, n_radial=max(1, g.n_radial // scale), n_circumferential=n_circ,
-        n_axial=max(1, g.n_axial // scale), center=(0.0, 0.0, -g.height / 2),
+        g.radius,
+        g.height,
+        n_radial=max(1, g.n_radial // scale),
+        n_circumferential=n_circ,
+        n_axial=max(1, g.n_axial // scale),
+        center=(0.0, 0.0, -g.height / 2),
     )
 
 
 def _row(name: str, label: str, out, truth, seconds: float, phase_seconds: float) -> dict:
     err = tracking_error(out, truth)
     row = {
-        "row": name, "method": label, "seconds": round(seconds, 1),
+        "row": name,
+        "method": label,
+        "seconds": round(seconds, 1),
         "phase_seconds": round(phase_seconds, 1),
-        "mean": float(err.mean_all), "sd": float(err.sd_all), "p95": float(err.p95_all),
-        "max": float(err.max_all), "coverage": float(err.coverage),
+        "mean": float(err.mean_all),
+        "sd": float(err.sd_all),
+        "p95": float(err.p95_all),
+        "max": float(err.max_all),
+        "coverage": float(err.coverage),
     }
     if "penalty" in out:  # FE tracking diagnostics
-        row.update({
-            "epsilon_max": float(np.nanmax(out.epsilon.values[1:])),
-            "penalty_max": float(np.nanmax(out.penalty.values)),
-            "iterations": int(out.iterations.sum()),
-            **{k: float(v) for k, v in out.attrs.items() if k.startswith("time_")},
-        })
+        row.update(
+            {
+                "epsilon_max": float(np.nanmax(out.epsilon.values[1:])),
+                "penalty_max": float(np.nanmax(out.penalty.values)),
+                "iterations": int(out.iterations.sum()),
+                **{k: float(v) for k, v in out.attrs.items() if k.startswith("time_")},
+            }
+        )
     print(row, flush=True)
     return row
 
@@ -198,7 +209,10 @@ def write(results: list[dict], size: str, scene: str = "phantom") -> None:
     OUT.mkdir(exist_ok=True)
     stem = "error_vs_runtime" + ("" if size == "paper" else f"_{size}")
     stem = OUT / (stem + ("" if scene == "phantom" else f"_{scene}"))
-    keys = sorted({k for r in results for k in r}, key=lambda k: list(results[0]).index(k) if k in results[0] else 99)
+    keys = sorted(
+        {k for r in results for k in r},
+        key=lambda k: list(results[0]).index(k) if k in results[0] else 99,
+    )
     with open(stem.with_suffix(".csv"), "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=keys)
         writer.writeheader()
@@ -221,12 +235,20 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", choices=["paper", "small"], default="paper")
     parser.add_argument("--scene", choices=list(SCENE_ROWS), default="phantom")
-    parser.add_argument("--rows", nargs="+", default=None,
-                        help="rows to run (default: all of the scene's); phantom: "
-                        f"{', '.join(ROWS)}; lv: {', '.join(LV_ROWS)}; tongue: "
-                        f"{', '.join(TONGUE_ROWS)}")
-    parser.add_argument("--cache", type=Path, default=None,
-                        help="LV only: pickle of the built scene, loaded if it exists")
+    parser.add_argument(
+        "--rows",
+        nargs="+",
+        default=None,
+        help="rows to run (default: all of the scene's); phantom: "
+        f"{', '.join(ROWS)}; lv: {', '.join(LV_ROWS)}; tongue: "
+        f"{', '.join(TONGUE_ROWS)}",
+    )
+    parser.add_argument(
+        "--cache",
+        type=Path,
+        default=None,
+        help="LV only: pickle of the built scene, loaded if it exists",
+    )
     args = parser.parse_args()
     choices = SCENE_ROWS[args.scene]
     rows = args.rows or list(choices)

@@ -31,8 +31,6 @@ import pickle
 import time
 from pathlib import Path
 
-import numpy as np
-
 from harpx.errors import HarpxError
 from harpx.imaging.harp import extract_phase
 from harpx.mechanics.cut import opening_angle
@@ -50,13 +48,23 @@ def main() -> None:
     parser.add_argument("--radius", type=float, default=0.7)
     parser.add_argument("--upsample", type=int, default=1)
     parser.add_argument("--snr", type=float, default=20.0)
-    parser.add_argument("--penalty", type=float, default=TRACKING["penalty"],
-                        help="relative penalty at the top of the first frame's ramp "
-                        "(harpx.scenes.lv.TRACKING; the tracker's own default is 1)")
-    parser.add_argument("--tolerance", type=float, default=1e-3,
-                        help="Gauss-Newton increment tolerance of the tracker, mm")
     parser.add_argument(
-        "--cache", type=Path, default=None,
+        "--penalty",
+        type=float,
+        default=TRACKING["penalty"],
+        help="relative penalty at the top of the first frame's ramp "
+        "(harpx.scenes.lv.TRACKING; the tracker's own default is 1)",
+    )
+    parser.add_argument(
+        "--tolerance",
+        type=float,
+        default=1e-3,
+        help="Gauss-Newton increment tolerance of the tracker, mm",
+    )
+    parser.add_argument(
+        "--cache",
+        type=Path,
+        default=None,
         help="pickle of the built scene: loaded if it exists, written after building",
     )
     args = parser.parse_args()
@@ -68,8 +76,10 @@ def main() -> None:
         print(f"- {text}", flush=True)
 
     note(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")
-    note(f"tracking: penalty start {args.penalty:g} (relative), increment tolerance "
-         f"{args.tolerance:g} mm")
+    note(
+        f"tracking: penalty start {args.penalty:g} (relative), increment tolerance "
+        f"{args.tolerance:g} mm"
+    )
     start = time.perf_counter()
     if args.cache is not None and args.cache.exists():
         with args.cache.open("rb") as f:
@@ -93,8 +103,10 @@ def main() -> None:
     )
     start = time.perf_counter()
     phase = extract_phase(scene.tagged, upsample=args.upsample, radius=args.radius)
-    note(f"phase extraction (upsample {args.upsample}, radius {args.radius}): "
-                 f"{time.perf_counter() - start:.1f} s")
+    note(
+        f"phase extraction (upsample {args.upsample}, radius {args.radius}): "
+        f"{time.perf_counter() - start:.1f} s"
+    )
 
     rows = []
     bodies = {}
@@ -113,12 +125,18 @@ def main() -> None:
             label = "SFR" if reference == "stress-free" else "PSR"
             try:
                 tracked = track(
-                    phase, bodies[reference], epsilon=eps, dirichlet=scene.dirichlet(),
-                    tolerance=args.tolerance, penalty=args.penalty,
+                    phase,
+                    bodies[reference],
+                    epsilon=eps,
+                    dirichlet=scene.dirichlet(),
+                    tolerance=args.tolerance,
+                    penalty=args.penalty,
                 )
             except HarpxError as exc:  # report the failure as a row, keep benchmarking
-                rows.append(f"| {label} | {eps:g} | failed: {str(exc)[:90]} | | | | "
-                            f"{time.perf_counter() - start:.0f} | | | False |")
+                rows.append(
+                    f"| {label} | {eps:g} | failed: {str(exc)[:90]} | | | | "
+                    f"{time.perf_counter() - start:.0f} | | | False |"
+                )
                 print(rows[-1], flush=True)
                 continue
             wall = time.perf_counter() - start

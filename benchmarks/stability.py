@@ -195,8 +195,9 @@ def _body_points(radius: float, height: float, n: int = 3000) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------ scenes
-def phantom_like(*, snr: float | None = 20.0, voxel: float = 1.0,
-                 tag_period: float | None = None, seed: int = 0) -> Scene:
+def phantom_like(
+    *, snr: float | None = 20.0, voxel: float = 1.0, tag_period: float | None = None, seed: int = 0
+) -> Scene:
     """The small phantom (lagged rotational impact) with another voxel size or tag period.
 
     ``voxel`` scales its voxels in all three directions (field of view kept); with the
@@ -206,9 +207,13 @@ def phantom_like(*, snr: float | None = 20.0, voxel: float = 1.0,
     if voxel == 1.0 and tag_period in (None, g.tag_period):
         return phantom("small", snr=snr, seed=seed)
     base = -g.height / 2
-    motion = RotationalImpact(radius=g.radius, base=base, height=g.height,
-                              angle=getattr(g, "angle", 0.2),
-                              rise_time=getattr(g, "rise_time", 72.0))
+    motion = RotationalImpact(
+        radius=g.radius,
+        base=base,
+        height=g.height,
+        angle=getattr(g, "angle", 0.2),
+        rise_time=getattr(g, "rise_time", 72.0),
+    )
     pixel, dz = g.pixel * voxel, g.slice_spacing * voxel
     matrix = int(np.ceil(g.matrix * g.pixel / pixel))
     slices = int(np.ceil(g.slices * g.slice_spacing / dz))
@@ -218,15 +223,27 @@ def phantom_like(*, snr: float | None = 20.0, voxel: float = 1.0,
         return (inside & (X[:, 2] <= base + g.height)).astype(float)
 
     tagged = synthesize_tagged(
-        motion, shape=(slices, matrix, matrix), spacing=(dz, pixel, pixel),
+        motion,
+        shape=(slices, matrix, matrix),
+        spacing=(dz, pixel, pixel),
         times=np.arange(g.frames) * g.repetition_time,
         tag_period=g.tag_period if tag_period is None else tag_period,
-        tags=("x", "y", "z"), sequence="SPAMM", snr=snr, body=density,
-        inverse=motion.inverse, oversample=2, rng=np.random.default_rng(seed),
+        tags=("x", "y", "z"),
+        sequence="SPAMM",
+        snr=snr,
+        body=density,
+        inverse=motion.inverse,
+        oversample=2,
+        rng=np.random.default_rng(seed),
     )
-    mesh = cylinder(g.radius, g.height, n_radial=g.n_radial,
-                    n_circumferential=g.n_circumferential, n_axial=g.n_axial,
-                    center=(0.0, 0.0, base))
+    mesh = cylinder(
+        g.radius,
+        g.height,
+        n_radial=g.n_radial,
+        n_circumferential=g.n_circumferential,
+        n_axial=g.n_axial,
+        center=(0.0, 0.0, base),
+    )
     return Scene(tagged, mesh, NeoHookean(c1=1.0, kappa=120.0), motion, {})
 
 
@@ -238,8 +255,14 @@ def translation_scene(step: float, frames: int = 5, *, ramp: int = 0) -> Scene:
     return cylinder_scene(motion, times=times, travel=float(offsets[-1]))
 
 
-def rotation_scene(step: float, frames: int = 2, *, radius: float = 24.0, snr: float | None = None,
-                   degrees_per_frame: float | None = None) -> Scene:
+def rotation_scene(
+    step: float,
+    frames: int = 2,
+    *,
+    radius: float = 24.0,
+    snr: float | None = None,
+    degrees_per_frame: float | None = None,
+) -> Scene:
     """Cylinder turning rigidly about its axis; the edge moves ``step`` tag periods a frame."""
     times = np.arange(frames) * FRAME
     rate = np.deg2rad(degrees_per_frame) if degrees_per_frame else step * TAG_PERIOD / radius
@@ -256,6 +279,7 @@ def _row(group: str, case: str, parameter: str, value: Any, **fields: Any) -> Ro
 def stiffness_cases() -> Iterable[Case]:
     for element in ("hex8", "hex20"):
         for ratio in (1e1, 1e2, 1e3, 1e4, 1e5):
+
             def run(element: str = element, ratio: float = ratio) -> list[Row]:
                 scene = phantom("small")
                 phase = extract_phase(scene.tagged)
@@ -269,22 +293,35 @@ def stiffness_cases() -> Iterable[Case]:
 def motion_cases() -> Iterable[Case]:
     for ramp, shape in ((0, "from rest"), (2, "ramped")):
         for step in STEPS:
+
             def run(step: float = step, ramp: int = ramp, shape: str = shape) -> list[Row]:
                 scene = translation_scene(step, ramp=ramp)
                 phase = extract_phase(scene.tagged)
                 rows = []
                 for predictor in ("linear", "none", "linear α=1"):
                     with _pure_linear_predictor(predictor == "linear α=1"):
-                        row, _ = run_fe(scene.tagged, phase, scene.body(),
-                                        predictor="none" if predictor == "none" else "linear")
-                    rows.append(_row("motion", f"translation {shape}, predictor {predictor}",
-                                     "step/period", step, **row))
+                        row, _ = run_fe(
+                            scene.tagged,
+                            phase,
+                            scene.body(),
+                            predictor="none" if predictor == "none" else "linear",
+                        )
+                    rows.append(
+                        _row(
+                            "motion",
+                            f"translation {shape}, predictor {predictor}",
+                            "step/period",
+                            step,
+                            **row,
+                        )
+                    )
                 row, _ = run_harp(scene.tagged, phase)
                 rows.append(_row("motion", f"translation {shape}", "step/period", step, **row))
                 return rows
 
             yield "motion", f"translation {shape} {step}", run
     for step in STEPS:
+
         def run_rot(step: float = step) -> list[Row]:
             scene = rotation_scene(step)
             phase = extract_phase(scene.tagged)
@@ -296,6 +333,7 @@ def motion_cases() -> Iterable[Case]:
 
         yield "motion", f"rotation one frame {step}", run_rot
     for radius in (0.5, 1.0):
+
         def run_180(radius: float = radius) -> list[Row]:
             scene = rotation_scene(0.0, frames=13, radius=12.0, degrees_per_frame=15.0)
             phase = extract_phase(scene.tagged, radius=radius)
@@ -313,11 +351,15 @@ def motion_cases() -> Iterable[Case]:
                     if "target_reached" in o:
                         reached = bool(o.target_reached.values[n])
                         per_frame["status"] = "converged" if reached else "not reached"
-                    rows.append(_row(
-                        "rotation to 180", f"rotation 15°/frame, filter radius {radius}",
-                        "angle (deg)", round(float(angles[n]), 1),
-                        **{**summary, **per_frame, "phase_error": float(quality[n])},
-                    ))
+                    rows.append(
+                        _row(
+                            "rotation to 180",
+                            f"rotation 15°/frame, filter radius {radius}",
+                            "angle (deg)",
+                            round(float(angles[n]), 1),
+                            **{**summary, **per_frame, "phase_error": float(quality[n])},
+                        )
+                    )
             return rows
 
         yield "motion", f"rotation to 180 radius {radius}", run_180
@@ -332,13 +374,21 @@ PENALTY_SCENES: dict[str, Callable[[], Scene]] = {
 def penalty_cases() -> Iterable[Case]:
     for label, make in PENALTY_SCENES.items():
         for scale in (1e-3, 1e-2, 1e-1, 1.0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6):
-            def run(scale: float = scale, label: str = label,
-                    make: Callable[[], Scene] = make) -> list[Row]:
+
+            def run(
+                scale: float = scale, label: str = label, make: Callable[[], Scene] = make
+            ) -> list[Row]:
                 scene = make()
                 phase = extract_phase(scene.tagged)
                 # pinned λ and an unreachable target: every frame ends at exactly this λ
-                row, (out, _) = run_fe(scene.tagged, phase, scene.body(), penalty=scale,
-                                       penalty_limit=scale, epsilon=1e-6)
+                row, (out, _) = run_fe(
+                    scene.tagged,
+                    phase,
+                    scene.body(),
+                    penalty=scale,
+                    penalty_limit=scale,
+                    epsilon=1e-6,
+                )
                 row["status"] = "nan" if row["status"] == "nan" else "pinned"
                 row["epsilon_frames"] = " ".join(f"{e:.4f}" for e in out.epsilon.values[1:])
                 return [_row("penalty", label, "penalty/default", scale, **row)]
@@ -350,20 +400,36 @@ def noise_cases() -> Iterable[Case]:
     sweeps: list[tuple[str, str, float, dict[str, float]]] = []
     sweeps += [("noise", "SNR", s, {"snr": s}) for s in (50.0, 20.0, 10.0, 5.0, 3.0)]
     sweeps += [("voxel", "voxel scale", v, {"voxel": v}) for v in (1.0, 1.5, 2.0)]
-    sweeps += [("tag period", "tag period (mm)", p, {"tag_period": p})
-               for p in (4.0, 6.0, 8.0, 10.0, 12.0)]
+    sweeps += [
+        ("tag period", "tag period (mm)", p, {"tag_period": p}) for p in (4.0, 6.0, 8.0, 10.0, 12.0)
+    ]
     for group, parameter, value, kwargs in sweeps:
-        def run(group: str = group, parameter: str = parameter, value: float = value,
-                kwargs: dict[str, float] = kwargs) -> list[Row]:
+
+        def run(
+            group: str = group,
+            parameter: str = parameter,
+            value: float = value,
+            kwargs: dict[str, float] = kwargs,
+        ) -> list[Row]:
             scene = phantom_like(**kwargs)
             phase = extract_phase(scene.tagged)
             g = GEOMETRIES["small"]
             quality = image_phase_error(phase, scene.motion, _body_points(g.radius, g.height))
             rows = []
-            for summary, _ in (run_fe(scene.tagged, phase, scene.body()),
-                               run_harp(scene.tagged, phase)):
-                rows.append(_row(group, "phantom", parameter, value, **summary,
-                                 phase_error=float(np.nanmean(quality[1:]))))
+            for summary, _ in (
+                run_fe(scene.tagged, phase, scene.body()),
+                run_harp(scene.tagged, phase),
+            ):
+                rows.append(
+                    _row(
+                        group,
+                        "phantom",
+                        parameter,
+                        value,
+                        **summary,
+                        phase_error=float(np.nanmean(quality[1:])),
+                    )
+                )
             return rows
 
         yield group, f"{parameter}={value:g}", run
@@ -374,6 +440,7 @@ SQUEEZE = "static images + pressure squeezing top and bottom"
 
 def inversion_cases() -> Iterable[Case]:
     for pressure in (1.0, 10.0, 100.0, 1000.0):
+
         def run_solve(pressure: float = pressure) -> list[Row]:
             body = Body(box((10.0, 10.0, 10.0), (3, 3, 3)), NeoHookean(c1=1.0, kappa=100.0))
             loads = [Fixed("bottom"), Pressure("top", pressure)]
@@ -381,18 +448,33 @@ def inversion_cases() -> Iterable[Case]:
             row: Row = {"method": "newton.solve hex8"}
             try:
                 res = solve(body, loads, steps=4)
-                row.update(status="converged", min_J=res.min_jacobian,
-                           iterations=res.iterations, halvings=res.cutbacks,
-                           line_search=res.line_search_steps)
+                row.update(
+                    status="converged",
+                    min_J=res.min_jacobian,
+                    iterations=res.iterations,
+                    halvings=res.cutbacks,
+                    line_search=res.line_search_steps,
+                )
             except ConvergenceError as exc:  # ElementInversionError names the cells
-                row.update(status="raised", error=_describe(exc),
-                           cells=len(exc.cells) if isinstance(exc, ElementInversionError) else "")
+                row.update(
+                    status="raised",
+                    error=_describe(exc),
+                    cells=len(exc.cells) if isinstance(exc, ElementInversionError) else "",
+                )
             row["wall_time"] = time.perf_counter() - start
-            return [_row("inversion", "pressed cube (Fixed bottom, Pressure top)",
-                         "pressure/C1", pressure, **row)]
+            return [
+                _row(
+                    "inversion",
+                    "pressed cube (Fixed bottom, Pressure top)",
+                    "pressure/C1",
+                    pressure,
+                    **row,
+                )
+            ]
 
         yield "inversion", f"solve pressure {pressure:g}", run_solve
     for pressure in (1.0, 10.0, 100.0, 1e3, 1e4):
+
         def run_track(pressure: float = pressure) -> list[Row]:
             scene = rotation_scene(0.0, frames=3, radius=12.0)  # static images
             phase = extract_phase(scene.tagged)
@@ -401,19 +483,32 @@ def inversion_cases() -> Iterable[Case]:
             row, _ = run_fe(scene.tagged, phase, body, terms=squeeze)
             return [_row("inversion", SQUEEZE, "pressure/C1", pressure, **row)]
 
-        yield "inversion", f"track pressure {pressure:g}", _guard(
-            run_track, "inversion", SQUEEZE, "pressure/C1", pressure)
+        yield (
+            "inversion",
+            f"track pressure {pressure:g}",
+            _guard(run_track, "inversion", SQUEEZE, "pressure/C1", pressure),
+        )
     for stretch in (0.8, 0.6, 0.4):
+
         def run_stretch(stretch: float = stretch) -> list[Row]:
             times = np.arange(4) * FRAME
             motion = Stretch(times=tuple(times), stretches=tuple(np.linspace(1.0, stretch, 4)))
             scene = cylinder_scene(motion, times=times, kappa=1.0)  # compressible model
             phase = extract_phase(scene.tagged)
             rows = []
-            for summary, _ in (run_fe(scene.tagged, phase, scene.body()),
-                               run_harp(scene.tagged, phase)):
-                rows.append(_row("inversion", "images of uniaxial compression (J = stretch)",
-                                 "final stretch", stretch, **summary))
+            for summary, _ in (
+                run_fe(scene.tagged, phase, scene.body()),
+                run_harp(scene.tagged, phase),
+            ):
+                rows.append(
+                    _row(
+                        "inversion",
+                        "images of uniaxial compression (J = stretch)",
+                        "final stretch",
+                        stretch,
+                        **summary,
+                    )
+                )
             return rows
 
         yield "inversion", f"compression {stretch:g}", run_stretch
@@ -427,14 +522,16 @@ def degenerate_cases() -> Iterable[Case]:
         scene = translation_scene(0.25, frames=4)
         return scene, extract_phase(scene.tagged)
 
-    def masked(edit: Callable[[Any], None],
-               make_scene: Callable[[], Scene] = lambda: translation_scene(0.25, frames=4),
-               ) -> Callable[[], Any]:
+    def masked(
+        edit: Callable[[Any], None],
+        make_scene: Callable[[], Scene] = lambda: translation_scene(0.25, frames=4),
+    ) -> Callable[[], Any]:
         def run() -> Any:
             scene = make_scene()
             ds = scene.tagged.copy(deep=True)
             edit(ds)
             return scene, ds
+
         return run
 
     def empty(ds: Any) -> None:
@@ -443,12 +540,12 @@ def degenerate_cases() -> Iterable[Case]:
     def tiny(ds: Any) -> None:  # 2 x 2 x 2 voxels on the axis of the rotating cylinder
         ds["mask"][:] = False
         cz, cy, cx = (ds.sizes[d] // 2 for d in ("z", "y", "x"))
-        ds["mask"][:, cz - 1:cz + 1, cy - 1:cy + 1, cx - 1:cx + 1] = True
+        ds["mask"][:, cz - 1 : cz + 1, cy - 1 : cy + 1, cx - 1 : cx + 1] = True
 
     def tiny_moving(ds: Any) -> None:  # the same 8 voxels, but the body translates away
         ds["mask"][:] = False
         cz, cy, cx = (ds.sizes[d] // 2 for d in ("z", "y", "x"))
-        ds["mask"][:, cz - 1:cz + 1, cy - 1:cy + 1, 9:11] = True
+        ds["mask"][:, cz - 1 : cz + 1, cy - 1 : cy + 1, 9:11] = True
 
     def one_tag(ds: Any) -> None:
         ds["mask"][2] = False
@@ -461,14 +558,17 @@ def degenerate_cases() -> Iterable[Case]:
 
     variants: list[tuple[str, Callable[[], Any]]] = [
         ("empty mask", masked(empty)),
-        ("tiny mask (8 voxels on the axis of a rotation)",
-         masked(tiny, lambda: rotation_scene(0.25, frames=3))),
+        (
+            "tiny mask (8 voxels on the axis of a rotation)",
+            masked(tiny, lambda: rotation_scene(0.25, frames=3)),
+        ),
         ("tiny mask (8 voxels the translating body leaves)", masked(tiny_moving)),
         ("one tag fully masked", masked(one_tag)),
         ("all-zero frame 2", masked(zero_frame)),
         ("NaNs in one slice", masked(nan_slice)),
     ]
     for label, make in variants:
+
         def run(label: str = label, make: Callable[[], Any] = make) -> list[Row]:
             scene, ds = make()
             row, _ = run_fe(scene.tagged, ds, scene.body())
@@ -487,9 +587,18 @@ def degenerate_cases() -> Iterable[Case]:
         start = time.perf_counter()
         out = track(phase.isel(time=[0]), scene.body())
         ok = _finite(out.displacement.values) and float(abs(out.displacement).max()) == 0.0
-        return [_row("degenerate", "a single frame", "", "", method="FE hex8",
-                     status="converged" if ok else "nan", frames=1,
-                     wall_time=time.perf_counter() - start)]
+        return [
+            _row(
+                "degenerate",
+                "a single frame",
+                "",
+                "",
+                method="FE hex8",
+                status="converged" if ok else "nan",
+                frames=1,
+                wall_time=time.perf_counter() - start,
+            )
+        ]
 
     yield "degenerate", "partly outside", _guard(outside, "degenerate", OUTSIDE, "", "")
     yield "degenerate", "single frame", _guard(single, "degenerate", "a single frame", "", "")
@@ -511,8 +620,9 @@ def _describe(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {lines[0] if lines else ''}"
 
 
-def _guard(run: Callable[[], list[Row]], group: str, case: str, parameter: str,
-           value: Any) -> Callable[[], list[Row]]:
+def _guard(
+    run: Callable[[], list[Row]], group: str, case: str, parameter: str, value: Any
+) -> Callable[[], list[Row]]:
     """Turn an exception of ``run`` into a ``raised`` row that names it."""
 
     def guarded() -> list[Row]:
@@ -520,8 +630,18 @@ def _guard(run: Callable[[], list[Row]], group: str, case: str, parameter: str,
         try:
             return run()
         except Exception as exc:  # noqa: BLE001 - reported as data, that is the point
-            return [_row(group, case, parameter, value, method="FE hex8", status="raised",
-                         error=_describe(exc), wall_time=time.perf_counter() - start)]
+            return [
+                _row(
+                    group,
+                    case,
+                    parameter,
+                    value,
+                    method="FE hex8",
+                    status="raised",
+                    error=_describe(exc),
+                    wall_time=time.perf_counter() - start,
+                )
+            ]
 
     return guarded
 
@@ -531,8 +651,13 @@ def _child(run: Callable[[], list[Row]], conn: Any) -> None:
     try:
         rows = run()
     except Exception as exc:  # noqa: BLE001
-        rows = [{"status": "raised", "error": _describe(exc),
-                 "traceback": traceback.format_exc(limit=3)}]
+        rows = [
+            {
+                "status": "raised",
+                "error": _describe(exc),
+                "traceback": traceback.format_exc(limit=3),
+            }
+        ]
     conn.send(rows)
     conn.close()
 
@@ -567,10 +692,32 @@ def run_bounded(group: str, label: str, run: Callable[[], list[Row]], timeout: f
 
 
 # ------------------------------------------------------------------------------ output
-COLUMNS = ["group", "case", "parameter", "value", "method", "status", "error", "mean", "p95",
-           "max", "epsilon", "iterations", "halvings", "penalty", "min_J", "coverage",
-           "cells_without_data", "phase_error", "wall_time", "frames", "epsilon_frames",
-           "line_search", "cells", "case_seconds"]
+COLUMNS = [
+    "group",
+    "case",
+    "parameter",
+    "value",
+    "method",
+    "status",
+    "error",
+    "mean",
+    "p95",
+    "max",
+    "epsilon",
+    "iterations",
+    "halvings",
+    "penalty",
+    "min_J",
+    "coverage",
+    "cells_without_data",
+    "phase_error",
+    "wall_time",
+    "frames",
+    "epsilon_frames",
+    "line_search",
+    "cells",
+    "case_seconds",
+]
 
 
 def _fmt(value: Any, digits: int = 3) -> str:
@@ -595,11 +742,14 @@ def write_csv(rows: list[Row], path: Path) -> None:
 def check_monotone_epsilon(rows: list[Row]) -> str:
     """Is ε non-increasing in the pinned penalty λ, frame by frame (per penalty scene)?"""
     verdicts = []
-    cases = sorted({r["case"] for r in rows
-                    if r.get("group") == "penalty" and r.get("epsilon_frames")})
+    cases = sorted(
+        {r["case"] for r in rows if r.get("group") == "penalty" and r.get("epsilon_frames")}
+    )
     for case in cases:
-        pinned = sorted((r for r in rows if r.get("case") == case and r.get("epsilon_frames")),
-                        key=lambda r: float(r["value"]))
+        pinned = sorted(
+            (r for r in rows if r.get("case") == case and r.get("epsilon_frames")),
+            key=lambda r: float(r["value"]),
+        )
         if len(pinned) < 2:
             continue
         eps = np.array([[float(e) for e in r["epsilon_frames"].split()] for r in pinned])
@@ -612,9 +762,11 @@ def check_monotone_epsilon(rows: list[Row]) -> str:
         else:
             i = int(bad[0])
             frame = int(np.argmax(rises[i])) + 1
-            verdict = (f"non-increasing up to {lam[i]:g} × default; it rises by "
-                       f"{rises[i].max():.2g} rad from {lam[i]:g} to {lam[i + 1]:g} (frame {frame})"
-                       f", largest rise {rises.max():.2g} rad")
+            verdict = (
+                f"non-increasing up to {lam[i]:g} × default; it rises by "
+                f"{rises[i].max():.2g} rad from {lam[i]:g} to {lam[i + 1]:g} (frame {frame})"
+                f", largest rise {rises.max():.2g} rad"
+            )
         verdicts.append(f"ε against pinned λ, {case}: {verdict}.")
     return "\n".join(verdicts)
 
@@ -631,7 +783,8 @@ def headline(rows: list[Row]) -> list[str]:
         points = ", ".join(
             f"{_fmt(r['value'])} → {_fmt(r['mean'])}"
             + ("" if r.get("status") in ("converged", "pinned") else f" ({r.get('status')})")
-            for r in rs)
+            for r in rs
+        )
         out.append(f"- **{group}**, {case}, {method} — {rs[0]['parameter']}: {points}")
     return out
 
@@ -652,21 +805,35 @@ def write_markdown(rows: list[Row], path: Path, seconds: float) -> None:
         lines += [v + "  " for v in verdict.splitlines()] + [""]
     lines += ["## Headline: mean error (mm) against each swept parameter", ""]
     lines += headline(rows) + ["", "## All cases", ""]
-    header = ("| group | case | parameter | value | method | status | mean | p95 | ε | "
-              "GN it. | halvings | min J | time (s) | note |")
+    header = (
+        "| group | case | parameter | value | method | status | mean | p95 | ε | "
+        "GN it. | halvings | min J | time (s) | note |"
+    )
     lines += [header, "|" + "---|" * 14]
     for r in rows:
         note = r.get("error", "")
         if r.get("phase_error") not in (None, ""):
             note = (note + " " if note else "") + (
-                f"image phase error (x, y tags) {_fmt(r['phase_error'])} rad")
+                f"image phase error (x, y tags) {_fmt(r['phase_error'])} rad"
+            )
         if r.get("cells_without_data"):
             note = (note + " " if note else "") + f"{r['cells_without_data']} cells without data"
-        cells = [r.get("group", ""), r.get("case", ""), r.get("parameter", ""),
-                 _fmt(r.get("value", "")), r.get("method", ""), r.get("status", ""),
-                 _fmt(r.get("mean")), _fmt(r.get("p95")), _fmt(r.get("epsilon")),
-                 _fmt(r.get("iterations")), _fmt(r.get("halvings")), _fmt(r.get("min_J")),
-                 _fmt(r.get("wall_time"), 2), str(note).replace("|", "/")]
+        cells = [
+            r.get("group", ""),
+            r.get("case", ""),
+            r.get("parameter", ""),
+            _fmt(r.get("value", "")),
+            r.get("method", ""),
+            r.get("status", ""),
+            _fmt(r.get("mean")),
+            _fmt(r.get("p95")),
+            _fmt(r.get("epsilon")),
+            _fmt(r.get("iterations")),
+            _fmt(r.get("halvings")),
+            _fmt(r.get("min_J")),
+            _fmt(r.get("wall_time"), 2),
+            str(note).replace("|", "/"),
+        ]
         lines.append("| " + " | ".join(str(c) for c in cells) + " |")
     path.write_text("\n".join(lines) + "\n")
 
@@ -693,7 +860,7 @@ def plot(rows: list[Row], out: Path) -> list[Path]:
         for label, rs in series.items():
             rs = sorted(rs, key=lambda r: float(r["value"]))
             x = [float(r["value"]) for r in rs]
-            line, = ax_e.plot(x, [r["mean"] for r in rs], "o-", label=label)
+            (line,) = ax_e.plot(x, [r["mean"] for r in rs], "o-", label=label)
             ax_e.plot(x, [r.get("p95", np.nan) for r in rs], "x:", color=line.get_color())
             if any(r.get("wall_time") is not None for r in rs):
                 ax_t.plot(x, [r.get("wall_time", np.nan) for r in rs], "o-", color=line.get_color())
@@ -740,8 +907,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--groups", nargs="+", choices=list(GROUPS), default=list(GROUPS))
     parser.add_argument("--timeout", type=float, default=240.0, help="wall-time bound per case, s")
     parser.add_argument("--out", type=Path, default=OUT)
-    parser.add_argument("--replot", action="store_true",
-                        help="redraw the PNGs from an existing stability.csv")
+    parser.add_argument(
+        "--replot", action="store_true", help="redraw the PNGs from an existing stability.csv"
+    )
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     if args.replot:
@@ -752,16 +920,20 @@ def main(argv: list[str] | None = None) -> None:
     rows: list[Row] = []
     for group in args.groups:
         for group_name, label, run in GROUPS[group]():
-            new = run_bounded(group_name, label, _guard(run, group_name, label, "", ""),
-                              args.timeout)
+            new = run_bounded(
+                group_name, label, _guard(run, group_name, label, "", ""), args.timeout
+            )
             for r in new:
-                print(f"[{time.perf_counter() - start:6.0f} s] {r.get('group')} | "
-                      f"{r.get('case')} | "
-                      f"{r.get('parameter', '')}={r.get('value', '')} | {r.get('method', '')} | "
-                      f"{r.get('status')} | mean {_fmt(r.get('mean'))} p95 {_fmt(r.get('p95'))} "
-                      f"eps {_fmt(r.get('epsilon'))} | halvings {r.get('halvings', '')} "
-                      f"min J {_fmt(r.get('min_J'))} | {_fmt(r.get('wall_time'), 2)} s "
-                      f"{r.get('error', '')}", flush=True)
+                print(
+                    f"[{time.perf_counter() - start:6.0f} s] {r.get('group')} | "
+                    f"{r.get('case')} | "
+                    f"{r.get('parameter', '')}={r.get('value', '')} | {r.get('method', '')} | "
+                    f"{r.get('status')} | mean {_fmt(r.get('mean'))} p95 {_fmt(r.get('p95'))} "
+                    f"eps {_fmt(r.get('epsilon'))} | halvings {r.get('halvings', '')} "
+                    f"min J {_fmt(r.get('min_J'))} | {_fmt(r.get('wall_time'), 2)} s "
+                    f"{r.get('error', '')}",
+                    flush=True,
+                )
             rows += new
     seconds = time.perf_counter() - start
     write_csv(rows, args.out / "stability.csv")

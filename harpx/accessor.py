@@ -134,10 +134,22 @@ class HarpAccessor:
         from harpx.tracking.track import track
 
         return track(
-            self._ds, body, method=method, epsilon=epsilon, penalty=penalty,
-            penalty_limit=penalty_limit, ramp=ramp, multiplier_tolerance=multiplier_tolerance,
-            max_updates=max_updates, predictor=predictor, tolerance=tolerance, dirichlet=dirichlet, terms=terms,
-            intorder=intorder, linear_solver=linear_solver, progress=progress,
+            self._ds,
+            body,
+            method=method,
+            epsilon=epsilon,
+            penalty=penalty,
+            penalty_limit=penalty_limit,
+            ramp=ramp,
+            multiplier_tolerance=multiplier_tolerance,
+            max_updates=max_updates,
+            predictor=predictor,
+            tolerance=tolerance,
+            dirichlet=dirichlet,
+            terms=terms,
+            intorder=intorder,
+            linear_solver=linear_solver,
+            progress=progress,
         )
 
     def track_harp(

@@ -187,12 +187,23 @@ def track_many(
             todo.append((i, digest))
 
     done = len(inputs) - len(todo) - len(failures)
-    with tqdm(total=len(inputs), initial=done, disable=not progress, desc="subjects",
-              unit="subject") as bar:
+    with tqdm(
+        total=len(inputs), initial=done, disable=not progress, desc="subjects", unit="subject"
+    ) as bar:
         bar.update(len(failures))
         if todo:
-            _run(todo, inputs, outputs, body_factory, kwargs, client, address, n_workers,
-                 failures, bar)
+            _run(
+                todo,
+                inputs,
+                outputs,
+                body_factory,
+                kwargs,
+                client,
+                address,
+                n_workers,
+                failures,
+                bar,
+            )
     if failures:
         raise _cohort_error(inputs, outputs, failures, out_dir)
     return outputs
@@ -274,8 +285,9 @@ def local_cluster(n_workers: int = 2) -> Any:
         raise ValueError(f"n_workers={n_workers!r} must be at least 1")
     environ = {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1}
     with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
-        return LocalCluster(n_workers=int(n_workers), threads_per_worker=1, processes=True,
-                            dashboard_address=":0")
+        return LocalCluster(
+            n_workers=int(n_workers), threads_per_worker=1, processes=True, dashboard_address=":0"
+        )
 
 
 # --- helpers ------------------------------------------------------------------------------
@@ -385,8 +397,14 @@ def _run(
             owned.insert(0, client)
         futures = {
             client.submit(
-                track_subject, str(inputs[i]), str(outputs[i]), body_factory, kwargs, digest,
-                key=f"harpx-track-{inputs[i].stem}-{uuid.uuid4().hex}", pure=False,
+                track_subject,
+                str(inputs[i]),
+                str(outputs[i]),
+                body_factory,
+                kwargs,
+                digest,
+                key=f"harpx-track-{inputs[i].stem}-{uuid.uuid4().hex}",
+                pure=False,
             ): i
             for i, digest in todo
         }

@@ -32,7 +32,9 @@ def _demo(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()
     scene = phantom(args.size)
-    print(f"phantom ({args.size}): images {dict(scene.tagged.sizes)} built in {time.perf_counter() - t:.1f} s")
+    print(
+        f"phantom ({args.size}): images {dict(scene.tagged.sizes)} built in {time.perf_counter() - t:.1f} s"
+    )
     t = time.perf_counter()
     phase = extract_phase(scene.tagged, upsample=args.upsample)
     phase_time = time.perf_counter() - t
@@ -42,13 +44,25 @@ def _demo(args: argparse.Namespace) -> int:
     t = time.perf_counter()
     harp = track_harp(phase, points=scene.tagged)
     results["HARP"] = harp
-    rows.append({"method": "conventional HARP", "seconds": time.perf_counter() - t + phase_time, "result": harp})
+    rows.append(
+        {
+            "method": "conventional HARP",
+            "seconds": time.perf_counter() - t + phase_time,
+            "result": harp,
+        }
+    )
     for element in args.elements:
         body = scene.body(element)
         t = time.perf_counter()
         fe = track(phase, body, method=args.method, epsilon=args.epsilon, progress=args.progress)
         results[f"FE {element}"] = fe
-        rows.append({"method": f"FE {args.method} {element} ({body.ncell} cells)", "seconds": time.perf_counter() - t + phase_time, "result": fe})
+        rows.append(
+            {
+                "method": f"FE {args.method} {element} ({body.ncell} cells)",
+                "seconds": time.perf_counter() - t + phase_time,
+                "result": fe,
+            }
+        )
         to_netcdf(fe, out / f"phantom_{element}.nc")
     to_netcdf(harp, out / "phantom_harp.nc")
     print()
@@ -56,10 +70,19 @@ def _demo(args: argparse.Namespace) -> int:
     print("|---|---|---|---|---|")
     for row in rows:
         err = tracking_error(row["result"], scene.tagged)
-        row.update(mean=float(err.mean_all), sd=float(err.sd_all), p95=float(err.p95_all), max=float(err.max_all))
-        print(f"| {row['method']} | {row['mean']:.3f} ± {row['sd']:.3f} | {row['p95']:.3f} | {row['max']:.2f} | {row['seconds']:.1f} |")
+        row.update(
+            mean=float(err.mean_all),
+            sd=float(err.sd_all),
+            p95=float(err.p95_all),
+            max=float(err.max_all),
+        )
+        print(
+            f"| {row['method']} | {row['mean']:.3f} ± {row['sd']:.3f} | {row['p95']:.3f} | {row['max']:.2f} | {row['seconds']:.1f} |"
+        )
     frame_time = 54.0 if args.size == "paper" else float(scene.tagged.time[-2])
-    displacement_maps(results, scene.tagged, time=frame_time, path=out / "phantom_displacement_maps.png")
+    displacement_maps(
+        results, scene.tagged, time=frame_time, path=out / "phantom_displacement_maps.png"
+    )
     error_vs_runtime(rows, path=out / "phantom_error_vs_runtime.png")
     print(f"\narchives and figures written to {out}/")
     return 0
@@ -110,7 +133,9 @@ def _report(args: argparse.Namespace) -> int:
         print(f"wrote {args.figure}")
     if args.truth:
         err = tracking_error(ds, open_dataset(args.truth))
-        print(f"error against truth: mean {float(err.mean_all):.3f} ± {float(err.sd_all):.3f} mm, p95 {float(err.p95_all):.3f} mm, max {float(err.max_all):.3f} mm")
+        print(
+            f"error against truth: mean {float(err.mean_all):.3f} ± {float(err.sd_all):.3f} mm, p95 {float(err.p95_all):.3f} mm, max {float(err.max_all):.3f} mm"
+        )
     return 0
 
 
@@ -129,8 +154,11 @@ def _dicom(args: argparse.Namespace) -> int:
         vector = [float(v) for v in direction.split(",")] if "," in direction else direction
         directions.setdefault(series, []).append((label, vector))
     ds = read_tagged(
-        args.input, tag_period=args.tag_period, tag_directions=directions,
-        sequence=args.sequence, spacing=args.spacing,
+        args.input,
+        tag_period=args.tag_period,
+        tag_directions=directions,
+        sequence=args.sequence,
+        spacing=args.spacing,
     )
     to_netcdf(ds, args.output)
     print(f"wrote {args.output}: {dict(ds.sizes)}")
@@ -150,7 +178,9 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--method", choices=["penalty", "augmented-lagrangian"], default="penalty")
     demo.add_argument("--epsilon", type=float, default=0.05, help="target tracking residual, rad")
     demo.add_argument("--elements", nargs="+", choices=["hex8", "hex20"], default=["hex8"])
-    demo.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+    demo.add_argument(
+        "--no-progress", dest="progress", action="store_false", help="no progress bar"
+    )
     demo.set_defaults(func=_demo)
 
     phase = sub.add_parser("phase", help="harmonic phase of a tagged archive")
@@ -175,9 +205,14 @@ def build_parser() -> argparse.ArgumentParser:
     dcm = sub.add_parser("dicom", help="tagged cine DICOM series -> tagged archive")
     dcm.add_argument("input", nargs="+", help="DICOM files or folders")
     dcm.add_argument("output", help="tagged/1 NetCDF archive to write")
-    dcm.add_argument("--tag", action="append", required=True, metavar="SERIES:LABEL:DIRECTION",
-                     help="tag of a series (SeriesDescription, number or UID): label and "
-                          "direction 'row', 'column' or 'x,y,z'; repeat for each tag")
+    dcm.add_argument(
+        "--tag",
+        action="append",
+        required=True,
+        metavar="SERIES:LABEL:DIRECTION",
+        help="tag of a series (SeriesDescription, number or UID): label and "
+        "direction 'row', 'column' or 'x,y,z'; repeat for each tag",
+    )
     dcm.add_argument("--tag-period", type=float, required=True, help="tag spacing, mm")
     dcm.add_argument("--sequence", choices=["SPAMM", "CSPAMM"])
     dcm.add_argument("--spacing", type=float, help="isotropic output voxel size, mm")

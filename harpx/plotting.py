@@ -53,7 +53,9 @@ def displacement_maps(
     zsel = float(true.z[true.sizes["z"] // 2]) if z is None else z
     true = true.sel(z=zsel, method="nearest")
     ncol = len(results) + 1
-    fig, axes = plt.subplots(2, ncol, figsize=(3.6 * ncol, 6.6), squeeze=False, layout="constrained")
+    fig, axes = plt.subplots(
+        2, ncol, figsize=(3.6 * ncol, 6.6), squeeze=False, layout="constrained"
+    )
     vmax = float(np.nanmax(_magnitude(true)))
     extent = [float(true.x[0]), float(true.x[-1]), float(true.y[0]), float(true.y[-1])]
     axes[0, 0].imshow(_magnitude(true), origin="lower", extent=extent, vmin=0, vmax=vmax)
@@ -61,13 +63,21 @@ def displacement_maps(
     axes[1, 0].axis("off")
     for col, (name, ds) in enumerate(results.items(), start=1):
         est = ds["displacement_grid"].sel(time=time, method="nearest")
-        est = est.interp(z=true.z, y=true.y, x=true.x) if est.sizes["x"] != true.sizes["x"] else est.sel(z=zsel, method="nearest")
+        est = (
+            est.interp(z=true.z, y=true.y, x=true.x)
+            if est.sizes["x"] != true.sizes["x"]
+            else est.sel(z=zsel, method="nearest")
+        )
         mag = _magnitude(est)
         im = axes[0, col].imshow(mag, origin="lower", extent=extent, vmin=0, vmax=vmax)
         axes[0, col].set_title(f"{name}: |u| (mm)", fontsize=9)
         err = _magnitude(est - true.values)
-        im2 = axes[1, col].imshow(err, origin="lower", extent=extent, vmin=0, vmax=2.0, cmap="magma")
-        axes[1, col].set_title(f"{name}: error (mm)\nslice mean {float(np.nanmean(err)):.2f}", fontsize=9)
+        im2 = axes[1, col].imshow(
+            err, origin="lower", extent=extent, vmin=0, vmax=2.0, cmap="magma"
+        )
+        axes[1, col].set_title(
+            f"{name}: error (mm)\nslice mean {float(np.nanmean(err)):.2f}", fontsize=9
+        )
     fig.colorbar(im, ax=axes[0, :].tolist(), shrink=0.8)
     fig.colorbar(im2, ax=axes[1, 1:].tolist(), shrink=0.8)
     fig.suptitle(f"t = {float(true.time):.0f} ms, z = {zsel:.1f} mm")
@@ -95,7 +105,11 @@ def error_vs_runtime(rows: Sequence[Mapping[str, Any]], *, path: PathLike | None
     fig, ax = plt.subplots(figsize=(6.5, 3.8 + 0.2 * len(rows)), layout="constrained")
     for row in rows:
         ax.errorbar(
-            row["seconds"], row["mean"], yerr=[[0], [row["p95"] - row["mean"]]], fmt="o", capsize=3,
+            row["seconds"],
+            row["mean"],
+            yerr=[[0], [row["p95"] - row["mean"]]],
+            fmt="o",
+            capsize=3,
             label=row["method"],
         )
     ax.set_xscale("log")
@@ -117,8 +131,14 @@ def _slice(da: xr.DataArray, time: float | None, z: float | None) -> xr.DataArra
     return da
 
 
-def tag_image(ds: xr.Dataset, *, tag: str | None = None, time: float | None = None,
-              z: float | None = None, ax: Any = None) -> Any:
+def tag_image(
+    ds: xr.Dataset,
+    *,
+    tag: str | None = None,
+    time: float | None = None,
+    z: float | None = None,
+    ax: Any = None,
+) -> Any:
     """One slice of a ``tagged/1`` image (default: first tag, last frame, middle slice).
 
     Parameters
@@ -143,8 +163,14 @@ def tag_image(ds: xr.Dataset, *, tag: str | None = None, time: float | None = No
     return ax
 
 
-def phase_map(ds: xr.Dataset, *, tag: str | None = None, time: float | None = None,
-              z: float | None = None, ax: Any = None) -> Any:
+def phase_map(
+    ds: xr.Dataset,
+    *,
+    tag: str | None = None,
+    time: float | None = None,
+    z: float | None = None,
+    ax: Any = None,
+) -> Any:
     """One slice of a ``phase/1`` harmonic phase (rad, cyclic colour map).
 
     Parameters
@@ -169,8 +195,14 @@ def phase_map(ds: xr.Dataset, *, tag: str | None = None, time: float | None = No
     return ax
 
 
-def displacement_map(ds: xr.Dataset, *, component: str | None = None, time: float | None = None,
-                     z: float | None = None, ax: Any = None) -> Any:
+def displacement_map(
+    ds: xr.Dataset,
+    *,
+    component: str | None = None,
+    time: float | None = None,
+    z: float | None = None,
+    ax: Any = None,
+) -> Any:
     """Tracked displacement on one slice of the image grid (magnitude or one component, mm).
 
     Parameters
@@ -191,14 +223,24 @@ def displacement_map(ds: xr.Dataset, *, component: str | None = None, time: floa
     da = _slice(ds["displacement_grid"], time, z)
     da = _magnitude(da) if component is None else da.sel(axis=component)
     ax = ax or plt.subplots(figsize=(4.5, 4))[1]
-    da.plot(ax=ax, cmap="viridis" if component is None else "RdBu_r",
-            cbar_kwargs={"label": f"u{'' if component is None else '_' + component} (mm)"})
+    da.plot(
+        ax=ax,
+        cmap="viridis" if component is None else "RdBu_r",
+        cbar_kwargs={"label": f"u{'' if component is None else '_' + component} (mm)"},
+    )
     ax.set_aspect("equal")
     return ax
 
 
-def strain_map(ds: xr.Dataset, *, i: int = 0, j: int = 0, time: float | None = None,
-               z: float | None = None, ax: Any = None) -> Any:
+def strain_map(
+    ds: xr.Dataset,
+    *,
+    i: int = 0,
+    j: int = 0,
+    time: float | None = None,
+    z: float | None = None,
+    ax: Any = None,
+) -> Any:
     """Green–Lagrange strain E_ij per cell, at the cell centres near one slice.
 
     Parameters

@@ -399,8 +399,19 @@ def _resolve_kind(ds: xr.Dataset, kind: str | None) -> str:
     raise ValueError(f"kind={kind!r} is not a harpx schema; expected one of {sorted(KINDS)}")
 
 
-_NUMERIC = ("image", "phase", "magnitude", "displacement_true", "body", "tag_direction",
-            "tag_frequency", "points", "displacement", "green_strain", "fiber_stretch")
+_NUMERIC = (
+    "image",
+    "phase",
+    "magnitude",
+    "displacement_true",
+    "body",
+    "tag_direction",
+    "tag_frequency",
+    "points",
+    "displacement",
+    "green_strain",
+    "fiber_stretch",
+)
 
 
 def _check_dtypes(ds: xr.Dataset, problems: list[str]) -> None:
@@ -426,9 +437,7 @@ def _check_layout(ds: xr.Dataset, specs: Mapping[str, VarSpec], problems: list[s
             if missing or extra:
                 hint = f"missing {missing}" if missing else ""
                 hint += ("; " if hint and extra else "") + (f"unexpected {extra}" if extra else "")
-                problems.append(
-                    f"{name!r} has dims {var.dims}; expected {spec.dims} ({hint})"
-                )
+                problems.append(f"{name!r} has dims {var.dims}; expected {spec.dims} ({hint})")
             else:
                 problems.append(
                     f"{name!r} has dims {var.dims}; expected order {spec.dims}; fix with "
@@ -561,9 +570,7 @@ def _check_tags(ds: xr.Dataset, problems: list[str]) -> None:
             f = None
         s = slice_axes[i] if slice_axes is not None else None
         if s is not None and s not in AXES:
-            problems.append(
-                f"slice_axis of tag {tag!r} is {s!r}; expected one of {list(AXES)!r}"
-            )
+            problems.append(f"slice_axis of tag {tag!r} is {s!r}; expected one of {list(AXES)!r}")
             s = None
         if d is not None and s is not None and abs(d[AXES.index(s)]) > 0.5:
             problems.append(
@@ -615,9 +622,7 @@ def _check_finite(ds: xr.Dataset, name: str, problems: list[str]) -> None:
     )
 
 
-def _check_range(
-    ds: xr.Dataset, name: str, low: float, high: float, problems: list[str]
-) -> None:
+def _check_range(ds: xr.Dataset, name: str, low: float, high: float, problems: list[str]) -> None:
     data = _numpy_data(ds.variables[name])
     if data is None or data.dtype.kind not in "fiu" or data.size == 0:
         return

@@ -40,14 +40,22 @@ def ideal_phase(motion, *, shape, spacing, times, tag_period=8.0, body=None, tag
         {
             "phase": (dims, phase, standard_attrs("phase")),
             "magnitude": (dims, mag, standard_attrs("magnitude")),
-            "displacement_true": (("time", "axis", "z", "y", "x"), truth, standard_attrs("displacement_true")),
+            "displacement_true": (
+                ("time", "axis", "z", "y", "x"),
+                truth,
+                standard_attrs("displacement_true"),
+            ),
         },
         coords={
             "tag": ("tag", list(tags), standard_attrs("tag")),
             "axis": ("axis", ["x", "y", "z"], standard_attrs("axis")),
             "tag_direction": (("tag", "axis"), dirs, standard_attrs("tag_direction")),
             "tag_frequency": ("tag", freq, standard_attrs("tag_frequency")),
-            "slice_axis": ("tag", ["z" if t != "z" else "y" for t in tags], standard_attrs("slice_axis")),
+            "slice_axis": (
+                "tag",
+                ["z" if t != "z" else "y" for t in tags],
+                standard_attrs("slice_axis"),
+            ),
             "time": ("time", np.asarray(times, float), standard_attrs("time")),
             "z": ("z", z, standard_attrs("z")),
             "y": ("y", y, standard_attrs("y")),

@@ -33,8 +33,9 @@ from harpx.tracking.track import track
 from tests.test_schema import make_phase, make_tagged, make_tracked
 
 MAT = NeoHookean(c1=1.0, kappa=120.0)
-_HYPOTHESIS = settings(max_examples=12, deadline=None,
-                       suppress_health_check=[HealthCheck.function_scoped_fixture])
+_HYPOTHESIS = settings(
+    max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 
 
 def _names(directory: Path) -> list[str]:
@@ -80,51 +81,97 @@ def _drop_attr(name: str) -> Callable[[xr.Dataset], xr.Dataset]:
     return change
 
 
-
 BAD_TAGGED = [
-    pytest.param(lambda ds: ds.assign(image=ds.image.transpose("time", "tag", "z", "y", "x")),
-                 r"'image' has dims \('time', 'tag', .*expected order", id="transposed-dims"),
-    pytest.param(lambda ds: ds.assign(image=ds.image.isel(z=0)),
-                 r"'image' has dims .*missing \['z'\]", id="missing-dim"),
-    pytest.param(lambda ds: ds.assign(image=ds.image.expand_dims(echo=2)),
-                 r"unexpected \['echo'\]", id="extra-dim"),
-    pytest.param(_set("x", lambda ds: ds.x.values.astype(str)),
-                 "coordinate 'x' has dtype", id="str-x"),
-    pytest.param(_set("time", lambda ds: np.array([0, 1], "datetime64[ms]")),
-                 "coordinate 'time' has dtype 'datetime64", id="datetime-time"),
-    pytest.param(_set("mask", lambda ds: ds.mask.values.astype(np.int8)),
-                 "'mask' has dtype 'int8'; expected bool", id="int-mask"),
-    pytest.param(_set("image", lambda ds: np.where(ds.image > 1.5, np.inf, ds.image)),
-                 "'image' has .* non-finite values", id="inf-image"),
-    pytest.param(_set("x", lambda ds: ds.x.values ** 1.1),
-                 "coordinate 'x' is not evenly spaced", id="uneven-x"),
-    pytest.param(_set("y", lambda ds: ds.y.values[::-1]),
-                 "coordinate 'y' is not increasing", id="decreasing-y"),
-    pytest.param(_drop("tag_direction"), "missing coordinate 'tag_direction'",
-                 id="no-tag-direction"),
-    pytest.param(_drop("tag_frequency"), "missing coordinate 'tag_frequency'",
-                 id="no-tag-frequency"),
+    pytest.param(
+        lambda ds: ds.assign(image=ds.image.transpose("time", "tag", "z", "y", "x")),
+        r"'image' has dims \('time', 'tag', .*expected order",
+        id="transposed-dims",
+    ),
+    pytest.param(
+        lambda ds: ds.assign(image=ds.image.isel(z=0)),
+        r"'image' has dims .*missing \['z'\]",
+        id="missing-dim",
+    ),
+    pytest.param(
+        lambda ds: ds.assign(image=ds.image.expand_dims(echo=2)),
+        r"unexpected \['echo'\]",
+        id="extra-dim",
+    ),
+    pytest.param(
+        _set("x", lambda ds: ds.x.values.astype(str)), "coordinate 'x' has dtype", id="str-x"
+    ),
+    pytest.param(
+        _set("time", lambda ds: np.array([0, 1], "datetime64[ms]")),
+        "coordinate 'time' has dtype 'datetime64",
+        id="datetime-time",
+    ),
+    pytest.param(
+        _set("mask", lambda ds: ds.mask.values.astype(np.int8)),
+        "'mask' has dtype 'int8'; expected bool",
+        id="int-mask",
+    ),
+    pytest.param(
+        _set("image", lambda ds: np.where(ds.image > 1.5, np.inf, ds.image)),
+        "'image' has .* non-finite values",
+        id="inf-image",
+    ),
+    pytest.param(
+        _set("x", lambda ds: ds.x.values**1.1), "coordinate 'x' is not evenly spaced", id="uneven-x"
+    ),
+    pytest.param(
+        _set("y", lambda ds: ds.y.values[::-1]),
+        "coordinate 'y' is not increasing",
+        id="decreasing-y",
+    ),
+    pytest.param(
+        _drop("tag_direction"), "missing coordinate 'tag_direction'", id="no-tag-direction"
+    ),
+    pytest.param(
+        _drop("tag_frequency"), "missing coordinate 'tag_frequency'", id="no-tag-frequency"
+    ),
     pytest.param(_drop("slice_axis"), "missing coordinate 'slice_axis'", id="no-slice-axis"),
-    pytest.param(_drop_attr("sequence"), "missing dataset attribute 'sequence'",
-                 id="no-sequence"),
-    pytest.param(_set("tag_direction", lambda ds: 2.0 * ds.tag_direction.values),
-                 "tag_direction of tag 'x' has norm 2", id="non-unit-direction"),
-    pytest.param(_set("tag_frequency", lambda ds: [0.4, 0.125]),
-                 "tag_frequency of tag 'x' is above the Nyquist limit", id="aliased-tags"),
-    pytest.param(_set("tag_frequency", lambda ds: [0.0, 0.125]),
-                 "tag_frequency of tag 'x' is .*0.0.*; expected a positive", id="zero-frequency"),
-    pytest.param(_set("slice_axis", lambda ds: ["x", "z"]),
-                 "tag 'x' has direction .* mostly along its slice_axis 'x'", id="tag-along-slice"),
-    pytest.param(lambda ds: ds.assign(image=ds.image.assign_attrs(units=None).drop_attrs()),
-                 "'image' has no 'long_name' attribute", id="no-attrs"),
-    pytest.param(_set("image", lambda ds: ds.image.values.astype(str)), "'image' has dtype",
-                 id="str-image"),
-    pytest.param(_set("image", lambda ds: ds.image.values.astype(complex)), "'image' has dtype",
-                 id="complex-image"),
-    pytest.param(_set("image", lambda ds: ds.image.values > 1), "'image' has dtype",
-                 id="bool-image"),
-    pytest.param(_set("tag_frequency", lambda ds: ds.tag_frequency.values.astype(str)),
-                 "'tag_frequency' has dtype", id="str-frequency"),
+    pytest.param(_drop_attr("sequence"), "missing dataset attribute 'sequence'", id="no-sequence"),
+    pytest.param(
+        _set("tag_direction", lambda ds: 2.0 * ds.tag_direction.values),
+        "tag_direction of tag 'x' has norm 2",
+        id="non-unit-direction",
+    ),
+    pytest.param(
+        _set("tag_frequency", lambda ds: [0.4, 0.125]),
+        "tag_frequency of tag 'x' is above the Nyquist limit",
+        id="aliased-tags",
+    ),
+    pytest.param(
+        _set("tag_frequency", lambda ds: [0.0, 0.125]),
+        "tag_frequency of tag 'x' is .*0.0.*; expected a positive",
+        id="zero-frequency",
+    ),
+    pytest.param(
+        _set("slice_axis", lambda ds: ["x", "z"]),
+        "tag 'x' has direction .* mostly along its slice_axis 'x'",
+        id="tag-along-slice",
+    ),
+    pytest.param(
+        lambda ds: ds.assign(image=ds.image.assign_attrs(units=None).drop_attrs()),
+        "'image' has no 'long_name' attribute",
+        id="no-attrs",
+    ),
+    pytest.param(
+        _set("image", lambda ds: ds.image.values.astype(str)), "'image' has dtype", id="str-image"
+    ),
+    pytest.param(
+        _set("image", lambda ds: ds.image.values.astype(complex)),
+        "'image' has dtype",
+        id="complex-image",
+    ),
+    pytest.param(
+        _set("image", lambda ds: ds.image.values > 1), "'image' has dtype", id="bool-image"
+    ),
+    pytest.param(
+        _set("tag_frequency", lambda ds: ds.tag_frequency.values.astype(str)),
+        "'tag_frequency' has dtype",
+        id="str-frequency",
+    ),
 ]
 
 
@@ -138,16 +185,29 @@ def test_malformed_tagged_is_named_and_never_written(
 @pytest.mark.parametrize(
     ("change", "match"),
     [
-        pytest.param(_set("phase", lambda ds: ds.phase.values + np.pi),
-                     r"'phase' has values in .*expected the wrapped range", id="unwrapped"),
-        pytest.param(_set("magnitude", lambda ds: -ds.magnitude.values),
-                     "'magnitude' has .* negative values", id="negative-magnitude"),
-        pytest.param(_set("phase", lambda ds: np.where(ds.x.values > 8, np.nan, ds.phase)),
-                     "'phase' has .* non-finite values", id="nan-phase"),
-        pytest.param(_set("phase", lambda ds: ds.phase.values * np.nan),
-                     "'phase' has .* non-finite values", id="all-nan-phase"),
-        pytest.param(_drop_attr("upsample"), "missing dataset attribute 'upsample'",
-                     id="no-filter-settings"),
+        pytest.param(
+            _set("phase", lambda ds: ds.phase.values + np.pi),
+            r"'phase' has values in .*expected the wrapped range",
+            id="unwrapped",
+        ),
+        pytest.param(
+            _set("magnitude", lambda ds: -ds.magnitude.values),
+            "'magnitude' has .* negative values",
+            id="negative-magnitude",
+        ),
+        pytest.param(
+            _set("phase", lambda ds: np.where(ds.x.values > 8, np.nan, ds.phase)),
+            "'phase' has .* non-finite values",
+            id="nan-phase",
+        ),
+        pytest.param(
+            _set("phase", lambda ds: ds.phase.values * np.nan),
+            "'phase' has .* non-finite values",
+            id="all-nan-phase",
+        ),
+        pytest.param(
+            _drop_attr("upsample"), "missing dataset attribute 'upsample'", id="no-filter-settings"
+        ),
     ],
 )
 def test_malformed_phase_is_named_never_written_nor_tracked(
@@ -163,15 +223,26 @@ def test_malformed_phase_is_named_never_written_nor_tracked(
 @pytest.mark.parametrize(
     ("change", "match"),
     [
-        pytest.param(_set("cells", lambda ds: ds.cells.values + 5),
-                     r"'cells' refers to node ids in \[5, 12\] but there are 8 nodes",
-                     id="cells-beyond-nodes"),
-        pytest.param(_set("cells", lambda ds: ds.cells.values.astype(float)),
-                     "'cells' has dtype 'float64'", id="float-cells"),
-        pytest.param(_set("points", lambda ds: np.where(ds.points > 0, np.nan, 0.0)),
-                     "'points' has .* non-finite values", id="nan-points"),
-        pytest.param(lambda ds: ds.assign(displacement=ds.displacement.transpose()),
-                     "'displacement' has dims", id="transposed-displacement"),
+        pytest.param(
+            _set("cells", lambda ds: ds.cells.values + 5),
+            r"'cells' refers to node ids in \[5, 12\] but there are 8 nodes",
+            id="cells-beyond-nodes",
+        ),
+        pytest.param(
+            _set("cells", lambda ds: ds.cells.values.astype(float)),
+            "'cells' has dtype 'float64'",
+            id="float-cells",
+        ),
+        pytest.param(
+            _set("points", lambda ds: np.where(ds.points > 0, np.nan, 0.0)),
+            "'points' has .* non-finite values",
+            id="nan-points",
+        ),
+        pytest.param(
+            lambda ds: ds.assign(displacement=ds.displacement.transpose()),
+            "'displacement' has dims",
+            id="transposed-displacement",
+        ),
     ],
 )
 def test_malformed_tracked_is_named_never_written_nor_exported(
@@ -199,8 +270,13 @@ def test_dataset_without_schema_is_refused_by_validate(tmp_path: Path) -> None:
 
 @_HYPOTHESIS
 @given(
-    index=st.tuples(st.integers(0, 1), st.integers(0, 1), st.integers(0, 2), st.integers(0, 7),
-                    st.integers(0, 7)),
+    index=st.tuples(
+        st.integers(0, 1),
+        st.integers(0, 1),
+        st.integers(0, 2),
+        st.integers(0, 7),
+        st.integers(0, 7),
+    ),
     value=st.sampled_from([np.nan, np.inf, -np.inf]),
 )
 def test_non_finite_image_is_never_written(
@@ -208,8 +284,11 @@ def test_non_finite_image_is_never_written(
 ) -> None:
     ds = make_tagged(nz=3)
     ds["image"].values[index] = value
-    where = re.escape("{" + ", ".join(f"{d}={i}" for d, i in zip("tag time z y x".split(), index,
-                                                                   strict=True)) + "}")
+    where = re.escape(
+        "{"
+        + ", ".join(f"{d}={i}" for d, i in zip("tag time z y x".split(), index, strict=True))
+        + "}"
+    )
     _refused(ds, tmp_path, rf"'image' has 1 non-finite values \(NaN/inf\), first at index {where}")
 
 
@@ -294,12 +373,15 @@ def _box_vtk() -> tuple[np.ndarray, np.ndarray]:
 
 
 BAD_CELLS = [
-    pytest.param(lambda c: np.concatenate([c[:1, [4, 5, 6, 7, 0, 1, 2, 3]], c[1:]]), "0",
-                 id="inverted"),
-    pytest.param(lambda c: np.concatenate([c[:1], c[1:, [0, 1, 3, 2, 4, 5, 6, 7]]]), "1",
-                 id="bow-tie"),
-    pytest.param(lambda c: np.concatenate([c[:1, [0, 1, 2, 3, 0, 1, 2, 3]], c[1:]]), "0",
-                 id="collapsed"),
+    pytest.param(
+        lambda c: np.concatenate([c[:1, [4, 5, 6, 7, 0, 1, 2, 3]], c[1:]]), "0", id="inverted"
+    ),
+    pytest.param(
+        lambda c: np.concatenate([c[:1], c[1:, [0, 1, 3, 2, 4, 5, 6, 7]]]), "1", id="bow-tie"
+    ),
+    pytest.param(
+        lambda c: np.concatenate([c[:1, [0, 1, 2, 3, 0, 1, 2, 3]], c[1:]]), "0", id="collapsed"
+    ),
 ]
 
 
@@ -321,8 +403,7 @@ def test_bad_cells_given_to_body_are_named(corrupt, cells: str) -> None:
 
 def test_mesh_outside_the_image_is_refused_and_nothing_is_written(tmp_path: Path) -> None:
     source = to_netcdf(make_phase(), tmp_path / "subject.nc")
-    far = cylinder(5.0, 5.0, n_radial=1, n_circumferential=8, n_axial=1,
-                   center=(500.0, 0.0, 0.0))
+    far = cylinder(5.0, 5.0, n_radial=1, n_circumferential=8, n_axial=1, center=(500.0, 0.0, 0.0))
     with pytest.raises(SchemaError, match="no constraint point of the body lies inside"):
         track(make_phase(), Body(far, MAT))
     target = tmp_path / "subject_tracked.nc"
@@ -376,8 +457,12 @@ _SLOW_EXPORT = textwrap.dedent(
 
 
 def _kill_mid_write(script: str, target: Path) -> None:
-    child = subprocess.Popen([sys.executable, "-c", script, str(target)],
-                             stdout=subprocess.PIPE, text=True, cwd=Path(__file__).parents[1])
+    child = subprocess.Popen(
+        [sys.executable, "-c", script, str(target)],
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=Path(__file__).parents[1],
+    )
     try:
         assert child.stdout is not None
         assert child.stdout.readline().strip() == "writing"  # the new version is being written

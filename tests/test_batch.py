@@ -35,17 +35,20 @@ def _inside(X: np.ndarray) -> np.ndarray:
 
 def body_factory(ds: xr.Dataset) -> Body:
     """The subjects' body: a coarse cylinder (so the test is fast), the same for everyone."""
-    mesh = cylinder(RADIUS, HEIGHT, n_radial=1, n_circumferential=8, n_axial=1,
-                    center=(0.0, 0.0, -HEIGHT / 2))
+    mesh = cylinder(
+        RADIUS, HEIGHT, n_radial=1, n_circumferential=8, n_axial=1, center=(0.0, 0.0, -HEIGHT / 2)
+    )
     return Body(mesh, NeoHookean(c1=1.0, kappa=120.0))
 
 
 def _subject(angle_mm: float, *, shift: float = 0.0) -> xr.Dataset:
     """Ideal phase of a lagged rotation (edge turns ``angle_mm``), 3 frames, 4x20x20 voxels."""
-    motion = RotationalImpact(radius=RADIUS, base=-HEIGHT / 2, height=HEIGHT,
-                              angle=angle_mm / RADIUS)
-    ds = ideal_phase(motion, shape=(4, 20, 20), spacing=(2.0, 1.5, 1.5),
-                     times=np.arange(3) * 18.0, body=_inside)
+    motion = RotationalImpact(
+        radius=RADIUS, base=-HEIGHT / 2, height=HEIGHT, angle=angle_mm / RADIUS
+    )
+    ds = ideal_phase(
+        motion, shape=(4, 20, 20), spacing=(2.0, 1.5, 1.5), times=np.arange(3) * 18.0, body=_inside
+    )
     if shift:  # the image grid moved away: the mesh lies outside the field of view
         ds = ds.assign_coords(x=ds.x + shift)
         ds["x"].attrs.update({"units": "mm", "long_name": "x position of voxel centre"})
@@ -78,8 +81,14 @@ def test_cohort_on_a_local_cluster_matches_a_serial_loop(
     cohort: list[Path], serial: list[xr.Dataset], tmp_path: Path
 ) -> None:
     # the default path: a LocalCluster with 2 worker processes started and closed here
-    outputs = track_many(cohort, body_factory, output_dir=tmp_path / "out", n_workers=2,
-                         track_kwargs=TRACK_KWARGS, progress=False)
+    outputs = track_many(
+        cohort,
+        body_factory,
+        output_dir=tmp_path / "out",
+        n_workers=2,
+        track_kwargs=TRACK_KWARGS,
+        progress=False,
+    )
     assert outputs == [tmp_path / "out" / f"s{k}_tracked.nc" for k in range(3)]
     for path, source, expected in zip(outputs, cohort, serial, strict=True):
         actual = open_dataset(path)
@@ -94,30 +103,46 @@ def test_resume_redoes_only_missing_and_corrupt_subjects(
     cohort: list[Path], client: object, tmp_path: Path
 ) -> None:
     out = tmp_path / "out"
-    outputs = track_many(cohort, body_factory, output_dir=out, client=client,
-                         track_kwargs=TRACK_KWARGS, progress=False)
+    outputs = track_many(
+        cohort,
+        body_factory,
+        output_dir=out,
+        client=client,
+        track_kwargs=TRACK_KWARGS,
+        progress=False,
+    )
     first = [open_dataset(p) for p in outputs]
     outputs[0].unlink()  # an interrupted cohort: one subject never written...
     data = outputs[1].read_bytes()
     outputs[1].write_bytes(data[: len(data) // 2])  # ...and one archive damaged afterwards
     untouched = _mtimes(outputs[2:])
     # through the scheduler address this time (an existing cluster)
-    again = track_many(cohort, body_factory, output_dir=out,
-                       address=client.scheduler.address,  # type: ignore[attr-defined]
-                       track_kwargs=TRACK_KWARGS, progress=False)
+    again = track_many(
+        cohort,
+        body_factory,
+        output_dir=out,
+        address=client.scheduler.address,  # type: ignore[attr-defined]
+        track_kwargs=TRACK_KWARGS,
+        progress=False,
+    )
     assert again == outputs
     assert _mtimes(outputs[2:]) == untouched  # the finished subject was skipped
     for path, before in zip(outputs, first, strict=True):
         # recomputed subjects: same inputs, same deterministic solver: same result to rounding
-        xr.testing.assert_allclose(open_dataset(path).displacement, before.displacement,
-                                   rtol=1e-10)
+        xr.testing.assert_allclose(open_dataset(path).displacement, before.displacement, rtol=1e-10)
 
 
 def test_complete_cohort_needs_no_cluster(
     cohort: list[Path], client: object, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    outputs = track_many(cohort, body_factory, output_dir=tmp_path, client=client,
-                         track_kwargs=TRACK_KWARGS, progress=False)
+    outputs = track_many(
+        cohort,
+        body_factory,
+        output_dir=tmp_path,
+        client=client,
+        track_kwargs=TRACK_KWARGS,
+        progress=False,
+    )
     stamps = _mtimes(outputs)
 
     def no_cluster(*args: object, **kwargs: object) -> None:
@@ -134,16 +159,35 @@ def test_changed_input_or_overwrite_recomputes(
     inputs = [tmp_path / p.name for p in cohort[:2]]
     for src, dst in zip(cohort, inputs, strict=False):
         dst.write_bytes(src.read_bytes())
-    outputs = track_many(inputs, body_factory, output_dir=tmp_path / "out", client=client,
-                         track_kwargs=TRACK_KWARGS, progress=False)
+    outputs = track_many(
+        inputs,
+        body_factory,
+        output_dir=tmp_path / "out",
+        client=client,
+        track_kwargs=TRACK_KWARGS,
+        progress=False,
+    )
     stamps = _mtimes(outputs)
     to_netcdf(_subject(1.0), inputs[0])  # subject 0 re-exported with other images: stale
-    track_many(inputs, body_factory, output_dir=tmp_path / "out", client=client,
-               track_kwargs=TRACK_KWARGS, progress=False)
+    track_many(
+        inputs,
+        body_factory,
+        output_dir=tmp_path / "out",
+        client=client,
+        track_kwargs=TRACK_KWARGS,
+        progress=False,
+    )
     after = _mtimes(outputs)
     assert after[0] > stamps[0] and after[1] == stamps[1]
-    track_many(inputs, body_factory, output_dir=tmp_path / "out", client=client,
-               track_kwargs=TRACK_KWARGS, overwrite=True, progress=False)
+    track_many(
+        inputs,
+        body_factory,
+        output_dir=tmp_path / "out",
+        client=client,
+        track_kwargs=TRACK_KWARGS,
+        overwrite=True,
+        progress=False,
+    )
     assert all(a > b for a, b in zip(_mtimes(outputs), after, strict=True))
 
 
@@ -154,8 +198,14 @@ def test_failing_subjects_are_reported_after_the_others_are_written(
     missing = tmp_path / "missing.nc"
     inputs = [cohort[0], far, missing, cohort[1]]
     with pytest.raises(CohortError, match="2 of 4 subjects failed") as info:
-        track_many(inputs, body_factory, output_dir=tmp_path / "out", client=client,
-                   track_kwargs=TRACK_KWARGS, progress=False)
+        track_many(
+            inputs,
+            body_factory,
+            output_dir=tmp_path / "out",
+            client=client,
+            track_kwargs=TRACK_KWARGS,
+            progress=False,
+        )
     err = info.value
     assert isinstance(err, HarpxError)
     message = str(err)
@@ -180,15 +230,28 @@ def _lambda_holder() -> object:
 @pytest.mark.parametrize(
     ("kwargs", "error", "match"),
     [
-        pytest.param({"client": object(), "address": "tcp://x:1"}, ValueError,
-                     "either client= or address=", id="client-and-address"),
+        pytest.param(
+            {"client": object(), "address": "tcp://x:1"},
+            ValueError,
+            "either client= or address=",
+            id="client-and-address",
+        ),
         pytest.param({"n_workers": 0}, ValueError, "n_workers=0", id="n-workers"),
-        pytest.param({"track_kwargs": {"epsilon": 0.1, "espilon": 1}}, TypeError,
-                     r"track_kwargs has \['espilon'\]", id="track-kwargs"),
-        pytest.param({"body_factory": _lambda_holder()}, TypeError,
-                     "cannot be pickled for the dask workers", id="unpicklable-factory"),
-        pytest.param({"body_factory": 3}, TypeError, "body_factory must be callable",
-                     id="not-callable"),
+        pytest.param(
+            {"track_kwargs": {"epsilon": 0.1, "espilon": 1}},
+            TypeError,
+            r"track_kwargs has \['espilon'\]",
+            id="track-kwargs",
+        ),
+        pytest.param(
+            {"body_factory": _lambda_holder()},
+            TypeError,
+            "cannot be pickled for the dask workers",
+            id="unpicklable-factory",
+        ),
+        pytest.param(
+            {"body_factory": 3}, TypeError, "body_factory must be callable", id="not-callable"
+        ),
     ],
 )
 def test_bad_arguments_fail_before_any_work(

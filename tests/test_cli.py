@@ -25,7 +25,11 @@ def test_missing_archive_is_one_clear_line(tmp_path, capsys):
     code = main(["report", str(tmp_path / "missing.nc")])
     err = capsys.readouterr().err.strip()
     assert code == 1
-    assert len(err.splitlines()) == 1 and "missing.nc" in err and err.startswith("harpx report: error:")
+    assert (
+        len(err.splitlines()) == 1
+        and "missing.nc" in err
+        and err.startswith("harpx report: error:")
+    )
 
 
 def test_demo_small_writes_archives_figures_and_table(tmp_path, capsys):
@@ -33,7 +37,12 @@ def test_demo_small_writes_archives_figures_and_table(tmp_path, capsys):
     assert main(["demo", "--size", "small", "--output", str(out), "--no-progress"]) == 0
     text = capsys.readouterr().out
     assert "| conventional HARP |" in text and "| FE penalty hex8" in text
-    for name in ("phantom_hex8.nc", "phantom_harp.nc", "phantom_displacement_maps.png", "phantom_error_vs_runtime.png"):
+    for name in (
+        "phantom_hex8.nc",
+        "phantom_harp.nc",
+        "phantom_displacement_maps.png",
+        "phantom_error_vs_runtime.png",
+    ):
         assert (out / name).stat().st_size > 0, name
     # the archive it wrote is a valid tracked/1 result with the same diagnostics
     figure = tmp_path / "map.png"
@@ -48,15 +57,29 @@ def test_dicom_subcommand_writes_a_tagged_archive(tmp_path, capsys):
 
     write_classic(tmp_path / "sa", SA)
     out = tmp_path / "tagged.nc"
-    code = main(["dicom", str(tmp_path / "sa"), str(out), "--tag", f"{SA.uid}:x:row",
-                 "--tag", f"{SA.uid}:y:column", "--tag-period", "8", "--sequence", "CSPAMM"])
+    code = main(
+        [
+            "dicom",
+            str(tmp_path / "sa"),
+            str(out),
+            "--tag",
+            f"{SA.uid}:x:row",
+            "--tag",
+            f"{SA.uid}:y:column",
+            "--tag-period",
+            "8",
+            "--sequence",
+            "CSPAMM",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     ds = open_dataset(out)
     assert ds.attrs["harpx_schema"] == "tagged/1" and list(ds.tag.values) == ["x", "y"]
 
 
 def test_dicom_subcommand_bad_tag_is_one_line(tmp_path, capsys):
-    code = main(["dicom", str(tmp_path), str(tmp_path / "o.nc"), "--tag", "nonsense",
-                 "--tag-period", "8"])
+    code = main(
+        ["dicom", str(tmp_path), str(tmp_path / "o.nc"), "--tag", "nonsense", "--tag-period", "8"]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 1 and "SERIES:LABEL:DIRECTION" in err and len(err.splitlines()) == 1

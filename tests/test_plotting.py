@@ -46,8 +46,15 @@ def test_strain_and_fiber_stretch(tracked):
 def test_tag_image_of_a_tagged_dataset():
     from harpx.imaging.synth import synthesize_tagged
 
-    tagged = synthesize_tagged(lambda X, t: 0 * X, shape=(2, 16, 16), spacing=(2.0, 1.5, 1.5),
-                               times=[0.0], tags=("x",), snr=None, oversample=1)
+    tagged = synthesize_tagged(
+        lambda X, t: 0 * X,
+        shape=(2, 16, 16),
+        spacing=(2.0, 1.5, 1.5),
+        times=[0.0],
+        tags=("x",),
+        snr=None,
+        oversample=1,
+    )
     ax = tagged.harp.plot.tag_image()
     assert ax.images or ax.collections
     plt.close("all")

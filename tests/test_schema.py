@@ -56,8 +56,11 @@ def make_phase() -> xr.Dataset:
     k = 2 * np.pi * ds.tag_frequency * ds.tag_direction
     arg = k.sel(axis="x") * ds.x + k.sel(axis="y") * ds.y + k.sel(axis="z") * ds.z
     wrapped = (arg + np.pi) % (2 * np.pi) - np.pi  # W(a) in [-pi, pi)
-    phase = wrapped.broadcast_like(ds.image).transpose(*ds.image.dims).drop_vars("tag_direction",
-                                                                               errors="ignore")
+    phase = (
+        wrapped.broadcast_like(ds.image)
+        .transpose(*ds.image.dims)
+        .drop_vars("tag_direction", errors="ignore")
+    )
     out = ds.drop_vars("image").assign(
         phase=phase.assign_attrs(_attrs("phase")),
         magnitude=xr.ones_like(ds.image).assign_attrs(_attrs("magnitude")),
@@ -246,15 +249,19 @@ def _negative_magnitude(ds: xr.Dataset) -> xr.Dataset:
     [
         pytest.param(_phase_at_pi, r"expected the wrapped range \[-pi, pi\)", id="phase-range"),
         pytest.param(_negative_magnitude, "'magnitude' has 1 negative values", id="neg-magnitude"),
-        pytest.param(lambda ds: ds.drop_vars("magnitude"), "missing data variable 'magnitude'",
-                     id="no-magnitude"),
-        pytest.param(lambda ds: ds.drop_attrs(deep=False).assign_attrs(harpx_schema="phase/1"),
-                     "missing dataset attribute 'upsample'", id="no-upsample"),
+        pytest.param(
+            lambda ds: ds.drop_vars("magnitude"),
+            "missing data variable 'magnitude'",
+            id="no-magnitude",
+        ),
+        pytest.param(
+            lambda ds: ds.drop_attrs(deep=False).assign_attrs(harpx_schema="phase/1"),
+            "missing dataset attribute 'upsample'",
+            id="no-upsample",
+        ),
     ],
 )
-def test_validate_rejects_bad_phase(
-    mutate: Callable[[xr.Dataset], xr.Dataset], match: str
-) -> None:
+def test_validate_rejects_bad_phase(mutate: Callable[[xr.Dataset], xr.Dataset], match: str) -> None:
     with pytest.raises(SchemaError, match=match):
         validate(mutate(make_phase()))
 
@@ -268,14 +275,26 @@ def _cells_attr(ds: xr.Dataset, **attrs: str) -> xr.Dataset:
 @pytest.mark.parametrize(
     ("mutate", "match"),
     [
-        pytest.param(lambda ds: _cells_attr(ds, element="hex20"),
-                     "'cells' has 8 vertices per cell but element 'hex20' needs 20", id="vertices"),
-        pytest.param(lambda ds: _cells_attr(ds, element="brick"),
-                     "'cells' element 'brick' is unknown", id="element"),
-        pytest.param(lambda ds: _set(ds, "cells", np.arange(1, 9)[None, :]),
-                     r"node ids in \[1, 8\] but there are 8 nodes", id="cell-index"),
-        pytest.param(lambda ds: ds.drop_vars("displacement"),
-                     "missing data variable 'displacement'", id="no-displacement"),
+        pytest.param(
+            lambda ds: _cells_attr(ds, element="hex20"),
+            "'cells' has 8 vertices per cell but element 'hex20' needs 20",
+            id="vertices",
+        ),
+        pytest.param(
+            lambda ds: _cells_attr(ds, element="brick"),
+            "'cells' element 'brick' is unknown",
+            id="element",
+        ),
+        pytest.param(
+            lambda ds: _set(ds, "cells", np.arange(1, 9)[None, :]),
+            r"node ids in \[1, 8\] but there are 8 nodes",
+            id="cell-index",
+        ),
+        pytest.param(
+            lambda ds: ds.drop_vars("displacement"),
+            "missing data variable 'displacement'",
+            id="no-displacement",
+        ),
     ],
 )
 def test_validate_rejects_bad_tracked(
@@ -323,7 +342,10 @@ def test_validate_dask_is_lazy() -> None:
 @settings(max_examples=25, deadline=None)
 @given(
     index=st.tuples(
-        st.integers(0, 1), st.integers(0, 1), st.integers(0, 1), st.integers(0, 7),
+        st.integers(0, 1),
+        st.integers(0, 1),
+        st.integers(0, 1),
+        st.integers(0, 7),
         st.integers(0, 7),
     ),
     value=st.sampled_from([np.nan, np.inf, -np.inf]),
@@ -336,8 +358,9 @@ def test_validate_never_accepts_nonfinite_image(index: tuple[int, ...], value: f
 
 
 def test_fill_standard_attrs_keeps_existing_and_copies() -> None:
-    bare = xr.Dataset({"phase": ("x", [0.0, 1.0])}, coords={"x": ("x", [0.5, 1.5], {"units": "mm",
-                                                                                   "note": "k"})})
+    bare = xr.Dataset(
+        {"phase": ("x", [0.0, 1.0])}, coords={"x": ("x", [0.5, 1.5], {"units": "mm", "note": "k"})}
+    )
     filled = fill_standard_attrs(bare)
     assert filled.phase.attrs == standard_attrs("phase")
     assert filled.x.attrs == {**standard_attrs("x"), "note": "k"}

@@ -65,8 +65,9 @@ def rotation(step: float, frames: int = 2, snr: float | None = None):
     times = np.arange(frames) * FRAME
     angles = frame_profile(step * PERIOD / 24.0, frames)
     motion = RigidRotation(times=tuple(times), angles=tuple(angles))
-    return cylinder_scene(motion, times=times, radius=24.0, n_radial=3, n_circumferential=24,
-                          snr=snr)
+    return cylinder_scene(
+        motion, times=times, radius=24.0, n_radial=3, n_circumferential=24, snr=snr
+    )
 
 
 def mean_error(tracked, tagged) -> float:
@@ -90,7 +91,9 @@ def test_nearly_incompressible_model_tracks_like_a_moderate_one(small_phantom):
         body = scene.body("hex8", material=NeoHookean(c1=1.0, kappa=ratio))
         out = track(phase, body)
         assert np.isfinite(out.epsilon.values).all() and out.target_reached.all(), (
-            ratio, out.epsilon.values)
+            ratio,
+            out.epsilon.values,
+        )
         errors[ratio] = mean_error(out, scene.tagged)
     # the criterion: κ/C1 = 1e5 within 10 % of κ/C1 = 1e2 (measured 0.199 vs
     # 0.197 mm; with the consistent pressure stiffness in the Gauss–Newton tangent it was
@@ -156,10 +159,16 @@ def test_epsilon_does_not_rise_with_a_pinned_penalty():
 @pytest.mark.parametrize(
     ("make", "kwargs"),
     [
-        pytest.param(lambda: translation(0.25, frames=3), {"penalty": 1e-3, "penalty_limit": 1e-3},
-                     id="penalty-1e-3"),
-        pytest.param(lambda: translation(0.25, frames=3), {"penalty": 1e6, "penalty_limit": 1e6},
-                     id="penalty-1e6"),
+        pytest.param(
+            lambda: translation(0.25, frames=3),
+            {"penalty": 1e-3, "penalty_limit": 1e-3},
+            id="penalty-1e-3",
+        ),
+        pytest.param(
+            lambda: translation(0.25, frames=3),
+            {"penalty": 1e6, "penalty_limit": 1e6},
+            id="penalty-1e6",
+        ),
         pytest.param(lambda: translation(1.0, frames=3), {}, id="full-period-steps"),
         pytest.param(lambda: rotation(0.5, snr=3.0), {}, id="snr-3"),
     ],
@@ -202,12 +211,25 @@ def test_tracking_step_that_inverts_names_the_frame_and_cells():
     squeeze = [Pressure("top", 100.0), Pressure("bottom", 100.0)]
     # without halvings the crushing step must raise, naming the frame and the cells
     with pytest.raises(ElementInversionError, match=r"of frame 1 inverts cells \[") as info:
-        equilibrate(body, constraint, np.zeros(body.ndof), terms=squeeze,
-                    solver=LinearSolver(), max_halvings=0, max_iterations=20)
+        equilibrate(
+            body,
+            constraint,
+            np.zeros(body.ndof),
+            terms=squeeze,
+            solver=LinearSolver(),
+            max_halvings=0,
+            max_iterations=20,
+        )
     assert info.value.cells
     # with the default halvings the same load is survived: J stays positive
-    res = equilibrate(body, constraint, np.zeros(body.ndof), terms=squeeze,
-                      solver=LinearSolver(), max_iterations=20)
+    res = equilibrate(
+        body,
+        constraint,
+        np.zeros(body.ndof),
+        terms=squeeze,
+        solver=LinearSolver(),
+        max_iterations=20,
+    )
     assert np.isfinite(res.u).all() and body.jacobian(res.u).min() > 0.0
 
 
@@ -237,8 +259,9 @@ def _nan_slice(ds):
     ("edit", "match"),
     [
         pytest.param(_empty_mask, "no constraint point of the body lies inside", id="empty-mask"),
-        pytest.param(_one_tag_masked, r"tag \['z'\] has no data at any constraint point",
-                     id="one-tag-masked"),
+        pytest.param(
+            _one_tag_masked, r"tag \['z'\] has no data at any constraint point", id="one-tag-masked"
+        ),
         pytest.param(_zero_frame, r"frame 2 \(time=36.0 ms\) has no valid phase", id="zero-frame"),
         pytest.param(_nan_slice, "'image' has .* non-finite values", id="nan-slice"),
     ],
@@ -255,7 +278,7 @@ def test_tiny_mask_tracks_what_it_sees_and_reports_the_rest():
     ds = scene.tagged.copy(deep=True)
     ds["mask"][:] = False
     cz, cy, cx = (ds.sizes[d] // 2 for d in ("z", "y", "x"))
-    ds["mask"][:, cz - 1:cz + 1, cy - 1:cy + 1, cx - 1:cx + 1] = True  # 8 voxels at the axis
+    ds["mask"][:, cz - 1 : cz + 1, cy - 1 : cy + 1, cx - 1 : cx + 1] = True  # 8 voxels at the axis
     out = track(ds, scene.body())
     assert np.isfinite(out.displacement.values).all()
     no_data = np.isnan(out.epsilon_cell.values[1]).sum()

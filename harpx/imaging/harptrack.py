@@ -263,8 +263,11 @@ def _assemble(
         {
             "points": (("node", "axis"), X, standard_attrs("points")),
             "cells": cells,
-            "displacement": (("time", "node", "axis"), displacement,
-                             standard_attrs("displacement")),
+            "displacement": (
+                ("time", "node", "axis"),
+                displacement,
+                standard_attrs("displacement"),
+            ),
             "epsilon": ("time", epsilon, standard_attrs("epsilon")),
             "iterations": ("time", sweeps, standard_attrs("iterations")),
             "wall_time": ("time", wall, standard_attrs("wall_time")),

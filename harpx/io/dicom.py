@@ -243,7 +243,10 @@ def _datetime(value: Any) -> datetime | None:
 
 
 def _pixel_positions(
-    position: FloatArray, orientation: FloatArray, pixel_spacing: FloatArray, rows: int,
+    position: FloatArray,
+    orientation: FloatArray,
+    pixel_spacing: FloatArray,
+    rows: int,
     columns: int,
 ) -> FloatArray:
     """Pixel-centre positions (rows, columns, 3) in mm; see the module docstring."""
@@ -308,8 +311,11 @@ def voxel_positions(images: Any) -> FloatArray:
         records.extend(_images_of(header, Path(str(getattr(header, "filename", "<dataset>")))))
     out = [
         _pixel_positions(
-            im.require("position"), im.require("orientation"), im.require("pixel_spacing"),
-            im.rows, im.columns,
+            im.require("position"),
+            im.require("orientation"),
+            im.require("pixel_spacing"),
+            im.rows,
+            im.columns,
         )
         for im in records
     ]
@@ -579,8 +585,10 @@ def _parse_tags(tag_directions: Any, images: list[_Image]) -> list[tuple[str, st
     triples: list[tuple[str, str, Any]] = []
     if isinstance(tag_directions, Mapping):
         for selector, entries in tag_directions.items():
-            single = isinstance(entries, tuple | list) and len(entries) == 2 and isinstance(
-                entries[0], str
+            single = (
+                isinstance(entries, tuple | list)
+                and len(entries) == 2
+                and isinstance(entries[0], str)
             )
             for entry in [entries] if single else entries:
                 if not (isinstance(entry, tuple | list) and len(entry) == 2):
@@ -605,11 +613,7 @@ def _parse_tags(tag_directions: Any, images: list[_Image]) -> list[tuple[str, st
 
 def _select(selector: str, images: list[_Image]) -> list[_Image]:
     uids = sorted(
-        {
-            im.series_uid
-            for im in images
-            if selector in (im.series_uid, im.description, im.number)
-        }
+        {im.series_uid for im in images if selector in (im.series_uid, im.description, im.number)}
     )
     if not uids:
         raise HarpxError(
@@ -684,8 +688,7 @@ def _frequencies(tag_period: float | Mapping[str, float] | None, labels: list[st
         period = _float(value)
         if period is None or period <= 0:
             raise HarpxError(
-                f"tag_period for tag {label!r} is {value!r}; expected a positive tag spacing "
-                "in mm"
+                f"tag_period for tag {label!r} is {value!r}; expected a positive tag spacing in mm"
             )
         periods.append(period)
     return 1.0 / np.asarray(periods)
@@ -863,9 +866,7 @@ def read_tagged(
             stacklevel=2,
         )
     volumes = dict(zip(by_series, _load_pixels(stacks), strict=True))
-    resampled = {
-        uid: _resample(stack, volumes[uid], x, y, z) for uid, stack in by_series.items()
-    }
+    resampled = {uid: _resample(stack, volumes[uid], x, y, z) for uid, stack in by_series.items()}
     image = np.stack([resampled[s.uid][0] for s in tag_stacks])
     mask = np.stack([resampled[s.uid][1] for s in tag_stacks])
     slice_axes = [AXES[int(np.argmax(np.abs(s.normal)))] for s in tag_stacks]

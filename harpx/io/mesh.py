@@ -176,11 +176,13 @@ def to_meshio(
     times = np.asarray(tracked["time"].values, dtype=np.float64)
     with _staging(directory, target.name) as tmp:
         if series == "xdmf":
-            names = _write_xdmf(tmp / target.name, tracked, points, (cell_type, cells),
-                                static, region_names, times)
+            names = _write_xdmf(
+                tmp / target.name, tracked, points, (cell_type, cells), static, region_names, times
+            )
         else:
-            names = _write_vtu(tmp, target, tracked, points, (cell_type, cells),
-                               static, region_names, times)
+            names = _write_vtu(
+                tmp, target, tracked, points, (cell_type, cells), static, region_names, times
+            )
         for name in names:
             _fsync(tmp / name)
         index, data = names[0], names[1:]
@@ -241,9 +243,7 @@ def _static_cell_data(tracked: xr.Dataset) -> tuple[dict[str, np.ndarray], dict[
     return static, names
 
 
-def _frame_data(
-    tracked: xr.Dataset, n: int
-) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+def _frame_data(tracked: xr.Dataset, n: int) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Point and cell data of frame ``n`` (values loaded for this frame only)."""
     frame = tracked.isel(time=n)
     point = {"displacement": np.asarray(frame["displacement"].values, dtype=np.float64)}
@@ -299,12 +299,10 @@ def _add_field_data(path: Path, field: Mapping[str, np.ndarray]) -> None:
 
 
 def _write_pvd(path: Path, frames: list[str], times: FloatArray) -> None:
-    root = ET.Element("VTKFile", type="Collection", version="0.1",
-                      byte_order="LittleEndian")
+    root = ET.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
     collection = ET.SubElement(root, "Collection")
     for name, t in zip(frames, times, strict=True):
-        ET.SubElement(collection, "DataSet", timestep=repr(float(t)), group="", part="0",
-                      file=name)
+        ET.SubElement(collection, "DataSet", timestep=repr(float(t)), group="", part="0", file=name)
     ET.indent(root)
     ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
 
@@ -342,8 +340,9 @@ def _write_xdmf(
     with _TimeSeriesWriter(path, data_format=data_format) as writer:
         writer.write_points_cells(points, [block])
         if region_names:
-            ET.SubElement(writer.domain, "Information", Name=_XDMF_INFO,
-                          Value=json.dumps(dict(region_names)))
+            ET.SubElement(
+                writer.domain, "Information", Name=_XDMF_INFO, Value=json.dumps(dict(region_names))
+            )
         for n, t in enumerate(times):  # loop over frames
             point, cell = _frame_data(tracked, n)
             cell_data = {name: [value] for name, value in {**cell, **static}.items()}
@@ -417,8 +416,9 @@ def read_body_mesh(path: PathLike) -> MeshSpec:
     else:
         mesh = _read(path)
         names = {
-            key[len(_REGION_FIELD):]: int(np.ravel(value)[0])
-            for key, value in mesh.field_data.items() if key.startswith(_REGION_FIELD)
+            key[len(_REGION_FIELD) :]: int(np.ravel(value)[0])
+            for key, value in mesh.field_data.items()
+            if key.startswith(_REGION_FIELD)
         }
     return _mesh_spec(mesh, names, path)
 
@@ -448,8 +448,9 @@ def _first_pvd_frame(path: Path) -> Path:
     first = min(sets, key=lambda e: float(e.get("timestep", "0")))
     frame = path.parent / str(first.get("file"))
     if not frame.is_file():
-        raise FileNotFoundError(f"PVD collection {str(path)!r} lists {str(frame)!r}, which "
-                                "does not exist")
+        raise FileNotFoundError(
+            f"PVD collection {str(path)!r} lists {str(frame)!r}, which does not exist"
+        )
     return frame
 
 

@@ -227,9 +227,9 @@ def _check_attr_items(items: list[Any], key: str, owner: str) -> None:
     if not items:
         raise ArchiveError(f"attribute {key!r} of {owner} is empty; NetCDF cannot store it")
     ok = all(isinstance(v, str | numbers.Number | np.number | np.bool_) for v in items)
-    if not ok or (any(isinstance(v, str) for v in items) and not all(
-        isinstance(v, str) for v in items
-    )):
+    if not ok or (
+        any(isinstance(v, str) for v in items) and not all(isinstance(v, str) for v in items)
+    ):
         raise ArchiveError(
             f"attribute {key!r} of {owner} mixes types or holds non-numbers; NetCDF stores "
             "only homogeneous lists of numbers or strings"
@@ -314,7 +314,7 @@ def _decode_mapping(attrs: Mapping[Hashable, Any]) -> dict[Hashable, Any]:
         if kind == "bool":
             out[key] = bool(value[0])
         elif kind.startswith("ndarray("):
-            shape = tuple(json.loads("[" + kind[len("ndarray("):-1].rstrip(",") + "]"))
+            shape = tuple(json.loads("[" + kind[len("ndarray(") : -1].rstrip(",") + "]"))
             out[key] = value.reshape(shape)
         elif kind == "ndarray:bool":
             out[key] = value.astype(bool)

@@ -70,8 +70,18 @@ def _read_mesh(path: str | os.PathLike[str]) -> tuple[skfem.MeshHex1, FloatArray
 
 # reference corners and centre of the unit hexahedron, where the geometry Jacobian is checked
 _CHECK_POINTS = np.array(
-    [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 0, 1], [0, 1, 1], [1, 1, 1],
-     [0.5, 0.5, 0.5]], dtype=np.float64,
+    [
+        [0, 0, 0],
+        [1, 0, 0],
+        [0, 1, 0],
+        [0, 0, 1],
+        [1, 1, 0],
+        [1, 0, 1],
+        [0, 1, 1],
+        [1, 1, 1],
+        [0.5, 0.5, 0.5],
+    ],
+    dtype=np.float64,
 ).T
 
 
@@ -187,7 +197,9 @@ class Body:
         t_max: float | Mapping[str, float] | None = None,
         growth: Any = None,
         boundaries: Mapping[str, ArrayLike] | None = None,
-        volumetric: Literal["mean-dilatation", "linear-dilatation", "pointwise"] = "mean-dilatation",
+        volumetric: Literal[
+            "mean-dilatation", "linear-dilatation", "pointwise"
+        ] = "mean-dilatation",
     ) -> None:
         spec_regions: Mapping[str, ArrayLike] = {}
         spec_boundaries: Mapping[str, ArrayLike] = {}
@@ -239,7 +251,9 @@ class Body:
         self.grad_N: FloatArray = np.ascontiguousarray(grads.transpose(2, 3, 0, 1))
         self.dV: FloatArray = np.ascontiguousarray(sb.dx)
         self.cell_volume: FloatArray = self.dV.sum(axis=1)
-        self._N_values = np.stack([np.asarray(sb.basis[j][0])[0] for j in range(self.nbasis)])  # (nb,nq)
+        self._N_values = np.stack(
+            [np.asarray(sb.basis[j][0])[0] for j in range(self.nbasis)]
+        )  # (nb,nq)
         cell_sdofs = np.ascontiguousarray(sb.element_dofs.T.astype(np.int64))  # (nel, nb)
         self.cell_scalar_dofs: IntArray = cell_sdofs
         self.element_dofs: IntArray = 3 * cell_sdofs[:, :, None] + np.arange(3)
@@ -339,8 +353,7 @@ class Body:
             for name, value in t_max.items():
                 if name not in self.regions:
                     raise ValueError(
-                        f"t_max names region {name!r}, which is not one of "
-                        f"{sorted(self.regions)!r}"
+                        f"t_max names region {name!r}, which is not one of {sorted(self.regions)!r}"
                     )
                 values[self.regions[name]] = float(value)
         else:
@@ -354,7 +367,9 @@ class Body:
         # match each VTK edge midpoint to the element's edge dofs by position
         edge_dofs = self.cell_scalar_dofs[:, 8:]  # (nel, 12)
         pos = self.dof_points[edge_dofs]  # (nel, 12, 3)
-        mid = 0.5 * (self.nodes[corners[:, _VTK_EDGES[:, 0]]] + self.nodes[corners[:, _VTK_EDGES[:, 1]]])
+        mid = 0.5 * (
+            self.nodes[corners[:, _VTK_EDGES[:, 0]]] + self.nodes[corners[:, _VTK_EDGES[:, 1]]]
+        )
         d = np.linalg.norm(mid[:, :, None, :] - pos[:, None, :, :], axis=-1)
         order = np.argmin(d, axis=2)
         edges = np.take_along_axis(edge_dofs, order, axis=1)
@@ -370,7 +385,9 @@ class Body:
     @property
     def quadrature_points(self) -> FloatArray:
         """Reference positions of the quadrature points, shape (ncell, nqp, 3), mm."""
-        return np.ascontiguousarray(np.asarray(self.scalar_basis.global_coordinates()).transpose(1, 2, 0))
+        return np.ascontiguousarray(
+            np.asarray(self.scalar_basis.global_coordinates()).transpose(1, 2, 0)
+        )
 
     # ------------------------------------------------------------------ field helpers
     def _check_u(self, u: ArrayLike) -> FloatArray:
@@ -383,9 +400,7 @@ class Body:
         """Displacement of every dof node, shape (n_dof_nodes, 3), mm."""
         return self._check_u(u).reshape(-1, 3)
 
-    def facet_dofs(
-        self, name: str | ArrayLike, components: Sequence[int] = (0, 1, 2)
-    ) -> IntArray:
+    def facet_dofs(self, name: str | ArrayLike, components: Sequence[int] = (0, 1, 2)) -> IntArray:
         """Dof ids on a named boundary (or on given facet ids).
 
         Parameters
@@ -416,7 +431,9 @@ class Body:
                 )
             return self.boundaries[name]
         ids = np.asarray(name, dtype=np.int64)
-        if ids.ndim != 1 or (ids.size and (ids.min() < 0 or ids.max() >= self.mesh.facets.shape[1])):
+        if ids.ndim != 1 or (
+            ids.size and (ids.min() < 0 or ids.max() >= self.mesh.facets.shape[1])
+        ):
             raise ValueError("facet ids must be a 1-D array of valid mesh facet indices")
         return ids
 
@@ -474,11 +491,14 @@ class Body:
         npt = b.X.shape[1]
         X_q = np.asarray(b.global_coordinates()).transpose(1, 2, 0).reshape(-1, 3)
         w_q = np.asarray(b.dx, dtype=np.float64).ravel()
-        phi = np.stack([np.asarray(b.basis[j][0]) for j in range(self.nbasis)], axis=-1)  # (nel,nq,nb)
+        phi = np.stack(
+            [np.asarray(b.basis[j][0]) for j in range(self.nbasis)], axis=-1
+        )  # (nel,nq,nb)
         nq = self.ncell * npt
-        rows = 3 * np.arange(nq).reshape(self.ncell, npt)[:, :, None, None] + np.arange(3)[
-            None, None, None, :
-        ]
+        rows = (
+            3 * np.arange(nq).reshape(self.ncell, npt)[:, :, None, None]
+            + np.arange(3)[None, None, None, :]
+        )
         cols = 3 * self.cell_scalar_dofs[:, None, :, None] + np.arange(3)[None, None, None, :]
         rows, cols = np.broadcast_arrays(rows, cols)
         vals = np.broadcast_to(phi[..., None], rows.shape)

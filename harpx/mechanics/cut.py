@@ -79,9 +79,7 @@ class GrowthField:
     def __post_init__(self) -> None:
         t = np.ascontiguousarray(np.asarray(self.tensors, dtype=np.float64))
         if t.ndim != 4 or t.shape[-2:] != (3, 3):
-            raise ValueError(
-                f"growth tensors have shape {t.shape!r}; expected (ncell, nqp, 3, 3)"
-            )
+            raise ValueError(f"growth tensors have shape {t.shape!r}; expected (ncell, nqp, 3, 3)")
         if not np.all(np.linalg.det(t) > 0):
             raise ValueError("growth tensors must have det Fg > 0 at every point")
         object.__setattr__(self, "tensors", t)
@@ -234,8 +232,14 @@ def release(
                     start = trial
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
                 r = equilibrate(
-                    body, dirichlet, start, 1.0, tol=tol, max_iterations=max_iterations,
-                    raise_on_failure=False, linear_solver=solver,
+                    body,
+                    dirichlet,
+                    start,
+                    1.0,
+                    tol=tol,
+                    max_iterations=max_iterations,
+                    raise_on_failure=False,
+                    linear_solver=solver,
                 )
             out.iterations += r.iterations
             if r.converged:

@@ -220,7 +220,9 @@ class LinearSolver:
         return x
 
     @staticmethod
-    def _call(solver: Any, data: FloatArray, indptr: Any, indices: Any, b: FloatArray) -> FloatArray:
+    def _call(
+        solver: Any, data: FloatArray, indptr: Any, indices: Any, b: FloatArray
+    ) -> FloatArray:
         import ctypes
 
         x = np.zeros_like(b)

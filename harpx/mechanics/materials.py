@@ -460,9 +460,7 @@ class Guccione(_Uncoupled):
 
     def _local(
         self, F: FloatArray, fiber: ArrayLike | None
-    ) -> tuple[
-        FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray
-    ]:
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
         if fiber is None:
             raise ValueError(
                 "Guccione needs fiber directions: pass 'fiber' with shape (..., 3) "
@@ -625,9 +623,7 @@ class ActiveContraction:
     def __post_init__(self) -> None:
         _check("t_max", self.t_max, allow_zero=True)
         if self.law not in ("prescribed", "calcium"):
-            raise ValueError(
-                f"parameter 'law' must be 'prescribed' or 'calcium', got {self.law!r}"
-            )
+            raise ValueError(f"parameter 'law' must be 'prescribed' or 'calcium', got {self.law!r}")
         for name in ("ca0", "ca0_max", "beta", "l0", "lr"):
             _check(name, getattr(self, name))
 

@@ -307,7 +307,9 @@ def _ogrid_2d(
     j = np.arange(nc)
     for k in range(1, len(ring_ids)):
         inner, outer = ring_ids[k - 1], ring_ids[k]
-        quads.append(np.column_stack([inner[j], outer[j], outer[(j + 1) % nc], inner[(j + 1) % nc]]))
+        quads.append(
+            np.column_stack([inner[j], outer[j], outer[(j + 1) % nc], inner[(j + 1) % nc]])
+        )
         layer.append(np.full(nc, k, dtype=np.int64))
     return np.concatenate(pts), np.concatenate(quads), np.concatenate(layer)
 

@@ -173,7 +173,9 @@ class _Newton:
         self.ls_ratio = 0.9
         self.stall_iterations = 6
         self.solver = (
-            linear_solver if isinstance(linear_solver, LinearSolver) else LinearSolver(linear_solver)
+            linear_solver
+            if isinstance(linear_solver, LinearSolver)
+            else LinearSolver(linear_solver)
         )
         self.pattern: Pattern = sparsity(body)
         self.time_assembly = 0.0
@@ -269,7 +271,9 @@ class _Newton:
             if not pending and (rn <= self.tol * scale or rn <= self.atol):
                 return _Outcome(True, u, history, it, min_jacobian=asm.min_jacobian)
             if it == self.max_iterations:
-                return _Outcome(False, u, history, it, "max_iterations", min_jacobian=asm.min_jacobian)
+                return _Outcome(
+                    False, u, history, it, "max_iterations", min_jacobian=asm.min_jacobian
+                )
             if it > 2 and rn > 1e8 * max(scale, self.atol):
                 return _Outcome(False, u, history, it, "diverged", min_jacobian=asm.min_jacobian)
             # linear system with Dirichlet elimination on the fixed pattern

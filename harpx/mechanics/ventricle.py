@@ -223,8 +223,14 @@ class VentricleGeometry:
         r2 = p[:, 0] ** 2 + p[:, 1] ** 2
         z2 = p[:, 2] ** 2
         # a(t), c(t) stay positive on the bracket [t_lo, 2]
-        t_lo = max(-1.0, 0.99 * max(-self.inner[0] / (self.outer[0] - self.inner[0]),
-                                    -self.inner[1] / (self.outer[1] - self.inner[1])))
+        t_lo = max(
+            -1.0,
+            0.99
+            * max(
+                -self.inner[0] / (self.outer[0] - self.inner[0]),
+                -self.inner[1] / (self.outer[1] - self.inner[1]),
+            ),
+        )
         lo = np.full(len(p), t_lo)
         hi = np.full(len(p), 2.0)
         for _ in range(int(iterations)):  # vectorised bisection over all points
@@ -337,8 +343,12 @@ def _disc_ogrid(
     cidx = np.arange((m + 1) ** 2).reshape(m + 1, m + 1)
     quads = [
         np.column_stack(
-            [cidx[:-1, :-1].ravel(), cidx[:-1, 1:].ravel(), cidx[1:, 1:].ravel(),
-             cidx[1:, :-1].ravel()]
+            [
+                cidx[:-1, :-1].ravel(),
+                cidx[:-1, 1:].ravel(),
+                cidx[1:, 1:].ravel(),
+                cidx[1:, :-1].ravel(),
+            ]
         )
     ]
     # counter-clockwise loop over the core boundary starting at the corner (+, -)
@@ -500,8 +510,12 @@ def ventricle(
     I_, J_ = np.meshgrid(np.arange(nl), j, indexing="ij")
     JN = (J_ + 1) % nc
     grid_quads = np.column_stack(
-        [grid[I_, J_].ravel(), grid[I_, JN].ravel(), grid[I_ + 1, JN].ravel(),
-         grid[I_ + 1, J_].ravel()]
+        [
+            grid[I_, J_].ravel(),
+            grid[I_, JN].ravel(),
+            grid[I_ + 1, JN].ravel(),
+            grid[I_ + 1, J_].ravel(),
+        ]
     )
     quads = np.concatenate([disc_to_layer[cap_quads], grid_quads])
     offsets = per_layer * np.arange(nt)[:, None, None]

@@ -311,8 +311,12 @@ def cylinder_scene(
     )
     tagged.attrs["scene"] = f"cylinder/{type(motion).__name__}"
     mesh = cylinder(
-        radius, height, n_radial=n_radial, n_circumferential=n_circumferential,
-        n_axial=n_axial, center=(0.0, 0.0, -height / 2),
+        radius,
+        height,
+        n_radial=n_radial,
+        n_circumferential=n_circumferential,
+        n_axial=n_axial,
+        center=(0.0, 0.0, -height / 2),
     )
     info = {"radius": radius, "height": height, "tag_period": tag_period, "snr": snr}
     return Scene(tagged, mesh, NeoHookean(c1=c1, kappa=kappa), motion, info)

@@ -251,8 +251,14 @@ def _advance(
         loads = [*dirichlet, Pressure("endo", systole.pressure * a)]
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             r = equilibrate(
-                body, loads, u, 1.0, tol=tol, max_iterations=max_iterations,
-                linear_solver=solver, raise_on_failure=False,
+                body,
+                loads,
+                u,
+                1.0,
+                tol=tol,
+                max_iterations=max_iterations,
+                linear_solver=solver,
+                raise_on_failure=False,
             )
         info["iterations"] += r.iterations
         if r.converged:
@@ -332,8 +338,17 @@ def simulate_systole(
     v0 = cavity_volume(body)
     path = [(0.0, np.zeros(body.ndof))]
     path += _advance(
-        body, systole, dirichlet, path[0][1], 0.0, 1.0, solver, info, tol=tol,
-        max_iterations=max_iterations, step=1.0 / 64.0,
+        body,
+        systole,
+        dirichlet,
+        path[0][1],
+        0.0,
+        1.0,
+        solver,
+        info,
+        tol=tol,
+        max_iterations=max_iterations,
+        step=1.0 / 64.0,
     )
     levels = np.array([a for a, _ in path])
     ejected = np.maximum.accumulate(np.array([v0 - cavity_volume(body, u) for _, u in path]))
@@ -354,8 +369,16 @@ def simulate_systole(
             U[n] = u_k
             continue
         U[n] = _advance(
-            body, systole, dirichlet, u_k, a_k, float(frame_levels[n]), solver, info,
-            tol=tol, max_iterations=max_iterations,
+            body,
+            systole,
+            dirichlet,
+            u_k,
+            a_k,
+            float(frame_levels[n]),
+            solver,
+            info,
+            tol=tol,
+            max_iterations=max_iterations,
         )[-1][1]
     body.set_t_max(systole.t_max)
     info["levels"] = frame_levels
@@ -419,10 +442,17 @@ class _HexLocator:
             cvw, cwu, cuv = np.cross(cv, cw), np.cross(cw, cu), np.cross(cu, cv)
             det = np.einsum("mi,mi->m", cu, cvw)
             det = np.where(np.abs(det) > 1e-300, det, 1e-300)
-            step = np.stack(
-                [np.einsum("mi,mi->m", r, cvw), np.einsum("mi,mi->m", r, cwu),
-                 np.einsum("mi,mi->m", r, cuv)], axis=1,
-            ) / det[:, None]
+            step = (
+                np.stack(
+                    [
+                        np.einsum("mi,mi->m", r, cvw),
+                        np.einsum("mi,mi->m", r, cwu),
+                        np.einsum("mi,mi->m", r, cuv),
+                    ],
+                    axis=1,
+                )
+                / det[:, None]
+            )
             xi = np.clip(xi + step, -1.0, 2.0)
         return xi
 
@@ -610,18 +640,34 @@ def _acquire(
     h_la = 2.0 * a_epi / size.la_slices
     y_la = -a_epi + h_la * (np.arange(size.la_slices) + 0.5)
     common = dict(
-        times=times, tag_period=size.tag_period, sequence="CSPAMM", snr=snr,
-        body=motion.density, inverse=motion.inverse, oversample=size.oversample, rng=rng,
+        times=times,
+        tag_period=size.tag_period,
+        sequence="CSPAMM",
+        snr=snr,
+        body=motion.density,
+        inverse=motion.inverse,
+        oversample=size.oversample,
+        rng=rng,
     )
     sa = synthesize_tagged(
-        motion, shape=(size.sa_slices, n_xy, n_xy), spacing=(h_sa, d, d),
-        origin=(z_sa[0], xy[0], xy[0]), tags=("x", "y"), slice_axis="z",
-        slice_thickness=h_sa, **common,
+        motion,
+        shape=(size.sa_slices, n_xy, n_xy),
+        spacing=(h_sa, d, d),
+        origin=(z_sa[0], xy[0], xy[0]),
+        tags=("x", "y"),
+        slice_axis="z",
+        slice_thickness=h_sa,
+        **common,
     )
     la = synthesize_tagged(
-        motion, shape=(n_z, size.la_slices, n_xy), spacing=(d, h_la, d),
-        origin=(z[0], y_la[0], xy[0]), tags=("z",), slice_axis="y",
-        slice_thickness=h_la, **common,
+        motion,
+        shape=(n_z, size.la_slices, n_xy),
+        spacing=(d, h_la, d),
+        origin=(z[0], y_la[0], xy[0]),
+        tags=("z",),
+        slice_axis="y",
+        slice_thickness=h_la,
+        **common,
     )
     i_sa, w_sa, cov_sa = _stack_weights(z_sa, h_sa, z)
     i_la, w_la, cov_la = _stack_weights(y_la, h_la, xy)
@@ -648,10 +694,14 @@ def _acquire(
         "axis": ("axis", np.array(["x", "y", "z"], dtype=object), standard_attrs("axis")),
         "tag_direction": (("tag", "axis"), np.eye(3), standard_attrs("tag_direction")),
         "tag_frequency": (
-            "tag", np.full(3, 1.0 / size.tag_period), standard_attrs("tag_frequency")
+            "tag",
+            np.full(3, 1.0 / size.tag_period),
+            standard_attrs("tag_frequency"),
         ),
         "slice_axis": (
-            "tag", np.array(["z", "z", "y"], dtype=object), standard_attrs("slice_axis")
+            "tag",
+            np.array(["z", "z", "y"], dtype=object),
+            standard_attrs("slice_axis"),
         ),
         "time": ("time", times, standard_attrs("time")),
         "z": ("z", z, standard_attrs("z")),
@@ -664,7 +714,9 @@ def _acquire(
             "mask": (("tag", *GRID_DIMS), mask, standard_attrs("mask")),
             "body": (GRID_DIMS, body, standard_attrs("body")),
             "displacement_true": (
-                ("time", "axis", *GRID_DIMS), truth, standard_attrs("displacement_true")
+                ("time", "axis", *GRID_DIMS),
+                truth,
+                standard_attrs("displacement_true"),
             ),
         },
         coords=coords,
@@ -905,7 +957,10 @@ class LVScene:
         """The prestretch growth field of the PSR (computed once, :func:`prestretch_growth`)."""
         if self._growth is None:
             self._growth, info = prestretch_growth(
-                self.mesh, self.material, self.dirichlet(), geometry=self.geometry,
+                self.mesh,
+                self.material,
+                self.dirichlet(),
+                geometry=self.geometry,
                 **self.info.get("prestretch_settings", {}),
             )
             self.info["prestretch"] = info
@@ -929,9 +984,7 @@ class LVScene:
             return Body(self.mesh, self.material)
         if reference == "prestretched":
             return Body(self.mesh, self.material, growth=self.growth())
-        raise ValueError(
-            f"reference={reference!r}; expected 'stress-free' or 'prestretched'"
-        )
+        raise ValueError(f"reference={reference!r}; expected 'stress-free' or 'prestretched'")
 
 
 def lv(
@@ -978,8 +1031,13 @@ def lv(
     geometry = GEOMETRY
     nc, nl, nt = g.truth
     fine = ventricle(
-        inner=geometry.inner, outer=geometry.outer, truncation=geometry.truncation,
-        n_circumferential=nc, n_longitudinal=nl, n_transmural=nt, segments=False,
+        inner=geometry.inner,
+        outer=geometry.outer,
+        truncation=geometry.truncation,
+        n_circumferential=nc,
+        n_longitudinal=nl,
+        n_transmural=nt,
+        segments=False,
     )
     truth_body = Body(fine, material, active=ActiveContraction(t_max=0.0))
     times = g.frame_interval * np.arange(g.frames)
@@ -993,8 +1051,12 @@ def lv(
     imaging_time = _time.perf_counter() - start
     nc, nl, nt = g.tracking
     mesh = ventricle(
-        inner=geometry.inner, outer=geometry.outer, truncation=geometry.truncation,
-        n_circumferential=nc, n_longitudinal=nl, n_transmural=nt,
+        inner=geometry.inner,
+        outer=geometry.outer,
+        truncation=geometry.truncation,
+        n_circumferential=nc,
+        n_longitudinal=nl,
+        n_transmural=nt,
     )
     info = {
         "size": size,

@@ -118,10 +118,22 @@ class TongueGeometry:
 GEOMETRIES: dict[str, TongueGeometry] = {
     # the paper's protocol; truth on the 2x refined mesh (2240 hex20)
     "paper": TongueGeometry(
-        length=70.0, width=50.0, height=40.0, divisions=(10, 7, 4),
-        truth_divisions=(20, 14, 8), truth_element="hex20", frames=4, frame_interval=60.0,
-        coronal_slices=10, sagittal_slices=8, pixel=1.9, matrix=256, margin=10.0,
-        tag_period=6.0, oversample=3, field_spacing=1.0,
+        length=70.0,
+        width=50.0,
+        height=40.0,
+        divisions=(10, 7, 4),
+        truth_divisions=(20, 14, 8),
+        truth_element="hex20",
+        frames=4,
+        frame_interval=60.0,
+        coronal_slices=10,
+        sagittal_slices=8,
+        pixel=1.9,
+        matrix=256,
+        margin=10.0,
+        tag_period=6.0,
+        oversample=3,
+        field_spacing=1.0,
     ),  # fmt: skip
 }
 # same protocol and tracking model; truth refined 2x along the length only (560 hex20),

@@ -79,8 +79,15 @@ def track_frame_augmented(
         constraint.penalty = lam * scale
         for _ in range(max_updates):
             res = equilibrate(
-                body, constraint, u, dirichlet=dirichlet, terms=terms, solver=solver,
-                tolerance=tolerance, max_iterations=max_iterations, timings=timings,
+                body,
+                constraint,
+                u,
+                dirichlet=dirichlet,
+                terms=terms,
+                solver=solver,
+                tolerance=tolerance,
+                max_iterations=max_iterations,
+                timings=timings,
             )
             u, state = res.u, res.state
             iterations += res.iterations

@@ -47,8 +47,7 @@ import skfem
 import xarray as xr
 
 from harpx._typing import FloatArray
-from harpx.imaging.sample import wrap
-from harpx.imaging.sample import PhaseSampler
+from harpx.imaging.sample import PhaseSampler, wrap
 from harpx.mechanics.assembly import sparsity
 
 # floats per temporary block when forming element matrices (bounds memory to ~64 MB)
@@ -93,7 +92,9 @@ def constraint_quadrature(body: object, spacing: float) -> tuple[FloatArray, Flo
     for j in range(3):
         diff = np.abs(ref[:, None, :] - ref[None, :, :])
         other = np.delete(diff, j, axis=2).sum(axis=2)
-        a, b = np.nonzero((diff[:, :, j] == 1) & (other == 0) & (np.arange(8)[:, None] < np.arange(8)))
+        a, b = np.nonzero(
+            (diff[:, :, j] == 1) & (other == 0) & (np.arange(8)[:, None] < np.arange(8))
+        )
         edges = mesh.p[:, mesh.t[a]] - mesh.p[:, mesh.t[b]]  # (3, 4 edges, ncell)
         longest = float(np.linalg.norm(edges, axis=0).max())
         # n Gauss points split an edge of length L into gaps of at most about L / n
@@ -190,12 +191,16 @@ class PhaseConstraint:
         # the acquired voxel: grid spacing times the upsampling factor of the phase images
         upsample = float(phase.attrs.get("upsample", 1))
         spacing = upsample * float(
-            min(abs(float(phase[d][1] - phase[d][0])) for d in ("z", "y", "x") if phase.sizes[d] > 1)
+            min(
+                abs(float(phase[d][1] - phase[d][0])) for d in ("z", "y", "x") if phase.sizes[d] > 1
+            )
         )
         element = body._scalar_element  # type: ignore[attr-defined]
         if intorder is None:
             basis = skfem.CellBasis(
-                body.mesh, element, quadrature=constraint_quadrature(body, spacing)  # type: ignore[attr-defined]
+                body.mesh,
+                element,
+                quadrature=constraint_quadrature(body, spacing),  # type: ignore[attr-defined]
             )
         else:
             basis = skfem.CellBasis(body.mesh, element, intorder=int(intorder))  # type: ignore[attr-defined]

@@ -123,7 +123,12 @@ def track_frame_penalty(
             # stages below the ramp's top only continue the path: a few iterations suffice
             last = stage == len(levels) - 1
             res = equilibrate(
-                body, constraint, u, dirichlet=dirichlet, terms=terms, solver=solver,
+                body,
+                constraint,
+                u,
+                dirichlet=dirichlet,
+                terms=terms,
+                solver=solver,
                 tolerance=tolerance,
                 max_iterations=max_iterations if last else min(max_iterations, RAMP_ITERATIONS),
                 timings=timings,

@@ -127,9 +127,13 @@ def tracked_dataset(
             "axis": xr.DataArray(["x", "y", "z"], dims="axis", attrs=standard_attrs("axis")),
         }
     )
-    ds["points"] = xr.DataArray(body.dof_points, dims=("node", "axis"), attrs=standard_attrs("points"))
+    ds["points"] = xr.DataArray(
+        body.dof_points, dims=("node", "axis"), attrs=standard_attrs("points")
+    )
     cells_attrs = standard_attrs("cells") | {"element": body.element}
-    ds["cells"] = xr.DataArray(np.asarray(body.cells, dtype=np.int64), dims=("cell", "vertex"), attrs=cells_attrs)
+    ds["cells"] = xr.DataArray(
+        np.asarray(body.cells, dtype=np.int64), dims=("cell", "vertex"), attrs=cells_attrs
+    )
     if body.regions:
         names = list(body.regions)
         label = np.full(body.ncell, -1, dtype=np.int64)
@@ -138,7 +142,9 @@ def tracked_dataset(
         ds["region"] = xr.DataArray(
             label, dims="cell", attrs=standard_attrs("region") | {"flag_meanings": " ".join(names)}
         )
-    ds["displacement"] = xr.DataArray(nodal, dims=("time", "node", "axis"), attrs=standard_attrs("displacement"))
+    ds["displacement"] = xr.DataArray(
+        nodal, dims=("time", "node", "axis"), attrs=standard_attrs("displacement")
+    )
     ds["green_strain"] = xr.DataArray(
         strain, dims=("time", "cell", "i", "j"), attrs=standard_attrs("green_strain")
     )
@@ -229,8 +235,13 @@ def tracking_error(
     }
     out = xr.Dataset(coords={"time": true.time})
     for name, (per_frame, overall) in stats.items():
-        out[name] = xr.DataArray(per_frame, dims="time", attrs={"units": "mm", "long_name": f"{name} displacement error"})
-        out[f"{name}_all"] = xr.DataArray(overall, attrs={"units": "mm", "long_name": f"{name} displacement error over all frames"})
+        out[name] = xr.DataArray(
+            per_frame, dims="time", attrs={"units": "mm", "long_name": f"{name} displacement error"}
+        )
+        out[f"{name}_all"] = xr.DataArray(
+            overall,
+            attrs={"units": "mm", "long_name": f"{name} displacement error over all frames"},
+        )
     n_body = float(body.values.sum())
     out["coverage"] = xr.DataArray(
         float(covered.values.sum()) / n_body if n_body else np.nan,

@@ -44,7 +44,9 @@ def _as_phase(ds: xr.Dataset) -> xr.Dataset:
 PREDICTOR_FACTORS = (0.0, 0.5, 1.0)
 
 
-def _predict(body: Any, constraint: PhaseConstraint, last: np.ndarray, before: np.ndarray) -> np.ndarray:
+def _predict(
+    body: Any, constraint: PhaseConstraint, last: np.ndarray, before: np.ndarray
+) -> np.ndarray:
     """Extrapolated start of a frame with the smallest phase residual (see ``predictor``)."""
     best, best_eps = last, np.inf
     for alpha in PREDICTOR_FACTORS:  # three candidates, each one image sampling
@@ -205,16 +207,26 @@ def track(
             u0 = _predict(body, constraint, U[n - 1], U[n - 2])
         timings.prediction += _time.perf_counter() - clock
         common = dict(
-            target=epsilon, penalty=lam, penalty_limit=penalty_limit, solver=solver,
-            dirichlet=dirichlet, terms=terms, timings=timings, tolerance=tolerance,
+            target=epsilon,
+            penalty=lam,
+            penalty_limit=penalty_limit,
+            solver=solver,
+            dirichlet=dirichlet,
+            terms=terms,
+            timings=timings,
+            tolerance=tolerance,
         )
         outcome: FrameOutcome
         if method == "penalty":
             outcome = track_frame_penalty(body, constraint, u0, ramp=int(ramp), **common)
         else:
             outcome = track_frame_augmented(
-                body, constraint, u0, multiplier_tolerance=multiplier_tolerance,
-                max_updates=int(max_updates), **common,
+                body,
+                constraint,
+                u0,
+                multiplier_tolerance=multiplier_tolerance,
+                max_updates=int(max_updates),
+                **common,
             )
         if not np.isfinite(outcome.epsilon):  # no constraint point saw data: ε is 0/0
             raise SchemaError(

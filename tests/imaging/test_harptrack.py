@@ -179,10 +179,15 @@ def test_tagged_input_is_phase_extracted_first(monkeypatch: pytest.MonkeyPatch) 
 @pytest.mark.parametrize(
     ("kwargs", "error", "match"),
     [
-        pytest.param({"iterations": 0}, ValueError, "iterations=0 must be at least 1",
-                     id="iterations"),
-        pytest.param({"points": np.zeros((3, 2))}, ValueError,
-                     r"points must have shape \(n, 3\)", id="points"),
+        pytest.param(
+            {"iterations": 0}, ValueError, "iterations=0 must be at least 1", id="iterations"
+        ),
+        pytest.param(
+            {"points": np.zeros((3, 2))},
+            ValueError,
+            r"points must have shape \(n, 3\)",
+            id="points",
+        ),
     ],
 )
 def test_bad_arguments(kwargs: dict[str, object], error: type, match: str) -> None:

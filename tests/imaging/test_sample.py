@@ -27,8 +27,9 @@ def _perturbation(p: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[
     x, y, z = p[:, 0], p[:, 1], p[:, 2]
     value = 0.5 * np.sin(2 * np.pi * x / 40) + 0.3 * np.cos(2 * np.pi * y / 30 + 0.2 * z)
     s = -0.3 * np.sin(2 * np.pi * y / 30 + 0.2 * z)
-    grad = np.stack([0.5 * 2 * np.pi / 40 * np.cos(2 * np.pi * x / 40), s * 2 * np.pi / 30,
-                     s * 0.2], -1)
+    grad = np.stack(
+        [0.5 * 2 * np.pi / 40 * np.cos(2 * np.pi * x / 40), s * 2 * np.pi / 30, s * 0.2], -1
+    )
     return value, grad
 
 
@@ -37,8 +38,9 @@ def phase_dataset(
     shape: tuple[int, int, int] = (10, 26, 28),
     spacing: tuple[float, float, float] = (1.5, 1.0, 1.0),
     ntag: int = 3,
-    field: Callable[[NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]]
-    = _perturbation,
+    field: Callable[
+        [NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]
+    ] = _perturbation,
 ) -> xr.Dataset:
     """phase/1 with phase W(k_t·x + p(x)) and magnitude 1 on a (z, y, x) grid."""
     z = 2.0 + spacing[0] * np.arange(shape[0])
@@ -84,8 +86,9 @@ def random_points(
 ) -> NDArray[np.float64]:
     """Uniform points at least `margin` voxels inside the field of view."""
     lo = np.array([float(ds[a][margin]) if ds.sizes[a] > 1 else float(ds[a][0]) for a in "xyz"])
-    hi = np.array([float(ds[a][-1 - margin]) if ds.sizes[a] > 1 else float(ds[a][0])
-                   for a in "xyz"])
+    hi = np.array(
+        [float(ds[a][-1 - margin]) if ds.sizes[a] > 1 else float(ds[a][0]) for a in "xyz"]
+    )
     return lo + (hi - lo) * rng.random((n, 3))
 
 
@@ -156,18 +159,22 @@ def test_outside_fov_masked_and_faded_points_are_invalid() -> None:
     mask[1, :, :, :3] = False  # tag "y" has no data in the first 3 x columns
     magnitude = ds.magnitude.values.copy()
     magnitude[0, 0, :, 8:, :] = 0.0  # tag "x" has faded for y rows >= 8
-    ds = ds.assign(mask=(("tag", "z", "y", "x"), mask, standard_attrs("mask")),
-                   magnitude=ds.magnitude.copy(data=magnitude))
+    ds = ds.assign(
+        mask=(("tag", "z", "y", "x"), mask, standard_attrs("mask")),
+        magnitude=ds.magnitude.copy(data=magnitude),
+    )
     x0, y0, z0 = float(ds.x[0]), float(ds.y[0]), float(ds.z[0])
-    points = np.array([
-        [x0 + 6.2, y0 + 3.1, z0 + 2.0],  # inside everything
-        [x0 - 0.5, y0 + 3.1, z0 + 2.0],  # left of the first voxel centre
-        [x0 + 6.2, y0 + 3.1, z0 + 99.0],  # above the last slice
-        [np.nan, y0 + 3.1, z0 + 2.0],  # not a number
-        [x0 + 1.0, y0 + 3.1, z0 + 2.0],  # outside the mask of tag "y"
-        [x0 + 6.2, y0 + 10.0, z0 + 2.0],  # below the magnitude floor of tag "x"
-        [x0 + 13.0, y0 + 11.0, z0 + 7.5],  # the far corner voxel centre (inside)
-    ])
+    points = np.array(
+        [
+            [x0 + 6.2, y0 + 3.1, z0 + 2.0],  # inside everything
+            [x0 - 0.5, y0 + 3.1, z0 + 2.0],  # left of the first voxel centre
+            [x0 + 6.2, y0 + 3.1, z0 + 99.0],  # above the last slice
+            [np.nan, y0 + 3.1, z0 + 2.0],  # not a number
+            [x0 + 1.0, y0 + 3.1, z0 + 2.0],  # outside the mask of tag "y"
+            [x0 + 6.2, y0 + 10.0, z0 + 2.0],  # below the magnitude floor of tag "x"
+            [x0 + 13.0, y0 + 11.0, z0 + 7.5],  # the far corner voxel centre (inside)
+        ]
+    )
     phi, grad, valid = PhaseSampler(ds, 0).sample(points)
     assert valid.tolist() == [True, False, False, False, False, False, False]
     assert np.all(phi[~valid] == 0) and np.all(grad[~valid] == 0)
@@ -211,22 +218,39 @@ def test_dask_backed_dataset_gives_the_same_answer(rng: np.random.Generator) -> 
     lazy = ds.chunk({"z": 2})
     assert isinstance(lazy.phase.data, da.Array)
     points = random_points(ds, rng, 50)
-    for eager, from_lazy in zip(PhaseSampler(ds, 0).sample(points),
-                                PhaseSampler(lazy, 0).sample(points), strict=True):
+    for eager, from_lazy in zip(
+        PhaseSampler(ds, 0).sample(points), PhaseSampler(lazy, 0).sample(points), strict=True
+    ):
         np.testing.assert_array_equal(eager, from_lazy)  # same numbers after compute: exact
 
 
 @pytest.mark.parametrize(
     ("call", "error", "match"),
     [
-        pytest.param(lambda ds: PhaseSampler(ds, 3), IndexError,
-                     "time_index=3 is out of range for 1 frames", id="time-index"),
-        pytest.param(lambda ds: PhaseSampler(ds, 0, order=2), ValueError,
-                     "order=2 is not supported", id="order"),
-        pytest.param(lambda ds: PhaseSampler(ds.drop_vars("magnitude"), 0), SchemaError,
-                     "missing data variable 'magnitude'", id="no-magnitude"),
-        pytest.param(lambda ds: PhaseSampler(ds, 0).sample(np.zeros((4, 2))), ValueError,
-                     r"points must have shape \(n, 3\)", id="points-shape"),
+        pytest.param(
+            lambda ds: PhaseSampler(ds, 3),
+            IndexError,
+            "time_index=3 is out of range for 1 frames",
+            id="time-index",
+        ),
+        pytest.param(
+            lambda ds: PhaseSampler(ds, 0, order=2),
+            ValueError,
+            "order=2 is not supported",
+            id="order",
+        ),
+        pytest.param(
+            lambda ds: PhaseSampler(ds.drop_vars("magnitude"), 0),
+            SchemaError,
+            "missing data variable 'magnitude'",
+            id="no-magnitude",
+        ),
+        pytest.param(
+            lambda ds: PhaseSampler(ds, 0).sample(np.zeros((4, 2))),
+            ValueError,
+            r"points must have shape \(n, 3\)",
+            id="points-shape",
+        ),
     ],
 )
 def test_bad_input(call: Callable[[xr.Dataset], object], error: type, match: str) -> None:

@@ -346,9 +346,12 @@ def test_masks_match_geometry(tagged: xr.Dataset) -> None:
     x, y, z = (points[..., a] for a in range(3))
     eps = 1e-6  # mm; grid points on the box faces count as inside
     box = (
-        (x >= -5 - eps) & (x <= -5 + 9 * 1.0 + eps)
-        & (y >= -7 - eps) & (y <= -7 + 11 * 1.25 + eps)
-        & (z >= -2.5 - eps) & (z <= 12.5 + eps)
+        (x >= -5 - eps)
+        & (x <= -5 + 9 * 1.0 + eps)
+        & (y >= -7 - eps)
+        & (y <= -7 + 11 * 1.25 + eps)
+        & (z >= -2.5 - eps)
+        & (z <= 12.5 + eps)
     )
     assert box.sum() > 100
     np.testing.assert_array_equal(tagged.mask.sel(tag="x"), box)
@@ -357,8 +360,7 @@ def test_masks_match_geometry(tagged: xr.Dataset) -> None:
     # the written decimal strings move faces by ~1e-9 mm).
     j, i, o = np.moveaxis(local_coords(LA, points), -1, 0)
     margin = np.minimum.reduce(
-        [j * 1.25, (LA.columns - 1 - j) * 1.25, i * 1.5, (LA.rows - 1 - i) * 1.5,
-         o + 3.0, 9.0 - o]
+        [j * 1.25, (LA.columns - 1 - j) * 1.25, i * 1.5, (LA.rows - 1 - i) * 1.5, o + 3.0, 9.0 - o]
     )
     mask = tagged.mask.sel(tag="l").values
     assert np.all(mask[margin > 1e-3]) and not np.any(mask[margin < -1e-3])
@@ -382,13 +384,21 @@ def test_resampled_image_equals_linear_function(tagged: xr.Dataset) -> None:
 
 def test_axis_aligned_stack_on_its_own_grid_is_not_interpolated(tmp_path: Path) -> None:
     spec = StackSpec(
-        description="SA square", frame=np.eye(3), origin=np.array([1.0, 2.0, 3.0]),
-        pixel_spacing=(1.5, 1.5), rows=5, columns=4, offsets=(0.0, 1.5, 3.0), thickness=1.5,
-        times=(10.0, 50.0), uid="1.2.826.0.1.3680043.8.498.3",
+        description="SA square",
+        frame=np.eye(3),
+        origin=np.array([1.0, 2.0, 3.0]),
+        pixel_spacing=(1.5, 1.5),
+        rows=5,
+        columns=4,
+        offsets=(0.0, 1.5, 3.0),
+        thickness=1.5,
+        times=(10.0, 50.0),
+        uid="1.2.826.0.1.3680043.8.498.3",
     )
     write_classic(tmp_path, spec)
-    ds = read_tagged(tmp_path, tag_period=6.0, tag_directions=[("SA square", "x", "row")],
-                     sequence="SPAMM")
+    ds = read_tagged(
+        tmp_path, tag_period=6.0, tag_directions=[("SA square", "x", "row")], sequence="SPAMM"
+    )
     assert ds.sizes == {"tag": 1, "time": 2, "z": 3, "y": 5, "x": 4, "axis": 3}
     np.testing.assert_allclose(ds.x, 1 + 1.5 * np.arange(4), rtol=1e-15)
     expected = np.stack(
@@ -410,8 +420,9 @@ def test_enhanced_multiframe_matches_classic(tmp_path: Path, tagged: xr.Dataset)
 
 def test_multiframe_timing_from_frame_acquisition_datetime(tmp_path: Path) -> None:
     write_enhanced(tmp_path, LA, timing="datetime")
-    ds = read_tagged(tmp_path, tag_period=8.0, tag_directions={"LA tagged": ("l", "row")},
-                     sequence="SPAMM")
+    ds = read_tagged(
+        tmp_path, tag_period=8.0, tag_directions={"LA tagged": ("l", "row")}, sequence="SPAMM"
+    )
     # Without trigger delays, time counts from the file's first acquired frame.
     np.testing.assert_allclose(ds.time, np.array(LA.times) - LA.times[0], atol=1e-6)
 
@@ -419,7 +430,9 @@ def test_multiframe_timing_from_frame_acquisition_datetime(tmp_path: Path) -> No
 def test_explicit_spacing_and_tag_list(study: Path) -> None:
     one_file = next((study / "sa").glob("*.dcm"))  # also inside a folder given: read once
     ds = read_tagged(
-        [study / "la", study / "sa", one_file], spacing=2.0, tag_period={"l": 10.0, "x": 8.0},
+        [study / "la", study / "sa", one_file],
+        spacing=2.0,
+        tag_period={"l": 10.0, "x": 8.0},
         tag_directions=[(LA.uid, "l", LA.frame[:, 0]), ("1", "x", (2.0, 0.0, 0.0))],
         sequence="SPAMM",
     )
@@ -439,9 +452,7 @@ def test_sequence_read_from_header(tmp_path: Path) -> None:
 # errors
 
 
-def test_missing_pydicom_gives_install_hint(
-    monkeypatch: pytest.MonkeyPatch, study: Path
-) -> None:
+def test_missing_pydicom_gives_install_hint(monkeypatch: pytest.MonkeyPatch, study: Path) -> None:
     monkeypatch.setitem(sys.modules, "pydicom", None)
     with pytest.raises(ImportError, match=r"pip install harpx\[dicom\]"):
         read_tagged(study, **READ)
@@ -465,8 +476,9 @@ def test_truncated_file_is_named(tmp_path: Path) -> None:
     victim = sorted(tmp_path.glob("*.dcm"))[4]
     victim.write_bytes(victim.read_bytes()[:-100])
     with pytest.raises(HarpxError, match=rf"{victim.name}.*truncated"):
-        read_tagged(tmp_path, tag_period=8.0, tag_directions={"SA tagged": ("x", "row")},
-                    sequence="CSPAMM")
+        read_tagged(
+            tmp_path, tag_period=8.0, tag_directions={"SA tagged": ("x", "row")}, sequence="CSPAMM"
+        )
 
 
 def _drop(keyword: str):
@@ -570,24 +582,29 @@ def test_trigger_times_beyond_tolerance(tmp_path: Path) -> None:
         pytest.param({"sequence": None}, "sequence is required", id="no-sequence"),
         pytest.param({"sequence": "HARP"}, "sequence is 'HARP'", id="bad-sequence"),
         pytest.param(
-            {"tag_directions": None}, r"tag_directions is required(.|\n)*'LA tagged'",
+            {"tag_directions": None},
+            r"tag_directions is required(.|\n)*'LA tagged'",
             id="no-tags",
         ),
         pytest.param(
-            {"tag_directions": {"4CH": ("x", "row")}}, "names series '4CH', which matches no",
+            {"tag_directions": {"4CH": ("x", "row")}},
+            "names series '4CH', which matches no",
             id="unknown-series",
         ),
         pytest.param(
-            {"tag_directions": {"SA tagged": ("x", "diagonal")}}, "direction 'diagonal'",
+            {"tag_directions": {"SA tagged": ("x", "diagonal")}},
+            "direction 'diagonal'",
             id="unknown-direction",
         ),
         pytest.param(
-            {"tag_directions": {"SA tagged": ("x", (0, 0, 1))}}, "mostly through the slices",
+            {"tag_directions": {"SA tagged": ("x", (0, 0, 1))}},
+            "mostly through the slices",
             id="through-plane",
         ),
         pytest.param(
             {"tag_directions": [("SA tagged", "x", "row"), ("LA tagged", "x", "row")]},
-            "unique tag labels", id="duplicate-label",
+            "unique tag labels",
+            id="duplicate-label",
         ),
         pytest.param({"spacing": 0.0}, "spacing is 0.0", id="bad-spacing"),
     ],

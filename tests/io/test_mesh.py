@@ -39,8 +39,9 @@ def _tracked(element: str, rng: np.random.Generator) -> xr.Dataset:
     phase = make_phase().isel(time=[0, 1, 1]).assign_coords(time=[0.0, 18.0, 36.0])
     X = body.dof_points
     A = 0.02 * rng.standard_normal((3, 3))
-    U = np.stack([(s * (X @ A.T + 0.01 * rng.standard_normal(X.shape))).ravel()
-                  for s in (0.0, 0.5, 1.0)])
+    U = np.stack(
+        [(s * (X @ A.T + 0.01 * rng.standard_normal(X.shape))).ravel() for s in (0.0, 0.5, 1.0)]
+    )
     eps_cell = rng.uniform(0, 0.1, (3, body.ncell))
     eps_cell[:, 0] = np.nan  # a cell without constraint points
     diagnostics = {"epsilon": np.array([0.0, 0.03, 0.04]), "epsilon_cell": eps_cell}
@@ -132,8 +133,9 @@ def test_read_body_mesh_rebuilds_the_same_body(
         names = tracked.region.attrs["flag_meanings"].split()
         assert sorted(body.regions) == sorted(names)
         for code, name in enumerate(names):
-            np.testing.assert_array_equal(body.regions[name],
-                                          np.flatnonzero(tracked.region.values == code))
+            np.testing.assert_array_equal(
+                body.regions[name], np.flatnonzero(tracked.region.values == code)
+            )
 
 
 def test_body_reads_an_exported_frame_directly(tmp_path: Path, rng: np.random.Generator) -> None:
@@ -154,12 +156,14 @@ def test_export_of_a_reopened_archive(tmp_path: Path, rng: np.random.Generator) 
     with meshio.xdmf.TimeSeriesReader(files[0]) as reader:
         reader.read_points_cells()
         _, point_data, _ = reader.read_data(2)
-    np.testing.assert_array_equal(point_data["displacement"],
-                                  tracked.displacement.isel(time=2).values)  # exact
+    np.testing.assert_array_equal(
+        point_data["displacement"], tracked.displacement.isel(time=2).values
+    )  # exact
 
 
-def test_xdmf_with_hdf5_heavy_data(tmp_path: Path, rng: np.random.Generator,
-                                   monkeypatch: pytest.MonkeyPatch) -> None:
+def test_xdmf_with_hdf5_heavy_data(
+    tmp_path: Path, rng: np.random.Generator, monkeypatch: pytest.MonkeyPatch
+) -> None:
     pytest.importorskip("h5py")
     tracked = _tracked("hex8", rng)
     monkeypatch.chdir(tmp_path)  # meshio alone would put the .h5 in the working directory
@@ -171,8 +175,9 @@ def test_xdmf_with_hdf5_heavy_data(tmp_path: Path, rng: np.random.Generator,
         points, _ = reader.read_points_cells()
         _, point_data, _ = reader.read_data(1)
     np.testing.assert_array_equal(points, tracked.points.values)  # binary: exact
-    np.testing.assert_array_equal(point_data["displacement"],
-                                  tracked.displacement.isel(time=1).values)
+    np.testing.assert_array_equal(
+        point_data["displacement"], tracked.displacement.isel(time=1).values
+    )
 
 
 def test_overwrite_replaces_files_and_failure_keeps_them(
@@ -199,14 +204,16 @@ def test_overwrite_replaces_files_and_failure_keeps_them(
     assert _names(tmp_path) == sorted(before)  # and no temporary directory left behind
     to_meshio(second, tmp_path / "r", series="vtu")
     back = meshio.read(tmp_path / "r_0002.vtu")
-    np.testing.assert_array_equal(back.point_data["displacement"],
-                                  second.displacement.isel(time=2).values)
+    np.testing.assert_array_equal(
+        back.point_data["displacement"], second.displacement.isel(time=2).values
+    )
 
 
 def _point_cloud(ds: xr.Dataset) -> xr.Dataset:
     """A tracked/1 point cloud (as conventional HARP tracking gives): no cells."""
-    cells = xr.Variable(("cell", "vertex"), np.zeros((0, 0), np.int64),
-                        {**ds.cells.attrs, "element": "points"})
+    cells = xr.Variable(
+        ("cell", "vertex"), np.zeros((0, 0), np.int64), {**ds.cells.attrs, "element": "points"}
+    )
     return ds.drop_vars("cells").assign(cells=cells)
 
 
@@ -215,12 +222,21 @@ def _point_cloud(ds: xr.Dataset) -> xr.Dataset:
     [
         pytest.param(lambda ds: ds.drop_vars("cells"), "has no 'cells'", id="no-cells"),
         pytest.param(_point_cloud, "element 'points'", id="point-cloud"),
-        pytest.param(lambda ds: ds.assign(cells=ds.cells.assign_attrs(element="pyramid5")),
-                     "element 'pyramid5'", id="unknown-element"),
-        pytest.param(lambda ds: ds.assign_attrs(harpx_schema="phase/1"),
-                     "'harpx_schema' is 'phase/1'", id="wrong-schema"),
-        pytest.param(lambda ds: ds.drop_vars("displacement"), "missing data variable "
-                     "'displacement'", id="no-displacement"),
+        pytest.param(
+            lambda ds: ds.assign(cells=ds.cells.assign_attrs(element="pyramid5")),
+            "element 'pyramid5'",
+            id="unknown-element",
+        ),
+        pytest.param(
+            lambda ds: ds.assign_attrs(harpx_schema="phase/1"),
+            "'harpx_schema' is 'phase/1'",
+            id="wrong-schema",
+        ),
+        pytest.param(
+            lambda ds: ds.drop_vars("displacement"),
+            "missing data variable 'displacement'",
+            id="no-displacement",
+        ),
     ],
 )
 def test_bad_dataset_is_named_and_nothing_is_written(tmp_path: Path, change, match) -> None:
@@ -234,10 +250,18 @@ def test_bad_dataset_is_named_and_nothing_is_written(tmp_path: Path, change, mat
     ("path", "series", "match"),
     [
         pytest.param("r.xdmf", "vtk", "series='vtk' is not supported", id="series"),
-        pytest.param("r.vtu", "xdmf", "ends in '.vtu', which belongs to series='vtu'",
-                     id="vtu-suffix-for-xdmf"),
-        pytest.param("r.xdmf", "vtu", "ends in '.xdmf', which belongs to series='xdmf'",
-                     id="xdmf-suffix-for-vtu"),
+        pytest.param(
+            "r.vtu",
+            "xdmf",
+            "ends in '.vtu', which belongs to series='vtu'",
+            id="vtu-suffix-for-xdmf",
+        ),
+        pytest.param(
+            "r.xdmf",
+            "vtu",
+            "ends in '.xdmf', which belongs to series='xdmf'",
+            id="xdmf-suffix-for-vtu",
+        ),
     ],
 )
 def test_bad_path_or_series_is_named(tmp_path: Path, path: str, series: str, match: str) -> None:
@@ -268,10 +292,12 @@ def _vtk_box_cells() -> tuple[np.ndarray, np.ndarray]:
     ("corrupt", "bad_cells"),
     [
         pytest.param(lambda c: c[:, [4, 5, 6, 7, 0, 1, 2, 3]], "0, 1", id="inverted"),
-        pytest.param(lambda c: np.concatenate([c[:1], c[1:, [0, 1, 3, 2, 4, 5, 6, 7]]]), "1",
-                     id="bow-tie"),
-        pytest.param(lambda c: np.concatenate([c[:1, [0, 1, 2, 3, 0, 1, 2, 3]], c[1:]]), "0",
-                     id="collapsed"),
+        pytest.param(
+            lambda c: np.concatenate([c[:1], c[1:, [0, 1, 3, 2, 4, 5, 6, 7]]]), "1", id="bow-tie"
+        ),
+        pytest.param(
+            lambda c: np.concatenate([c[:1, [0, 1, 2, 3, 0, 1, 2, 3]], c[1:]]), "0", id="collapsed"
+        ),
     ],
 )
 def test_read_body_mesh_rejects_bad_hexahedra(tmp_path: Path, corrupt, bad_cells: str) -> None:
@@ -302,7 +328,9 @@ def test_read_body_mesh_errors_name_the_file(tmp_path: Path) -> None:
     with pytest.raises(SchemaError, match=r"tri\.vtu' has cell blocks \['triangle'\]"):
         read_body_mesh(tri)
     pvd = tmp_path / "lost.pvd"
-    pvd.write_text('<VTKFile type="Collection"><Collection><DataSet timestep="0" '
-                   'file="gone_0000.vtu"/></Collection></VTKFile>')
+    pvd.write_text(
+        '<VTKFile type="Collection"><Collection><DataSet timestep="0" '
+        'file="gone_0000.vtu"/></Collection></VTKFile>'
+    )
     with pytest.raises(FileNotFoundError, match=r"lists '.*gone_0000\.vtu', which does not exist"):
         read_body_mesh(pvd)

@@ -32,8 +32,11 @@ def tagged_like(rng: np.random.Generator) -> xr.Dataset:
     shape = (ds.sizes["time"], 3, ds.sizes["z"], ds.sizes["y"], ds.sizes["x"])
     truth = rng.standard_normal(shape)
     truth[:, :, :, :2] = np.nan  # outside the body
-    ds["displacement_true"] = (("time", "axis", "z", "y", "x"), truth,
-                               standard_attrs("displacement_true"))
+    ds["displacement_true"] = (
+        ("time", "axis", "z", "y", "x"),
+        truth,
+        standard_attrs("displacement_true"),
+    )
     ds["body"] = (("z", "y", "x"), rng.uniform(0, 1, ds.image.shape[2:]), standard_attrs("body"))
     mask = ds.mask.values.copy()
     mask[0, :, 0] = False
@@ -61,8 +64,11 @@ def tracked_like(rng: np.random.Generator) -> xr.Dataset:
     ds["displacement"] = ds.displacement.copy(data=rng.standard_normal(ds.displacement.shape))
     ds["region"] = ("cell", np.array([2], np.int32), standard_attrs("region"))
     ds["fiber"] = (("cell", "axis"), [[1.0, 0.0, 0.0]], standard_attrs("fiber"))
-    ds["green_strain"] = (("time", "cell", "i", "j"), rng.standard_normal((ntime, 1, 3, 3)),
-                          standard_attrs("green_strain"))
+    ds["green_strain"] = (
+        ("time", "cell", "i", "j"),
+        rng.standard_normal((ntime, 1, 3, 3)),
+        standard_attrs("green_strain"),
+    )
     ds["iterations"] = ("time", np.array([0, 7], np.int64), standard_attrs("iterations"))
     ds["wall_time"] = ("time", [0.0, 1.25], standard_attrs("wall_time"))
     ds.attrs.update(method="penalty", converged=True)

@@ -82,8 +82,9 @@ def test_fiber_basis_is_orthonormal_right_handed_and_deterministic(rng):
     raw = rng.standard_normal((50, 3)) * 3.0
     f, s, n = fiber_basis(raw)
     R = np.stack([f, s, n], axis=-1)
-    np.testing.assert_allclose(R.transpose(0, 2, 1) @ R, np.broadcast_to(np.eye(3), R.shape),
-                               atol=EXACT)
+    np.testing.assert_allclose(
+        R.transpose(0, 2, 1) @ R, np.broadcast_to(np.eye(3), R.shape), atol=EXACT
+    )
     np.testing.assert_allclose(np.linalg.det(R), 1.0, rtol=EXACT)
     np.testing.assert_allclose(f, raw / np.linalg.norm(raw, axis=-1, keepdims=True), rtol=EXACT)
     f2, s2, n2 = fiber_basis(raw)
@@ -146,8 +147,9 @@ def _quartic(Fe: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return 0.25 * I1**2, P, A
 
 
-@pytest.mark.parametrize("scale", [pytest.param(0.05, id="near-identity"),
-                                   pytest.param(0.35, id="large-strain")])
+@pytest.mark.parametrize(
+    "scale", [pytest.param(0.05, id="near-identity"), pytest.param(0.35, id="large-strain")]
+)
 def test_push_growth_response_matches_finite_differences(rng, scale):
     n = 12
     F = _random_F(rng, n, scale)

@@ -91,8 +91,9 @@ def _isochoric_energy(mat, fiber):
 
 
 @pytest.mark.parametrize("scale", SCALES)
-@pytest.mark.parametrize("mat", [pytest.param(NH, id="neo-hookean"),
-                                 pytest.param(GUCCIONE, id="guccione")])
+@pytest.mark.parametrize(
+    "mat", [pytest.param(NH, id="neo-hookean"), pytest.param(GUCCIONE, id="guccione")]
+)
 def test_isochoric_stress_is_energy_gradient(rng, mat, scale):
     n = 30
     F = _random_F(rng, n, scale)
@@ -104,8 +105,9 @@ def test_isochoric_stress_is_energy_gradient(rng, mat, scale):
 
 
 @pytest.mark.parametrize("scale", SCALES)
-@pytest.mark.parametrize("mat", [pytest.param(NH, id="neo-hookean"),
-                                 pytest.param(GUCCIONE, id="guccione")])
+@pytest.mark.parametrize(
+    "mat", [pytest.param(NH, id="neo-hookean"), pytest.param(GUCCIONE, id="guccione")]
+)
 def test_isochoric_tangent_matches_finite_differences(rng, mat, scale):
     n = 30
     F = _random_F(rng, n, scale)
@@ -114,8 +116,9 @@ def test_isochoric_tangent_matches_finite_differences(rng, mat, scale):
     assert err <= FD_RTOL_A, f"A vs dP/dF: relative error {err:.2e}"
 
 
-@pytest.mark.parametrize("mat", [pytest.param(NH, id="neo-hookean"),
-                                 pytest.param(GUCCIONE, id="guccione")])
+@pytest.mark.parametrize(
+    "mat", [pytest.param(NH, id="neo-hookean"), pytest.param(GUCCIONE, id="guccione")]
+)
 def test_tangent_has_major_symmetry(rng, mat):
     F = _random_F(rng, 10, 0.35)
     _, A = mat.isochoric_response(F, _random_fibers(rng, 10))
@@ -207,8 +210,9 @@ def test_neo_hookean_equibiaxial(lam):
     J = lam * lam * lz
     dU = NH.volumetric(J)[1]
     expected = 2.0 * NH.c1 * J ** (-5.0 / 3.0) * (lam**2 - lz**2)
-    np.testing.assert_allclose(dU, 4.0 / 3.0 * NH.c1 * J ** (-5.0 / 3.0) * (lam**2 - lz**2),
-                               rtol=CLOSED_FORM)
+    np.testing.assert_allclose(
+        dU, 4.0 / 3.0 * NH.c1 * J ** (-5.0 / 3.0) * (lam**2 - lz**2), rtol=CLOSED_FORM
+    )
     np.testing.assert_allclose(s[0, 0], expected, rtol=CLOSED_FORM)
     np.testing.assert_allclose(s[1, 1], expected, rtol=CLOSED_FORM)
     np.testing.assert_allclose(s[0, 0], 1.5 * dU, rtol=CLOSED_FORM)
@@ -264,8 +268,9 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
-@pytest.mark.parametrize("mat", [pytest.param(NH, id="neo-hookean"),
-                                 pytest.param(GUCCIONE, id="guccione")])
+@pytest.mark.parametrize(
+    "mat", [pytest.param(NH, id="neo-hookean"), pytest.param(GUCCIONE, id="guccione")]
+)
 def test_superposed_rotation_rotates_stress(rng, mat):
     F = _random_F(rng, 10, 0.3)
     fiber = _random_fibers(rng, 10)
@@ -275,11 +280,13 @@ def test_superposed_rotation_rotates_stress(rng, mat):
     np.testing.assert_allclose(PR, R @ P, atol=EXACT * np.max(np.abs(P)))
 
 
-@pytest.mark.parametrize("angle", [pytest.param(np.pi / 2, id="90deg"),
-                                   pytest.param(np.pi, id="180deg")])
+@pytest.mark.parametrize(
+    "angle", [pytest.param(np.pi / 2, id="90deg"), pytest.param(np.pi, id="180deg")]
+)
 @pytest.mark.parametrize("axis", [[0, 0, 1], [1, 1, 0]])
-@pytest.mark.parametrize("mat", [pytest.param(NH, id="neo-hookean"),
-                                 pytest.param(GUCCIONE, id="guccione")])
+@pytest.mark.parametrize(
+    "mat", [pytest.param(NH, id="neo-hookean"), pytest.param(GUCCIONE, id="guccione")]
+)
 def test_rigid_rotation_is_stress_free(rng, mat, angle, axis):
     R = _rotation(axis, angle)
     fiber = _random_fibers(rng, 5)
@@ -421,8 +428,9 @@ def test_active_stress_derives_from_fiber_potential(rng, law):
             d[i, j] = FD_H
             lo, hi = stretch(F - d), stretch(F + d)
             for p in range(len(F)):
-                val, _ = quad(lambda m: float(act.tension(m)) * m, lo[p], hi[p],
-                              epsabs=0.0, epsrel=1e-13)
+                val, _ = quad(
+                    lambda m: float(act.tension(m)) * m, lo[p], hi[p], epsabs=0.0, epsrel=1e-13
+                )
                 P_fd[p, i, j] = val / (2 * FD_H)
     err = _rel(P, P_fd)
     assert err <= FD_RTOL_P, f"P vs dW_a/dF: relative error {err:.2e}"
@@ -506,8 +514,9 @@ def _grown(mat, growth, fiber):
 
 @pytest.mark.parametrize("scale", SCALES)
 @pytest.mark.parametrize("theta", [0.85, 1.2])
-@pytest.mark.parametrize("mat", [pytest.param(NH, id="neo-hookean"),
-                                 pytest.param(GUCCIONE, id="guccione")])
+@pytest.mark.parametrize(
+    "mat", [pytest.param(NH, id="neo-hookean"), pytest.param(GUCCIONE, id="guccione")]
+)
 def test_growth_composed_response_matches_finite_differences(rng, mat, theta, scale):
     n = 20
     F = _random_F(rng, n, scale)
@@ -520,8 +529,9 @@ def test_growth_composed_response_matches_finite_differences(rng, mat, theta, sc
     assert err_A <= FD_RTOL_A, f"A vs dP/dF: relative error {err_A:.2e}"
 
 
-@pytest.mark.parametrize("mat", [pytest.param(NH, id="neo-hookean"),
-                                 pytest.param(GUCCIONE, id="guccione")])
+@pytest.mark.parametrize(
+    "mat", [pytest.param(NH, id="neo-hookean"), pytest.param(GUCCIONE, id="guccione")]
+)
 def test_pure_growth_is_stress_free(rng, mat):
     fiber = _random_fibers(rng, 6)
     growth = FiberGrowth(1.15)
@@ -531,8 +541,9 @@ def test_pure_growth_is_stress_free(rng, mat):
     np.testing.assert_allclose(P, 0.0, atol=EXACT * mat.kappa)
 
 
-@pytest.mark.parametrize("mat", [pytest.param(NH, id="neo-hookean"),
-                                 pytest.param(GUCCIONE, id="guccione")])
+@pytest.mark.parametrize(
+    "mat", [pytest.param(NH, id="neo-hookean"), pytest.param(GUCCIONE, id="guccione")]
+)
 def test_growth_held_at_reference_compresses_fibers(rng, mat):
     fiber = _random_fibers(rng, 6)
     _, response = _grown(mat, FiberGrowth(1.15), fiber)

@@ -75,8 +75,10 @@ def test_endo_and_epi_nodes_lie_on_their_ellipsoids():
 def test_volumes_converge_to_the_analytic_ellipsoid_at_second_order(what):
     errors = []
     for nc, nl, nt in ((16, 6, 2), (32, 12, 4)):
-        body = Body(_coarse(n_circumferential=nc, n_longitudinal=nl, n_transmural=nt),
-                    NeoHookean(c1=1.0, kappa=100.0))
+        body = Body(
+            _coarse(n_circumferential=nc, n_longitudinal=nl, n_transmural=nt),
+            NeoHookean(c1=1.0, kappa=100.0),
+        )
         if what == "wall":
             actual, expected = body.cell_volume.sum(), GEOM.wall_volume()
         else:

@@ -8,7 +8,6 @@ import pytest
 from harpx.imaging.harp import extract_phase
 from harpx.mechanics.assembly import cauchy_stress
 from harpx.mechanics.cut import opening_angle, release
-from harpx.schema import validate
 from harpx.scenes.lv import (
     TRACKING,
     Systole,
@@ -16,6 +15,7 @@ from harpx.scenes.lv import (
     fiber_shortening,
     lv,
 )
+from harpx.schema import validate
 from harpx.tracking.results import tracking_error
 from harpx.tracking.track import track
 

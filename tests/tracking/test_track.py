@@ -29,7 +29,9 @@ def scene():
     ds = ideal_phase(
         motion, shape=(7, 48, 48), spacing=(3.0, 1.5, 1.5), times=np.arange(5) * 18.0, body=_inside
     )
-    mesh = cylinder(RADIUS, HEIGHT, n_radial=2, n_circumferential=16, n_axial=3, center=(0, 0, -HEIGHT / 2))
+    mesh = cylinder(
+        RADIUS, HEIGHT, n_radial=2, n_circumferential=16, n_axial=3, center=(0, 0, -HEIGHT / 2)
+    )
     return ds, mesh
 
 
@@ -76,7 +78,9 @@ def test_error_against_truth_is_sub_voxel(tracked, scene):
 
 def test_augmented_lagrangian_reaches_epsilon(scene, tracked):
     ds, mesh = scene
-    al = track(ds, Body(mesh, NeoHookean(c1=1.0, kappa=120.0)), method="augmented-lagrangian", epsilon=0.05)
+    al = track(
+        ds, Body(mesh, NeoHookean(c1=1.0, kappa=120.0)), method="augmented-lagrangian", epsilon=0.05
+    )
     assert np.all(al.epsilon.values[1:] <= 0.05), al.epsilon.values
     err_al = float(tracking_error(al, ds).mean_all)
     err_pen = float(tracking_error(tracked, ds).mean_all)
