@@ -17,8 +17,7 @@ if TYPE_CHECKING:
 
     from harpx._typing import PathLike
 
-Method = Literal["penalty", "augmented-lagrangian"]
-Predictor = Literal["none", "linear"]
+from harpx.tracking.settings import Method, Predictor, Regularization, TrackingSettings
 
 
 class PlotMethods:
@@ -111,19 +110,23 @@ class HarpAccessor:
         body: Any,
         *,
         method: Method = "penalty",
-        epsilon: float = 0.05,
+        epsilon: float | None = None,
+        epsilon_factor: float = 1.15,
         penalty: float = 1.0,
         penalty_limit: float = 1e4,
         ramp: int = 2,
         multiplier_tolerance: float = 0.1,
         max_updates: int = 10,
         predictor: Predictor = "linear",
+        regularization: Regularization = "increment",
         tolerance: float = 0.01,
+        max_iterations: int = 10,
         dirichlet: Sequence[Any] = (),
         terms: Sequence[Any] = (),
         intorder: int | None = None,
         linear_solver: str = "auto",
         progress: bool = False,
+        settings: TrackingSettings | None = None,
     ) -> xr.Dataset:
         """Track a finite-element body through the phase images.
 
@@ -134,23 +137,13 @@ class HarpAccessor:
         from harpx.tracking.track import track
 
         return track(
-            self._ds,
-            body,
-            method=method,
-            epsilon=epsilon,
-            penalty=penalty,
-            penalty_limit=penalty_limit,
-            ramp=ramp,
-            multiplier_tolerance=multiplier_tolerance,
-            max_updates=max_updates,
-            predictor=predictor,
-            tolerance=tolerance,
-            dirichlet=dirichlet,
-            terms=terms,
-            intorder=intorder,
-            linear_solver=linear_solver,
-            progress=progress,
-        )
+            self._ds, body, method=method, epsilon=epsilon, epsilon_factor=epsilon_factor,
+            penalty=penalty, penalty_limit=penalty_limit, ramp=ramp,
+            multiplier_tolerance=multiplier_tolerance, max_updates=max_updates,
+            predictor=predictor, regularization=regularization, tolerance=tolerance,
+            max_iterations=max_iterations, dirichlet=dirichlet, terms=terms, intorder=intorder,
+            linear_solver=linear_solver, progress=progress, settings=settings,
+        )  # fmt: skip
 
     def track_harp(
         self, *, points: ArrayLike | xr.Dataset | None = None, iterations: int = 10

@@ -6,7 +6,8 @@ its phase in the reference frame, the constraint energy is
 
 .. math::
 
-    \Pi_c(u) = \int_{\mathcal R} \tfrac12\, m(X) \sum_t \Big(\lambda\, r_t^2 + 2\Lambda_t r_t\Big)\, dV,
+    \Pi_c(u) = \int_{\mathcal R} \tfrac12\, m(X)
+        \sum_t \Big(\lambda\, r_t^2 + 2\Lambda_t r_t\Big)\, dV,
     \qquad r_t = W\big(\phi_t(x, t) - \phi_{0,t}(X)\big),
 
 with :math:`W(a) = \operatorname{angle}(e^{ia})` the wrap to :math:`[-\pi, \pi)`, :math:`m` the
@@ -49,6 +50,8 @@ import xarray as xr
 from harpx._typing import FloatArray
 from harpx.imaging.sample import PhaseSampler, wrap
 from harpx.mechanics.assembly import sparsity
+from harpx.tracking.noise import epsilon_floor, reference_residual
+from harpx.tracking.observability import Observability, observability
 
 # floats per temporary block when forming element matrices (bounds memory to ~64 MB)
 _BLOCK_FLOATS = 8_000_000
@@ -220,6 +223,17 @@ class PhaseConstraint:
         self.reference_phase = phi0
         self.reference_valid = valid0
         self.ntag = phi0.shape[1]
+        self.directions = np.asarray(
+            phase["tag_direction"].transpose("tag", "axis").sel(axis=["x", "y", "z"]), dtype=float
+        )
+        self.wavevectors = (
+            2.0 * np.pi * np.asarray(phase["tag_frequency"], dtype=float)[:, None]
+        ) * self.directions
+        self.reference_noise = reference_residual(
+            self.points, self.volume, phi0, valid0, self.wavevectors
+        )
+        self.reference_magnitude = self._mean_magnitude(reference, self.points, valid0)
+        self.observability: Observability | None = None
         self.penalty = 0.0
         self.multipliers = np.zeros_like(phi0)
         self._sampler: PhaseSampler | None = None
@@ -234,6 +248,49 @@ class PhaseConstraint:
     def penalty_scale(self) -> float:
         """Absolute penalty (kPa/rad²) that corresponds to a relative penalty of 1."""
         return self.shear_modulus / (self.wavenumber * self.element_size) ** 2
+
+    def observe(self, fixed_dofs: np.ndarray) -> Observability:
+        """Work out what the tags see (:mod:`harpx.tracking.observability`) and apply it.
+
+        From here on the phase force acts through each point's seen projector, and
+        :attr:`observability` lists the rigid-body modes that neither the tags nor the
+        Dirichlet dofs ``fixed_dofs`` hold.
+        """
+        self.observability = observability(
+            self.body,
+            self.points,
+            self.volume,
+            self.shape_values,
+            self._cell_dofs,
+            self.directions,
+            self.reference_valid,
+            np.asarray(fixed_dofs, dtype=np.int64),
+        )
+        return self.observability
+
+    def _mean_magnitude(
+        self, sampler: PhaseSampler, points: FloatArray, valid: np.ndarray
+    ) -> FloatArray:
+        magnitude, _ = sampler.magnitude(points)
+        w = self.volume[:, None] * valid
+        total = w.sum(axis=0)
+        return np.where(total > 0, (w * magnitude).sum(axis=0) / np.where(total > 0, total, 1), 0)
+
+    def epsilon_floor(self, u: FloatArray) -> float:
+        """Noise floor of ε in the current frame with the tissue at ``u`` (rad).
+
+        See :mod:`harpx.tracking.noise`; the reference frame's floor is its own affine-fit
+        residual alone.
+        """
+        share = (self.volume[:, None] * self.reference_valid).sum(axis=0)
+        share = share / max(float(share.sum()), 1e-300)
+        if self.frame == 0 or self._sampler is None:
+            ok = np.isfinite(self.reference_noise)
+            return float((share[ok] * self.reference_noise[ok]).sum() / share[ok].sum())
+        magnitude = self._mean_magnitude(
+            self._sampler, self.current_points(u), self.reference_valid
+        )
+        return epsilon_floor(self.reference_noise, self.reference_magnitude, magnitude, share)
 
     def set_frame(self, time_index: int) -> None:
         """Target the phase images of frame ``time_index`` (prefilters them once)."""
@@ -255,6 +312,9 @@ class PhaseConstraint:
         ok = valid & self.reference_valid  # (nq, ntag)
         residual = np.where(ok, wrap(phi - self.reference_phase), 0.0)
         grad = np.where(ok[..., None], grad, 0.0)
+        if self.observability is not None and (self.observability.point_rank < 3).any():
+            # the force acts along seen directions only (module notes of observability)
+            grad = np.einsum("qtj,qij->qti", grad, self.observability.projectors)
         return ConstraintState(residual, grad, self.volume * ok.any(axis=1), ok)
 
     def epsilon_at(self, u: FloatArray) -> float:
@@ -289,16 +349,22 @@ class PhaseConstraint:
         st = self.state(u)
         return self.assemble(st, s)
 
+    def force(self, st: ConstraintState, s: float = 1.0) -> FloatArray:
+        """Residual contribution (paper eq. 5) from an evaluated state, mN (no tangent)."""
+        N = self.shape_values  # (c, q, a)
+        ncell, npc, nb = N.shape
+        drive = s * self.penalty * st.residual + s * self.multipliers * st.tag_valid
+        force = np.einsum("qt,qti->qi", drive, st.gradient) * st.weight[:, None]
+        fe = np.matmul(N.transpose(0, 2, 1), force.reshape(ncell, npc, 3))  # (c, a, i)
+        ndof = int(self.body.ndof)  # type: ignore[attr-defined]
+        return np.bincount(self._cell_dofs.ravel(), weights=fe.ravel(), minlength=ndof)
+
     def assemble(self, st: ConstraintState, s: float = 1.0) -> tuple[FloatArray, object]:
         """Residual and tangent from an evaluated :class:`ConstraintState`."""
         N = self.shape_values  # (c, q, a)
         ncell, npc, nb = N.shape
         lam = s * self.penalty
-        drive = lam * st.residual + s * self.multipliers * st.tag_valid
-        force = np.einsum("qt,qti->qi", drive, st.gradient) * st.weight[:, None]
-        fe = np.matmul(N.transpose(0, 2, 1), force.reshape(ncell, npc, 3))  # (c, a, i)
-        ndof = int(self.body.ndof)  # type: ignore[attr-defined]
-        r = np.bincount(self._cell_dofs.ravel(), weights=fe.ravel(), minlength=ndof)
+        r = self.force(st, s)
         G = st.gradient
         M = np.matmul(G.transpose(0, 2, 1), G) * (lam * st.weight)[:, None, None]
         M = M.reshape(ncell, npc, 9)

@@ -82,12 +82,69 @@ class EquilibriumResult:
     converged: bool = False
 
 
-def _split_dirichlet(body: Any, dirichlet: Sequence[Any]) -> tuple[np.ndarray, FloatArray]:
+def split_dirichlet(body: Any, dirichlet: Sequence[Any]) -> tuple[np.ndarray, FloatArray]:
     if not dirichlet:
         return np.zeros(0, dtype=np.int64), np.zeros(0)
     dofs = np.concatenate([d.dofs(body) for d in dirichlet])
     values = np.concatenate([d.values(body, 1.0) for d in dirichlet])
     return dofs, values
+
+
+#: The line search acts when the energy slope at the full step is above this fraction of
+#: the (negative) slope at its start: the step has overshot the minimum along it.
+OVERSHOOT = 0.2
+#: Increments that do not shrink below this fraction of the last one are damped.
+CONTRACTION = 0.8
+#: Smallest fraction of a step the line search keeps.
+MIN_SHRINK = 0.1
+
+
+def _residual(
+    body: Any,
+    constraint: PhaseConstraint,
+    u: FloatArray,
+    internal_r: FloatArray,
+    state: ConstraintState,
+    offset: FloatArray | None,
+    terms: Sequence[Any],
+) -> FloatArray:
+    """Total residual at ``u`` from its internal force and constraint state (no tangent)."""
+    R = internal_r + constraint.force(state)
+    if offset is not None:
+        R = R + offset
+    for term in terms:
+        R = R + term.residual_tangent(body, u, 1.0)[0]
+    return R
+
+
+def _admissible_step(
+    body: Any,
+    constraint: PhaseConstraint,
+    u: FloatArray,
+    du: FloatArray,
+    alpha: float,
+    seen: Any,
+    max_halvings: int,
+    iteration: int,
+    history: list[float],
+) -> tuple[FloatArray, Any, float]:
+    """The step ``u + alpha du``, halved until no element inverts."""
+    for _ in range(max_halvings + 1):
+        trial = u + alpha * du
+        if seen is not None:
+            trial = seen.remove_unseen(trial)
+        internal_trial = internal_forces(body, trial, pressure_stiffness=False)
+        if internal_trial.r is not None:
+            return trial, internal_trial, alpha
+        alpha *= 0.5
+    raise ElementInversionError(
+        f"Gauss-Newton step {iteration} of frame {constraint.frame} inverts cells "
+        f"{internal_trial.inverted_cells[:10].tolist()} (det F <= 0 or a non-finite "
+        f"stress) even after {max_halvings} halvings; lower the penalty or track "
+        "with more frames",
+        internal_trial.inverted_cells,
+        history,
+    )
 
 
 def equilibrate(
@@ -102,6 +159,7 @@ def equilibrate(
     max_iterations: int = 10,
     max_halvings: int = 6,
     max_step: float | None = None,
+    offset: FloatArray | None = None,
     timings: Timings | None = None,
 ) -> EquilibriumResult:
     """Solve for equilibrium at the constraint's current penalty and multipliers.
@@ -130,12 +188,22 @@ def equilibrate(
         Trust radius: steps whose largest nodal increment exceeds it are scaled down to it,
         mm. Default: a quarter of the shortest tag period, so that no step carries a
         point across a phase wrap into another tag's basin.
+    offset : ndarray, shape (ndof,), optional
+        A constant force added to the residual, mN: minus the previous frame's internal
+        force when the model regularises the increment only
+        (``regularization="increment"``).
     timings : Timings, optional
         Accumulates the time spent sampling images, assembling and solving.
 
     Returns
     -------
     EquilibriumResult
+
+    Notes
+    -----
+    Rigid-body modes that no tag sees (``constraint.observability``) are removed at every
+    step: one dof per such mode is held in the linear solve, so it is never singular, and
+    the step is then shifted back to zero amplitude of those modes.
 
     Raises
     ------
@@ -144,11 +212,19 @@ def equilibrate(
     """
     clock = timings if timings is not None else Timings()
     u = np.array(u, dtype=float, copy=True)
-    fixed, fixed_values = _split_dirichlet(body, dirichlet)
+    fixed, fixed_values = split_dirichlet(body, dirichlet)
     u[fixed] = fixed_values
+    seen = constraint.observability
+    if seen is not None:
+        u = seen.remove_unseen(u)
+        held = np.union1d(fixed, seen.pinned_dofs)
+    else:
+        held = fixed
     if max_step is None:
         max_step = 0.5 * np.pi / constraint.max_wavenumber
-    free = np.setdiff1d(np.arange(body.ndof), fixed) if fixed.size else None
+    free = np.setdiff1d(np.arange(body.ndof), held) if held.size else None
+    movable = free if free is not None else slice(None)
+    damping = 1.0
     tic = time.perf_counter()
     result = EquilibriumResult(u, constraint.state(u), 0)
     clock.sampling += time.perf_counter() - tic
@@ -165,6 +241,8 @@ def equilibrate(
         tic = time.perf_counter()
         rc, Kc = constraint.assemble(result.state)
         R = internal.r + rc
+        if offset is not None:
+            R = R + offset
         K = internal.K.copy()
         K.data += Kc.data
         for term in terms:
@@ -183,30 +261,44 @@ def equilibrate(
         tic = time.perf_counter()
         largest = float(np.abs(du).max())
         alpha = min(1.0, max_step / largest) if largest > 0 else 1.0
-        for _ in range(max_halvings + 1):
-            trial = u + alpha * du
-            internal_trial = internal_forces(body, trial, pressure_stiffness=False)
-            if internal_trial.r is not None:
-                break
-            alpha *= 0.5
-        else:
-            raise ElementInversionError(
-                f"Gauss-Newton step {iteration} of frame {constraint.frame} inverts cells "
-                f"{internal_trial.inverted_cells[:10].tolist()} (det F <= 0 or a non-finite "
-                f"stress) even after {max_halvings} halvings; lower the penalty or track "
-                "with more frames",
-                internal_trial.inverted_cells,
-                result.step_norms,
-            )
+        history = result.step_norms
+        if len(history) >= 2 and history[-1] > CONTRACTION * history[-2]:
+            # the increments stopped shrinking: the iteration bounces between the facets of
+            # the piecewise-linear phase interpolant; damp it so that it contracts
+            damping *= 0.5
+        alpha *= damping
+        trial, internal_trial, alpha = _admissible_step(
+            body, constraint, u, du, alpha, seen, max_halvings, iteration, result.step_norms
+        )
         clock.assembly += time.perf_counter() - tic
+        tic = time.perf_counter()
+        state_trial = constraint.state(trial)
+        clock.sampling += time.perf_counter() - tic
+        # energy-slope line search: Gauss-Newton on the wrapped, piecewise-smooth phase
+        # overshoots and can cycle; where the slope along du has changed sign, take the
+        # secant estimate of its zero instead (one more evaluation, only then)
+        slope0 = float(du[movable] @ R[movable])
+        r_trial = _residual(body, constraint, trial, internal_trial.r, state_trial, offset, terms)
+        slope1 = float(du[movable] @ r_trial[movable])
+        if slope0 < 0.0 < slope1 and slope1 > OVERSHOOT * -slope0:
+            shrink = max(MIN_SHRINK, slope0 / (slope0 - slope1))
+            tic = time.perf_counter()
+            retry = u + alpha * shrink * du
+            if seen is not None:
+                retry = seen.remove_unseen(retry)
+            internal_retry = internal_forces(body, retry, pressure_stiffness=False)
+            clock.assembly += time.perf_counter() - tic
+            if internal_retry.r is not None:
+                tic = time.perf_counter()
+                trial, internal_trial, alpha = retry, internal_retry, alpha * shrink
+                state_trial = constraint.state(trial)
+                clock.sampling += time.perf_counter() - tic
         u = trial
         internal = internal_trial
         step = float(np.abs(alpha * du).max())
         result.step_norms.append(step)
         result.iterations = iteration
-        tic = time.perf_counter()
-        result.state = constraint.state(u)
-        clock.sampling += time.perf_counter() - tic
+        result.state = state_trial
         if step < tolerance:
             result.converged = True
             break

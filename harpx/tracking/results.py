@@ -15,6 +15,20 @@ from harpx.tracking.resample import interpolate_displacement
 _DIAGNOSTIC_ATTRS = {
     "stages": {"units": "1", "long_name": "penalty stages or multiplier updates"},
     "target_reached": {"units": "1", "long_name": "tracking residual met its target"},
+    "converged": {"units": "1", "long_name": "Gauss-Newton met its increment tolerance"},
+    "epsilon_target": {"units": "rad", "long_name": "target tracking residual"},
+    "epsilon_floor": {
+        "units": "rad",
+        "long_name": "noise floor of the tracking residual estimated from the images",
+    },
+    "observed_directions": {
+        "units": "1",
+        "long_name": "number of independent directions the tags with data in the cell see",
+    },
+    "observed_fraction": {
+        "units": "1",
+        "long_name": "fraction of each axis seen by the cell's tags, |P e_axis|^2",
+    },
 }
 
 
@@ -107,8 +121,8 @@ def tracked_dataset(
         Displacement per frame, mm.
     phase : xarray.Dataset
         The ``phase/1`` dataset that was tracked (for time and grid coordinates).
-    diagnostics : mapping of str to ndarray
-        Per-frame arrays (time,) or (time, cell).
+    diagnostics : mapping of str to ndarray or (dims, ndarray)
+        Per-frame arrays (time,) or (time, cell), or ``(dims, values)`` pairs.
     settings : mapping
         Settings recorded in ``attrs``.
 
@@ -158,7 +172,10 @@ def tracked_dataset(
             attrs=standard_attrs("fiber_stretch"),
         )
     for name, value in diagnostics.items():
-        dims = ("time",) if np.ndim(value) == 1 else ("time", "cell")
+        if isinstance(value, tuple):  # (dims, values) for anything not per frame
+            dims, value = value
+        else:
+            dims = ("time",) if np.ndim(value) == 1 else ("time", "cell")
         ds[name] = xr.DataArray(np.asarray(value), dims=dims, attrs=_attrs(name))
     ds["displacement_grid"] = displacement_on_grid(body, U, acquired_grid(phase))
     ds["dof_displacement"] = xr.DataArray(

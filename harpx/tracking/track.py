@@ -3,32 +3,36 @@
 This is the method of the paper (§3): a hyperelastic model of the organ, in its reference
 configuration at frame 0, is pulled through the phase images by the phase-conservation
 constraint (:mod:`harpx.tracking.constraint`) with the penalty or the augmented-Lagrangian
-strategy, each frame started from the last (optionally extrapolated). The result is a
-self-contained ``tracked/1`` dataset (DESIGN §3).
+strategy, each frame started from the last (optionally extrapolated). Before the first frame
+the tracker works out what the tags can see (:mod:`harpx.tracking.observability`) and the
+noise floor of the residual that the images allow (:mod:`harpx.tracking.noise`). The
+result is a self-contained ``tracked/1`` dataset.
 """
 
 from __future__ import annotations
 
 import time as _time
+import warnings
 from collections.abc import Sequence
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import xarray as xr
 from tqdm.auto import tqdm
 
-from harpx.errors import SchemaError
+from harpx.errors import HarpxWarning, SchemaError
 from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.schema import validate
 from harpx.tracking.augmented import track_frame_augmented
 from harpx.tracking.constraint import PhaseConstraint
-from harpx.tracking.equilibrium import Timings
-from harpx.tracking.penalty import FrameOutcome, track_frame_penalty
+from harpx.tracking.equilibrium import Timings, split_dirichlet
+from harpx.tracking.frame import FrameOutcome, FrameProblem
+from harpx.tracking.penalty import track_frame_penalty
 from harpx.tracking.results import tracked_dataset
+from harpx.tracking.settings import Method, Predictor, Regularization, TrackingSettings
 
-Method = Literal["penalty", "augmented-lagrangian"]
-Predictor = Literal["none", "linear"]
+STRATEGIES = {"penalty": track_frame_penalty, "augmented-lagrangian": track_frame_augmented}
 
 
 def _as_phase(ds: xr.Dataset) -> xr.Dataset:
@@ -59,115 +63,18 @@ def _predict(
     return best
 
 
-def track(
-    ds: xr.Dataset,
-    body: Any,
-    *,
-    method: Method = "penalty",
-    epsilon: float = 0.05,
-    penalty: float = 1.0,
-    penalty_limit: float = 1e4,
-    ramp: int = 2,
-    multiplier_tolerance: float = 0.1,
-    max_updates: int = 10,
-    predictor: Predictor = "linear",
-    tolerance: float = 0.01,
-    dirichlet: Sequence[Any] = (),
-    terms: Sequence[Any] = (),
-    intorder: int | None = None,
-    linear_solver: str = "auto",
-    progress: bool = False,
-) -> xr.Dataset:
-    """Track a body through a phase (or tagged) image series with the phase constraint.
+def _mechanical_force(body: Any, u: np.ndarray, terms: Sequence[Any]) -> np.ndarray:
+    """Internal force plus further residual terms at ``u`` (mN): what the model resists."""
+    internal = internal_forces(body, u, tangent=False)
+    if internal.r is None:  # pragma: no cover - tracked states never invert (checked per step)
+        raise SchemaError("a tracked state inverts cells; this is a bug, please report it")
+    force = np.array(internal.r, dtype=np.float64)
+    for term in terms:
+        force += term.residual_tangent(body, u, 1.0)[0]
+    return force
 
-    Parameters
-    ----------
-    ds : xarray.Dataset
-        ``phase/1`` dataset, or ``tagged/1`` (its phase is extracted with defaults first).
-    body : Body
-        Finite-element model in the reference configuration of frame 0 (mm).
-    method : {"penalty", "augmented-lagrangian"}, default "penalty"
-        Constraint enforcement (paper §3.2 "Solution Strategy").
-    epsilon : float, default 0.05
-        Target tracking residual ε, mean |W(φ(x, t) − φ0(X))| over the constrained
-        volume, rad.
-    penalty : float, default 1.0
-        Starting λ_max relative to material stiffness and tag wavenumber (dimensionless;
-        1 makes the data stiffness λ|k|² equal μ/h²).
-    penalty_limit : float, default 1e4
-        Largest relative penalty the automatic raise may reach (dimensionless).
-    ramp : int, default 2
-        Linear penalty stages per frame, λ_max/ramp … λ_max (penalty method). Across frames
-        λ_max itself rises automatically until ε meets its target. On the paper phantom
-        ``ramp=1`` and ``ramp=3`` give the same error (0.113 mm mean over the first six
-        frames) with 37 and 50 Gauss–Newton iterations.
-    multiplier_tolerance : float, default 0.1
-        λ_tol of the augmented-Lagrangian updates (relative change of the multipliers).
-    max_updates : int, default 10
-        Multiplier updates per penalty level (augmented Lagrangian).
-    predictor : {"none", "linear"}, default "linear"
-        Start each frame from the previous displacement (``"none"``), or from the linear
-        extrapolation u(n−1) + α (u(n−1) − u(n−2)) whose phase residual ε is smallest
-        among α ∈ {0, ½, 1} (``"linear"``): the images themselves pick how much of the
-        last frame's velocity to carry, which keeps a decelerating motion from
-        overshooting into the neighbouring tag's basin.
-    tolerance : float, default 0.01
-        Gauss–Newton convergence: largest nodal increment, mm (1/75 of a 0.75 mm voxel).
-    dirichlet : sequence, optional
-        Prescribed displacements (:class:`harpx.mechanics.loads.Fixed`, ``Prescribed``).
-    terms : sequence, optional
-        Further residual terms (pressure, body force).
-    intorder : int, optional
-        Gauss order of the constraint quadrature; default: points at most a voxel apart.
-    linear_solver : str, default "auto"
-        See :class:`harpx.mechanics.linsolve.LinearSolver`.
-    progress : bool, default False
-        Show a progress bar over frames.
 
-    Returns
-    -------
-    xarray.Dataset
-        ``tracked/1`` with displacement, strain, fibre stretch (if fibres), and per-frame
-        diagnostics ``epsilon``, ``epsilon_cell``, ``penalty``, ``iterations``,
-        ``wall_time``, ``target_reached``; ``displacement_grid`` on the phase grid.
-        Constraint points outside the field of view or the mask carry no force; a point
-        inside some tags' masks only (e.g. short-axis but not long-axis slices) is pulled
-        by those tags alone. Cells with no data left have ``epsilon_cell`` NaN and follow
-        the mechanics.
-
-    Raises
-    ------
-    SchemaError
-        If no constraint point lies in the image data at frame 0, a tag has data at none
-        of them, or a later frame has no valid phase at any of them (an all-zero or fully
-        masked frame).
-    ElementInversionError
-        If a Gauss–Newton step inverts elements even after step halving (names the
-        frame and the cells).
-
-    Notes
-    -----
-    The constraint force is paper eq. 5, its tangent eq. 6; see
-    :mod:`harpx.tracking.constraint` for the wrap-safe form used here.
-    """
-    if method not in ("penalty", "augmented-lagrangian"):
-        raise ValueError(f"method={method!r}; expected 'penalty' or 'augmented-lagrangian'")
-    if predictor not in ("none", "linear"):
-        raise ValueError(f"predictor={predictor!r}; expected 'none' or 'linear'")
-    for name, value in (("epsilon", epsilon), ("penalty", penalty), ("tolerance", tolerance)):
-        if not (np.isfinite(value) and value > 0):
-            raise ValueError(f"{name}={value!r} must be a positive number")
-    if penalty_limit < penalty:
-        raise ValueError(f"penalty_limit={penalty_limit!r} is below penalty={penalty!r}")
-    if int(ramp) < 1:
-        raise ValueError(f"ramp={ramp!r} must be at least 1")
-    timings = Timings()
-    clock = _time.perf_counter()
-    phase = _as_phase(ds)
-    ntime = phase.sizes["time"]
-    setup_start = _time.perf_counter()
-    timings.phase = setup_start - clock
-    constraint = PhaseConstraint(body, phase, intorder=intorder)
+def _check_data(phase: xr.Dataset, constraint: PhaseConstraint) -> None:
     if not constraint.reference_valid.any():
         raise SchemaError(
             "no constraint point of the body lies inside the image data in frame 0; "
@@ -181,54 +88,217 @@ def track(
             "mask or field of view misses the mesh), so the body could not be tracked along "
             f"it; fix the tag's mask or drop it (ds.drop_sel(tag={blind!r}))"
         )
-    solver = LinearSolver(linear_solver)
+
+
+def _warn_unseen(constraint: PhaseConstraint) -> None:
+    seen = constraint.observability
+    assert seen is not None
+    if not seen.unseen_directions:
+        return
+    tags = ", ".join(
+        f"{label} ({d[0]:.2g}, {d[1]:.2g}, {d[2]:.2g})"
+        for label, d in zip(constraint.phase["tag"].values, constraint.directions, strict=True)
+    )
+    warnings.warn(
+        f"the tags ({tags}) see only {seen.body_rank} of 3 directions of the body's motion: "
+        f"{'; '.join(seen.unseen_directions)} is not seen by any tag. That rigid-body motion "
+        "was removed (held at zero); any motion along the unseen direction comes from the "
+        "mechanics alone (see 'observed_directions' per cell). Add a tag along it (e.g. "
+        "long-axis slices with a through-plane tag) or hold the body with a Dirichlet "
+        "condition along it to make that explicit.",
+        HarpxWarning,
+        stacklevel=3,
+    )
+
+
+def _warn_frames(phase: xr.Dataset, reached: np.ndarray, converged: np.ndarray,
+                 eps: np.ndarray, target: np.ndarray, floor: np.ndarray) -> None:  # fmt: skip
+    times = phase["time"].values
+    missed = [n for n in range(1, len(reached)) if not reached[n]]
+    if missed:
+        detail = ", ".join(
+            f"frame {n} (t={float(times[n]):g} ms: ε {eps[n]:.3g} vs target {target[n]:.3g}, "
+            f"floor {floor[n]:.3g} rad)"
+            for n in missed[:5]
+        )
+        warnings.warn(
+            f"{len(missed)} frame(s) missed the tracking target: {detail}"
+            f"{' …' if len(missed) > 5 else ''}. The penalty stopped rising there (limit, or ε "
+            "no longer fell); 'target_reached' marks them. Pass a larger epsilon=, or a "
+            "larger penalty_limit= if the penalty reached its limit.",
+            HarpxWarning,
+            stacklevel=3,
+        )
+    stopped = [n for n in range(1, len(converged)) if not converged[n]]
+    if stopped:
+        warnings.warn(
+            f"the Gauss–Newton solve stopped at its iteration limit in frame(s) "
+            f"{stopped[:10]}{' …' if len(stopped) > 10 else ''} ('converged' marks them); "
+            "raise max_iterations= or tolerance=, or track with more frames",
+            HarpxWarning,
+            stacklevel=3,
+        )
+
+
+def track(
+    ds: xr.Dataset,
+    body: Any,
+    *,
+    method: Method = "penalty",
+    epsilon: float | None = None,
+    epsilon_factor: float = 1.15,
+    penalty: float = 1.0,
+    penalty_limit: float = 1e4,
+    ramp: int = 2,
+    multiplier_tolerance: float = 0.1,
+    max_updates: int = 10,
+    predictor: Predictor = "linear",
+    regularization: Regularization = "increment",
+    tolerance: float = 0.01,
+    max_iterations: int = 10,
+    dirichlet: Sequence[Any] = (),
+    terms: Sequence[Any] = (),
+    intorder: int | None = None,
+    linear_solver: str = "auto",
+    progress: bool = False,
+    settings: TrackingSettings | None = None,
+) -> xr.Dataset:
+    """Track a body through a phase (or tagged) image series with the phase constraint.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        ``phase/1`` dataset, or ``tagged/1`` (its phase is extracted with defaults first).
+    body : Body
+        Finite-element model in the reference configuration of frame 0 (mm).
+    method, epsilon, epsilon_factor, penalty, penalty_limit, ramp, multiplier_tolerance, \
+max_updates, predictor, regularization, tolerance, max_iterations, intorder, linear_solver, \
+progress
+        The tracking settings, documented (with units and defaults) on
+        :class:`harpx.tracking.settings.TrackingSettings`. By default the target ε is 1.15
+        times the noise floor the images allow in each frame, and the model regularises the
+        frame-to-frame increment.
+    dirichlet : sequence, optional
+        Prescribed displacements (:class:`harpx.mechanics.loads.Fixed`, ``Prescribed``).
+    terms : sequence, optional
+        Further residual terms (pressure, body force).
+    settings : TrackingSettings, optional
+        All settings as one object instead of the keywords (then leave those at their
+        defaults).
+
+    Returns
+    -------
+    xarray.Dataset
+        ``tracked/1`` with displacement, strain, fibre stretch (if fibres), per-frame
+        diagnostics ``epsilon``, ``epsilon_target``, ``epsilon_floor``, ``epsilon_cell``,
+        ``penalty``, ``iterations``, ``stages``, ``wall_time``, ``target_reached``,
+        ``converged``; observability ``observed_directions`` (cell) and
+        ``observed_fraction`` (cell, axis) with the unseen rigid motions in the attribute
+        ``unseen_directions``; ``displacement_grid`` on the phase grid. Constraint points
+        outside the field of view or the mask carry no force; a point inside some tags'
+        masks only (e.g. short-axis but not long-axis slices) is pulled by those tags alone,
+        along the directions they see.
+
+    Raises
+    ------
+    SchemaError
+        If no constraint point lies in the image data at frame 0, a tag has data at none
+        of them, or a later frame has no valid phase at any of them (an all-zero or fully
+        masked frame).
+    ElementInversionError
+        If a Gauss–Newton step inverts elements even after step halving (names the
+        frame and the cells).
+
+    Warns
+    -----
+    HarpxWarning
+        When the tags leave a direction of the body's motion unseen (names it), when a
+        frame misses its target ε, or when a Gauss–Newton solve stops at its iteration limit.
+
+    Notes
+    -----
+    The constraint force is paper eq. 5, its tangent eq. 6; see
+    :mod:`harpx.tracking.constraint` for the wrap-safe form used here.
+    """
+    chosen = TrackingSettings(
+        method=method, epsilon=epsilon, epsilon_factor=epsilon_factor, penalty=penalty,
+        penalty_limit=penalty_limit, ramp=ramp, multiplier_tolerance=multiplier_tolerance,
+        max_updates=max_updates, predictor=predictor, regularization=regularization,
+        tolerance=tolerance, max_iterations=max_iterations, intorder=intorder,
+        linear_solver=linear_solver, progress=progress,
+    )  # fmt: skip
+    if settings is not None:
+        if not isinstance(settings, TrackingSettings):
+            raise TypeError(f"settings={settings!r} must be a TrackingSettings")
+        if chosen != TrackingSettings():
+            raise ValueError(
+                "pass the tracking settings either as settings= or as keywords, not both "
+                "(e.g. dataclasses.replace(settings, epsilon=0.1))"
+            )
+        chosen = settings
+    return track_with(ds, body, chosen, dirichlet=dirichlet, terms=terms)
+
+
+def track_with(
+    ds: xr.Dataset,
+    body: Any,
+    settings: TrackingSettings,
+    *,
+    dirichlet: Sequence[Any] = (),
+    terms: Sequence[Any] = (),
+) -> xr.Dataset:
+    """:func:`track` with the settings as one validated object (same result)."""
+    timings = Timings()
+    clock = _time.perf_counter()
+    phase = _as_phase(ds)
+    ntime = phase.sizes["time"]
+    setup_start = _time.perf_counter()
+    timings.phase = setup_start - clock
+    constraint = PhaseConstraint(body, phase, intorder=settings.intorder)
+    _check_data(phase, constraint)
+    fixed, _ = split_dirichlet(body, dirichlet)
+    seen = constraint.observe(fixed)
+    _warn_unseen(constraint)
+    problem = FrameProblem(
+        body, constraint, settings, LinearSolver(settings.linear_solver), dirichlet, terms,
+        timings,
+    )  # fmt: skip
+    strategy = STRATEGIES[settings.method]
     U = np.zeros((ntime, body.ndof))
     eps = np.zeros(ntime)
+    floor = np.zeros(ntime)
+    target = np.zeros(ntime)
     eps_cell = np.full((ntime, body.ncell), np.nan)
     lam_used = np.zeros(ntime)
     iterations = np.zeros(ntime, dtype=np.int64)
     stages = np.zeros(ntime, dtype=np.int64)
     reached = np.ones(ntime, dtype=bool)
+    converged = np.ones(ntime, dtype=bool)
     wall = np.zeros(ntime)
     constraint.set_frame(0)
     st0 = constraint.state(U[0])
     eps[0] = st0.epsilon()
+    floor[0] = constraint.epsilon_floor(U[0])
+    target[0] = settings.target(floor[0])
     eps_cell[0] = constraint.epsilon_cell(st0)
     wall[0] = _time.perf_counter() - setup_start
     timings.setup = wall[0]
-    lam = float(penalty)
-    for n in tqdm(range(1, ntime), disable=not progress, desc="tracking", unit="frame"):
+    lam = settings.penalty
+    for n in tqdm(range(1, ntime), disable=not settings.progress, desc="tracking", unit="frame"):
         start = _time.perf_counter()
         constraint.set_frame(n)
         clock = _time.perf_counter()
         timings.prefilter += clock - start
         u0 = U[n - 1]
-        if predictor == "linear" and n >= 2:
+        if settings.predictor == "linear" and n >= 2:
             u0 = _predict(body, constraint, U[n - 1], U[n - 2])
+        if settings.regularization == "increment":
+            problem.offset = -_mechanical_force(body, U[n - 1], terms)
+        floor[n] = constraint.epsilon_floor(u0)
+        target[n] = settings.target(floor[n])
         timings.prediction += _time.perf_counter() - clock
-        common = dict(
-            target=epsilon,
-            penalty=lam,
-            penalty_limit=penalty_limit,
-            solver=solver,
-            dirichlet=dirichlet,
-            terms=terms,
-            timings=timings,
-            tolerance=tolerance,
-        )
-        outcome: FrameOutcome
-        if method == "penalty":
-            outcome = track_frame_penalty(body, constraint, u0, ramp=int(ramp), **common)
-        else:
-            outcome = track_frame_augmented(
-                body,
-                constraint,
-                u0,
-                multiplier_tolerance=multiplier_tolerance,
-                max_updates=int(max_updates),
-                **common,
-            )
-        if not np.isfinite(outcome.epsilon):  # no constraint point saw data: ε is 0/0
+        outcome: FrameOutcome = strategy(problem, u0, target=target[n], penalty=lam)
+        if not np.isfinite(outcome.epsilon) or outcome.state is None:
             raise SchemaError(
                 f"frame {n} (time={float(phase['time'][n])!r} ms) has no valid phase at any "
                 "constraint point of the body (all-zero, fully masked or out-of-view images); "
@@ -238,38 +308,44 @@ def track(
         eps[n] = outcome.epsilon
         eps_cell[n] = constraint.epsilon_cell(outcome.state)
         lam_used[n] = outcome.penalty
-        lam = max(float(penalty), outcome.penalty)
+        lam = max(settings.penalty, outcome.penalty)
         iterations[n] = outcome.iterations
         stages[n] = outcome.stages
         reached[n] = outcome.reached
+        converged[n] = outcome.converged
         wall[n] = _time.perf_counter() - start
+    _warn_frames(phase, reached, converged, eps, target, floor)
     clock = _time.perf_counter()
-    settings = {
-        "method": method,
-        "epsilon_target": float(epsilon),
-        "penalty_start": float(penalty),
-        "penalty_limit": float(penalty_limit),
-        "ramp": int(ramp),
-        "multiplier_tolerance": float(multiplier_tolerance),
-        "predictor": predictor,
-        "tolerance": float(tolerance),
+    attrs = {
+        "method": settings.method,
+        "epsilon_target": "auto" if settings.epsilon is None else float(settings.epsilon),
+        "penalty_start": float(settings.penalty),
+        **settings.as_attrs(),
         "constraint_intorder": -1 if constraint.intorder is None else constraint.intorder,
         "constraint_points_per_cell": constraint.points_per_cell,
         "constraint_points": int(constraint.points.shape[0]),
         "penalty_scale": constraint.penalty_scale(),
-        "linear_solver": solver.method,
+        "linear_solver": problem.solver.method,
+        "seen_directions": int(seen.body_rank),
+        "unseen_directions": "; ".join(seen.unseen_directions) or "none",
+        "rigid_modes_removed": int(seen.unseen_modes.shape[0]),
         **timings.as_attrs(),
     }
-    diagnostics = {
+    diagnostics: dict[str, Any] = {
         "epsilon": eps,
+        "epsilon_target": target,
+        "epsilon_floor": floor,
         "epsilon_cell": eps_cell,
         "penalty": lam_used,
         "iterations": iterations,
         "stages": stages,
         "target_reached": reached,
+        "converged": converged,
         "wall_time": wall,
+        "observed_directions": (("cell",), seen.cell_rank),
+        "observed_fraction": (("cell", "axis"), seen.cell_seen),
     }
-    out = tracked_dataset(body, U, phase, diagnostics, settings)
+    out = tracked_dataset(body, U, phase, diagnostics, attrs)
     timings.output = _time.perf_counter() - clock
     out.attrs.update(timings.as_attrs())
     return out

@@ -1,0 +1,129 @@
+"""One frame of tracking: the problem both strategies solve and what they report.
+
+The penalty (:mod:`harpx.tracking.penalty`) and augmented-Lagrangian
+(:mod:`harpx.tracking.augmented`) strategies differ only in how they set the penalty and
+the multipliers between equilibrium solves; everything else — the body, the constraint
+targeted at the frame, the loads, the linear solver, the settings and the timings — is the
+:class:`FrameProblem` they share, and each returns a :class:`FrameOutcome`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from harpx._typing import FloatArray
+from harpx.mechanics.linsolve import LinearSolver
+from harpx.tracking.constraint import ConstraintState, PhaseConstraint
+from harpx.tracking.equilibrium import EquilibriumResult, Timings, equilibrate
+from harpx.tracking.settings import TrackingSettings
+
+
+@dataclass
+class FrameProblem:
+    """Everything an equilibrium solve of one frame needs.
+
+    Attributes
+    ----------
+    body : Body
+        The finite-element body.
+    constraint : PhaseConstraint
+        The phase constraint, targeted at the frame.
+    settings : TrackingSettings
+        The validated tracking settings.
+    solver : LinearSolver
+        Linear solver, reused across solves.
+    dirichlet, terms : sequences
+        Prescribed displacements and further residual terms.
+    timings : Timings
+        Accumulated wall time per part.
+    offset : ndarray, shape (ndof,), optional
+        Constant force added to the residual (minus the previous frame's mechanical force
+        when only the increment is regularised), mN.
+    """
+
+    body: Any
+    constraint: PhaseConstraint
+    settings: TrackingSettings
+    solver: LinearSolver
+    dirichlet: Sequence[Any] = ()
+    terms: Sequence[Any] = ()
+    timings: Timings = field(default_factory=Timings)
+    offset: FloatArray | None = None
+
+    def solve(self, u: FloatArray, max_iterations: int) -> EquilibriumResult:
+        """Gauss–Newton equilibrium from ``u`` at the constraint's current λ and Λ."""
+        return equilibrate(
+            self.body,
+            self.constraint,
+            u,
+            dirichlet=self.dirichlet,
+            terms=self.terms,
+            solver=self.solver,
+            tolerance=self.settings.tolerance,
+            max_iterations=max_iterations,
+            offset=self.offset,
+            timings=self.timings,
+        )
+
+
+@dataclass
+class FrameOutcome:
+    """What tracking one frame produced.
+
+    Attributes
+    ----------
+    u : ndarray, shape (ndof,)
+        Tracked displacement, mm.
+    state : ConstraintState or None
+        Constraint at ``u`` (None before the first solve).
+    epsilon : float
+        Tracking residual ε reached, rad.
+    penalty : float
+        Final relative penalty (dimensionless; see :mod:`harpx.tracking.constraint`).
+    iterations : int
+        Gauss–Newton iterations over all stages.
+    stages : int
+        Penalty stages (penalty method) or multiplier updates (augmented Lagrangian).
+    reached : bool
+        Whether ε met the target.
+    converged : bool
+        Whether the last full Gauss–Newton solve met its increment tolerance (rather than
+        stopping at its iteration limit).
+    stalled : bool
+        Whether the penalty raise stopped because ε no longer fell (the data's noise floor)
+        rather than at ``penalty_limit``.
+    """
+
+    u: FloatArray
+    state: ConstraintState | None = None
+    epsilon: float = float("inf")
+    penalty: float = 0.0
+    iterations: int = 0
+    stages: int = 0
+    reached: bool = False
+    converged: bool = True
+    stalled: bool = False
+
+    @classmethod
+    def start(cls, u: FloatArray) -> FrameOutcome:
+        """An outcome that has not solved anything yet, at displacement ``u``."""
+        return cls(u=np.asarray(u, dtype=np.float64))
+
+    def add(self, result: EquilibriumResult, penalty: float, final_stage: bool) -> None:
+        """Take in one equilibrium solve at relative penalty ``penalty``."""
+        self.u, self.state = result.u, result.state
+        self.epsilon = result.state.epsilon()
+        self.penalty = float(penalty)
+        self.iterations += result.iterations
+        self.stages += 1
+        if final_stage:
+            self.converged = bool(result.converged)
+
+    def finish(self, *, reached: bool) -> FrameOutcome:
+        """Mark whether the target was met and return self."""
+        self.reached = bool(reached)
+        return self

@@ -1,0 +1,140 @@
+"""The noise floor of the tracking residual ε that the images themselves allow.
+
+Even at the true motion the residual :math:`W(\\phi(x, t) - \\phi_0(X))` is not zero: both
+phases carry image noise, the band-pass filter blurs the phase near the tissue's edges, and
+the tags fade. Raising the penalty past that floor only fits noise, and costs Gauss–Newton
+iterations. The floor is estimated from the data, before any tracking:
+
+1. **Reference frame.** At the tagging time the tags are undeformed, so each tag's phase is
+   affine in the material position, :math:`\\phi_{0,t}(X) = k_t \\cdot X + c_t`. The weighted
+   mean :math:`\\varepsilon_{0,t}` of :math:`|W(\\phi_{0,t} - k_t \\cdot X - c_t)|` over the
+   constraint points, after fitting :math:`k_t` and :math:`c_t` (starting from the nominal
+   wave vector :math:`2\\pi f_t \\hat d_t`), is that frame's phase noise and edge error.
+2. **Later frames.** Phase noise scales as :math:`\\sigma/|H|` (for a harmonic image with
+   additive complex noise σ, the phase error is σ/|H| to first order), so with tag fading
+   frame n's own error is :math:`\\varepsilon_{0,t}\\, \\bar m_{0,t} / \\bar m_{n,t}`, where
+   :math:`\\bar m` is the mean harmonic magnitude at the tissue. The two frames' errors are
+   independent, and the mean absolute value of a sum of independent zero-mean errors grows
+   as the root of their squares (exactly so for Gaussian errors):
+
+   .. math::
+
+       \\varepsilon_{\\mathrm{floor}, n} = \\sum_t w_t\\, \\varepsilon_{0,t}
+       \\sqrt{1 + (\\bar m_{0,t} / \\bar m_{n,t})^2},
+
+   with :math:`w_t` the share of constraint volume that tag t has data in.
+
+The estimate is recorded per frame as ``epsilon_floor`` in the tracked result; the default
+target is a fixed factor above it (:class:`harpx.tracking.settings.TrackingSettings`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from harpx._typing import FloatArray
+from harpx.imaging.sample import wrap
+
+
+def reference_residual(
+    points: FloatArray,
+    volume: FloatArray,
+    phase: FloatArray,
+    valid: np.ndarray,
+    wavevectors: FloatArray,
+    *,
+    refinements: int = 2,
+) -> FloatArray:
+    """Per-tag residual of an affine phase fitted to the reference frame, rad.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        Reference positions, mm.
+    volume : ndarray, shape (n,)
+        Weights of the points (quadrature volumes), mm³.
+    phase : ndarray, shape (n, ntag)
+        Reference-frame phase φ0 at the points, rad (wrapped).
+    valid : ndarray of bool, shape (n, ntag)
+        Which tags have data at each point.
+    wavevectors : ndarray, shape (ntag, 3)
+        Nominal tag wave vectors 2π f d̂, rad/mm.
+    refinements : int, default 2
+        Weighted least-squares corrections of the wave vector and offset.
+
+    Returns
+    -------
+    ndarray, shape (ntag,)
+        Weighted mean |W(φ0 − k·X − c)| per tag, rad (NaN for a tag without data).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> X = rng.uniform(0, 20, (4000, 3))
+    >>> k = np.array([[2 * np.pi / 8, 0, 0]])
+    >>> noise = rng.normal(0, 0.1, (4000, 1))
+    >>> phi = wrap(X @ (1.01 * k).T + 0.3 + noise)  # wave vector 1 % off nominal
+    >>> eps0 = reference_residual(X, np.ones(4000), phi, np.ones((4000, 1), bool), k)
+    >>> bool(abs(eps0[0] - 0.1 * np.sqrt(2 / np.pi)) < 0.005)
+    True
+    """
+    ntag = phase.shape[1]
+    out = np.full(ntag, np.nan)
+    for t in range(ntag):  # loop over the ≤ 3 tags
+        ok = valid[:, t]
+        if not ok.any():
+            continue
+        X = points[ok]
+        w = volume[ok]
+        centre = (w[:, None] * X).sum(axis=0) / w.sum()
+        A = X - centre
+        k = np.asarray(wavevectors[t], dtype=np.float64).copy()
+        c = 0.0
+        for _ in range(refinements + 1):
+            rho = wrap(phase[ok, t] - A @ k - c)
+            c += float(np.angle(np.sum(w * np.exp(1j * rho))))
+            rho = wrap(phase[ok, t] - A @ k - c)
+            near = np.abs(rho) < 1.0  # robust to the odd wrapped outlier
+            if near.sum() < 4:
+                break
+            sw = np.sqrt(w[near])
+            dk, *_ = np.linalg.lstsq(A[near] * sw[:, None], rho[near] * sw, rcond=None)
+            k = k + dk
+        rho = wrap(phase[ok, t] - A @ k - c)
+        out[t] = float((w * np.abs(rho)).sum() / w.sum())
+    return out
+
+
+def epsilon_floor(
+    reference: FloatArray,
+    reference_magnitude: FloatArray,
+    magnitude: FloatArray,
+    share: FloatArray,
+) -> float:
+    """Noise floor of ε in one frame (module notes), rad.
+
+    Parameters
+    ----------
+    reference : ndarray, shape (ntag,)
+        Reference-frame residual per tag (:func:`reference_residual`), rad.
+    reference_magnitude, magnitude : ndarray, shape (ntag,)
+        Mean harmonic magnitude at the tissue in the reference and in this frame (any
+        common unit).
+    share : ndarray, shape (ntag,)
+        Share of the constraint volume that each tag has data in (weights, summing to 1).
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> round(epsilon_floor(np.array([0.1]), np.array([2.0]), np.array([1.0]), np.ones(1)), 4)
+    0.2236
+    """
+    ok = np.isfinite(reference) & (share > 0)
+    if not ok.any():
+        return float("nan")
+    ratio = np.where(magnitude > 0, reference_magnitude / np.where(magnitude > 0, magnitude, 1), 1)
+    per_tag = reference * np.sqrt(1.0 + ratio**2)
+    return float((share[ok] * per_tag[ok]).sum() / share[ok].sum())

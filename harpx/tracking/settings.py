@@ -1,0 +1,170 @@
+"""The tracking settings as one validated, immutable object.
+
+:class:`TrackingSettings` is built once (by :func:`harpx.tracking.track.track` from its
+keywords, or by the user) and travels unchanged from the accessor down to the Gauss–Newton
+solves, so every value is checked in one place and recorded in the result's attributes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any, Literal
+
+Method = Literal["penalty", "augmented-lagrangian"]
+Predictor = Literal["none", "linear"]
+Regularization = Literal["increment", "total"]
+
+METHODS: tuple[str, ...] = ("penalty", "augmented-lagrangian")
+PREDICTORS: tuple[str, ...] = ("none", "linear")
+REGULARIZATIONS: tuple[str, ...] = ("increment", "total")
+
+
+def _positive(name: str, value: Any, *, allow_none: bool = False) -> float | None:
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise TypeError(f"{name}={value!r} must be a number")
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{name}={value!r} must be a positive finite number")
+    return float(value)
+
+
+def _count(name: str, value: Any, *, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise TypeError(f"{name}={value!r} must be a whole number")
+    if not math.isfinite(value) or value != int(value) or value < minimum:
+        raise ValueError(f"{name}={value!r} must be a whole number ≥ {minimum}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class TrackingSettings:
+    """How a body is pulled through the phase images (paper §3.2).
+
+    Parameters
+    ----------
+    method : {"penalty", "augmented-lagrangian"}, default "penalty"
+        Constraint enforcement: a penalty λ ramped within each frame and raised until ε meets
+        its target, or per-point multipliers updated at a fixed penalty.
+    epsilon : float, optional
+        Target tracking residual ε, the weighted mean of |W(φ(x, t) − φ0(X))| over the
+        constrained volume, rad. Default (None): ``epsilon_factor`` times the noise floor the
+        images allow in each frame (``epsilon_floor`` in the result), so that the penalty is
+        never raised to fit noise. Passing a number keeps full control.
+    epsilon_factor : float, default 1.15
+        Default target relative to the estimated noise floor (dimensionless, > 1).
+    penalty : float, default 1.0
+        Starting λ_max relative to material stiffness and tag wavenumber (dimensionless;
+        1 makes the data stiffness λ|k|² equal to μ/h² at the element scale h). The tracker
+        raises it, frame by frame, until ε reaches its target, so the start only sets how
+        softly the first frame begins.
+    penalty_limit : float, default 1e4
+        Largest relative penalty the automatic raise may reach (dimensionless).
+    ramp : int, default 2
+        Linear penalty stages per frame, λ_max/ramp … λ_max (penalty method).
+    multiplier_tolerance : float, default 0.1
+        λ_tol of the augmented-Lagrangian updates: relative change ‖ΔΛ‖/‖Λ‖ (dimensionless).
+    max_updates : int, default 10
+        Multiplier updates per penalty level (augmented Lagrangian, ≥ 1).
+    predictor : {"none", "linear"}, default "linear"
+        Start each frame from the previous displacement, or from the linear extrapolation
+        u(n−1) + α (u(n−1) − u(n−2)) whose phase residual is smallest among α ∈ {0, ½, 1}.
+    regularization : {"increment", "total"}, default "increment"
+        What the tracking model resists. ``"total"`` (the paper's formulation): the stored
+        energy of the whole deformation from frame 0, so the model's stress accumulates and
+        pulls against an actively contracting tissue. ``"increment"``: each frame starts
+        stress-free from the previous frame's tracked state (the previous internal force is
+        balanced), so the model regularises the frame-to-frame increment only while the phase
+        constraint still matches every frame to the reference phase φ0(X).
+    tolerance : float, default 0.01
+        Gauss–Newton convergence: largest nodal increment, mm.
+    max_iterations : int, default 10
+        Gauss–Newton iterations per penalty stage (≥ 1).
+    intorder : int, optional
+        Gauss order of the constraint quadrature (≥ 1); default: points at most a voxel apart.
+    linear_solver : str, default "auto"
+        See :class:`harpx.mechanics.linsolve.LinearSolver`.
+    progress : bool, default False
+        Show a progress bar over frames.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Naming the setting that is out of range or of the wrong type.
+
+    Examples
+    --------
+    >>> TrackingSettings(epsilon=0.1).target(0.2)
+    0.1
+    >>> round(TrackingSettings().target(0.1), 3)
+    0.115
+    >>> TrackingSettings(ramp=float("nan"))
+    Traceback (most recent call last):
+    ...
+    ValueError: ramp=nan must be a whole number ≥ 1
+    """
+
+    method: Method = "penalty"
+    epsilon: float | None = None
+    epsilon_factor: float = 1.15
+    penalty: float = 1.0
+    penalty_limit: float = 1e4
+    ramp: int = 2
+    multiplier_tolerance: float = 0.1
+    max_updates: int = 10
+    predictor: Predictor = "linear"
+    regularization: Regularization = "increment"
+    tolerance: float = 0.01
+    max_iterations: int = 10
+    intorder: int | None = None
+    linear_solver: str = "auto"
+    progress: bool = False
+
+    def __post_init__(self) -> None:
+        for name, allowed in (
+            ("method", METHODS),
+            ("predictor", PREDICTORS),
+            ("regularization", REGULARIZATIONS),
+        ):
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"{name}={getattr(self, name)!r}; expected one of {allowed!r}")
+        set_ = object.__setattr__
+        set_(self, "epsilon", _positive("epsilon", self.epsilon, allow_none=True))
+        for name in ("epsilon_factor", "penalty", "penalty_limit", "multiplier_tolerance",
+                     "tolerance"):  # fmt: skip
+            set_(self, name, _positive(name, getattr(self, name)))
+        if self.epsilon_factor < 1.0:
+            raise ValueError(
+                f"epsilon_factor={self.epsilon_factor!r} must be ≥ 1: a target below the "
+                "images' noise floor cannot be reached"
+            )
+        if self.penalty_limit < self.penalty:
+            raise ValueError(
+                f"penalty_limit={self.penalty_limit!r} is below penalty={self.penalty!r}"
+            )
+        set_(self, "ramp", _count("ramp", self.ramp, minimum=1))
+        set_(self, "max_updates", _count("max_updates", self.max_updates, minimum=1))
+        set_(self, "max_iterations", _count("max_iterations", self.max_iterations, minimum=1))
+        if self.intorder is not None:
+            set_(self, "intorder", _count("intorder", self.intorder, minimum=1))
+        if not isinstance(self.linear_solver, str):
+            raise TypeError(f"linear_solver={self.linear_solver!r} must be a string")
+        set_(self, "progress", bool(self.progress))
+
+    def target(self, floor: float) -> float:
+        """Tracking residual to reach in a frame whose noise floor is ``floor`` rad."""
+        if self.epsilon is not None:
+            return float(self.epsilon)
+        return float(self.epsilon_factor * floor)
+
+    def as_attrs(self) -> dict[str, Any]:
+        """The settings as NetCDF-safe attributes (None written as -1 or "auto")."""
+        out: dict[str, Any] = {}
+        for key, value in asdict(self).items():
+            if value is None:
+                value = "auto" if key == "epsilon" else -1
+            elif isinstance(value, bool):
+                value = int(value)
+            out[f"setting_{key}"] = value
+        return out

@@ -1,0 +1,207 @@
+"""The tracker's core, tested directly: the constraint's force and tangent against finite
+differences, mask weighting, the penalty and augmented-Lagrangian strategies, settings."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from harpx.mechanics.body import Body
+from harpx.mechanics.materials import NeoHookean
+from harpx.mechanics.mesh import box
+from harpx.tracking.constraint import PhaseConstraint
+from harpx.tracking.equilibrium import EquilibriumResult
+from harpx.tracking.frame import FrameProblem
+from harpx.tracking.penalty import STALL
+from harpx.tracking.settings import TrackingSettings
+from tests._helpers import still
+from tests._ideal import ideal_phase
+
+still.inverse = lambda x, t: x  # type: ignore[attr-defined]
+
+
+@pytest.fixture(scope="module")
+def ideal():
+    # a linear phase in every direction (no motion): the demodulated images are constant,
+    # so trilinear interpolation is exact and the residual is exactly linear in u
+    ds = ideal_phase(still, shape=(9, 16, 16), spacing=(2.0, 2.0, 2.0), times=[0.0, 10.0])
+    body = Body(box((12.0, 12.0, 8.0), (3, 3, 2), origin=(-6.0, -6.0, -4.0)).mesh,
+                NeoHookean(c1=1.0, kappa=50.0))  # fmt: skip
+    constraint = PhaseConstraint(body, ds)
+    constraint.set_frame(1)
+    constraint.penalty = 3.0
+    return body, constraint
+
+
+def _energy(constraint: PhaseConstraint, u: np.ndarray) -> float:
+    st = constraint.state(u)
+    r = st.residual
+    w = st.weight[:, None] * st.tag_valid
+    return float((w * (0.5 * constraint.penalty * r**2 + constraint.multipliers * r)).sum())
+
+
+def test_force_is_the_gradient_of_the_constraint_energy(ideal, rng):
+    body, constraint = ideal
+    constraint.multipliers = rng.normal(0.0, 0.5, constraint.multipliers.shape)
+    try:
+        u = rng.normal(0.0, 0.3, body.ndof)
+        v = rng.normal(0.0, 1.0, body.ndof)
+        h = 1e-4  # mm; the residual is linear here, so central differences are exact to round-off
+        numeric = (_energy(constraint, u + h * v) - _energy(constraint, u - h * v)) / (2 * h)
+        analytic = float(constraint.force(constraint.state(u)) @ v)
+        assert numeric == pytest.approx(analytic, rel=1e-7)
+    finally:
+        constraint.multipliers[:] = 0.0
+
+
+def test_tangent_is_the_derivative_of_the_force_on_a_linear_phase(ideal, rng):
+    # on a linear phase the dropped phase Hessian is zero: Gauss-Newton is the exact tangent
+    body, constraint = ideal
+    u = rng.normal(0.0, 0.3, body.ndof)
+    v = rng.normal(0.0, 1.0, body.ndof)
+    h = 1e-3
+    _, K = constraint.assemble(constraint.state(u))
+    numeric = (
+        constraint.force(constraint.state(u + h * v)) - constraint.force(constraint.state(u - h * v))
+    ) / (2 * h)
+    np.testing.assert_allclose(K @ v, numeric, rtol=1e-7, atol=1e-9 * np.abs(numeric).max())
+
+
+def test_points_outside_a_tags_mask_carry_none_of_its_force(rng):
+    ds = ideal_phase(still, shape=(9, 16, 16), spacing=(2.0, 2.0, 2.0), times=[0.0, 10.0])
+    mask = np.ones((3, 9, 16, 16), dtype=bool)
+    mask[0, :, :, 8:] = False  # the x tag has no data at x > 0
+    ds["mask"] = (("tag", "z", "y", "x"), mask)
+    body = Body(box((12.0, 12.0, 8.0), (3, 3, 2), origin=(-6.0, -6.0, -4.0)).mesh,
+                NeoHookean(c1=1.0, kappa=50.0))  # fmt: skip
+    constraint = PhaseConstraint(body, ds)
+    constraint.set_frame(1)
+    st = constraint.state(np.zeros(body.ndof))
+    right = constraint.points[:, 0] > 0.5
+    left = constraint.points[:, 0] < -0.5
+    assert not st.tag_valid[right, 0].any() and st.tag_valid[left, 0].all()
+    assert st.tag_valid[:, 1:].all()  # the other tags keep every point
+    constraint.penalty = 1.0
+    u = np.zeros(body.ndof)
+    u[0::3] = 0.5  # a pure x translation: only the x tag pulls back, and only where it has data
+    force = constraint.force(constraint.state(u)).reshape(-1, 3)
+    nodes = body.dof_points
+    # nodes of cells wholly at x > 2 mm feel no x force; those of cells at x < −2 mm do (the
+    # residual R = λ ∇φ r is positive: the restoring force −R points back along −x)
+    assert np.abs(force[nodes[:, 0] > 2.5, 0]).max() == 0.0
+    assert (force[nodes[:, 0] < -2.5, 0] > 0).all()
+    np.testing.assert_allclose(force[:, 1:], 0.0, atol=1e-12)
+
+
+class _Scripted(FrameProblem):
+    """A frame problem whose solves return a scripted ε per call (strategy logic only)."""
+
+    def __init__(self, epsilons, settings):
+        self.epsilons = list(epsilons)
+        self.settings = settings
+        self.penalties = []
+        self.constraint = _StubConstraint(self)
+
+    def solve(self, u, max_iterations):
+        self.penalties.append(self.constraint.penalty)
+        return EquilibriumResult(u, _StubState(self.epsilons.pop(0)), 2, [0.0], True)
+
+
+class _StubState:
+    def __init__(self, eps):
+        self.eps = eps
+        self.residual = np.ones((1, 1))
+        self.tag_valid = np.ones((1, 1), bool)
+
+    def epsilon(self):
+        return self.eps
+
+
+class _StubConstraint:
+    def __init__(self, problem):
+        self.penalty = 0.0
+        self.multipliers = np.zeros((1, 1))
+        self.problem = problem
+
+    def penalty_scale(self):
+        return 1.0
+
+    def update_multipliers(self, st):
+        self.multipliers = self.multipliers + self.penalty * st.residual
+        return 1.0  # never converges on its own
+
+
+def test_penalty_ramps_then_doubles_until_the_target():
+    from harpx.tracking.penalty import track_frame_penalty
+
+    problem = _Scripted([0.5, 0.3, 0.2, 0.09], TrackingSettings(ramp=2, penalty_limit=100.0))
+    out = track_frame_penalty(problem, np.zeros(3), target=0.1, penalty=4.0)
+    # ramp 2 → 4, then doubled 8 → 16 while each doubling lowers ε by > 3 %
+    assert problem.penalties == [2.0, 4.0, 8.0, 16.0]
+    assert out.reached and out.penalty == 16.0 and out.stages == 4 and out.epsilon == 0.09
+
+
+def test_penalty_stops_raising_at_the_noise_floor():
+    from harpx.tracking.penalty import track_frame_penalty
+
+    stalled = 0.2 * (1.0 - STALL / 2)  # lowers ε by less than the stall margin
+    problem = _Scripted([0.3, 0.2, stalled], TrackingSettings(ramp=1, penalty_limit=100.0))
+    out = track_frame_penalty(problem, np.zeros(3), target=0.1, penalty=1.0)
+    assert problem.penalties == [1.0, 2.0, 4.0]
+    assert not out.reached and out.stalled
+
+
+def test_penalty_stops_at_its_limit():
+    from harpx.tracking.penalty import track_frame_penalty
+
+    problem = _Scripted([0.5, 0.4, 0.3], TrackingSettings(ramp=1, penalty=1.0, penalty_limit=4.0))
+    out = track_frame_penalty(problem, np.zeros(3), target=0.1, penalty=1.0)
+    assert problem.penalties == [1.0, 2.0, 4.0]
+    assert not out.reached and not out.stalled and out.penalty == 4.0
+
+
+def test_augmented_lagrangian_updates_multipliers_then_raises_the_penalty():
+    from harpx.tracking.augmented import track_frame_augmented
+
+    settings = TrackingSettings(method="augmented-lagrangian", max_updates=2, penalty_limit=10.0)
+    problem = _Scripted([0.5, 0.4, 0.3, 0.05], settings)
+    out = track_frame_augmented(problem, np.zeros(3), target=0.1, penalty=2.0)
+    # two updates at λ = 2 (Λ += 2 r each), then λ doubled
+    assert problem.penalties == [2.0, 2.0, 4.0, 4.0]
+    assert problem.constraint.multipliers[0, 0] == pytest.approx(2.0 + 2.0 + 4.0)
+    assert out.reached and out.stages == 4
+
+
+def test_multiplier_update_is_lambda_times_the_residual(ideal, rng):
+    body, constraint = ideal
+    u = rng.normal(0.0, 0.3, body.ndof)
+    st = constraint.state(u)
+    constraint.multipliers[:] = 0.0
+    change = constraint.update_multipliers(st)
+    np.testing.assert_allclose(constraint.multipliers, constraint.penalty * st.residual)
+    assert change == pytest.approx(1.0)  # from zero, the whole multiplier is new
+    constraint.multipliers[:] = 0.0
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        pytest.param({"ramp": float("nan")}, "ramp=nan", id="ramp-nan"),
+        pytest.param({"penalty_limit": float("nan")}, "penalty_limit=nan", id="limit-nan"),
+        pytest.param({"multiplier_tolerance": float("nan")}, "multiplier_tolerance=nan", id="tol"),
+        pytest.param({"multiplier_tolerance": -1.0}, "multiplier_tolerance=-1.0", id="tol-neg"),
+        pytest.param({"intorder": 0}, "intorder=0", id="intorder"),
+        pytest.param({"max_updates": 0}, "max_updates=0", id="updates"),
+        pytest.param({"epsilon_factor": 0.5}, "epsilon_factor=0.5", id="factor"),
+        pytest.param({"regularization": "none"}, "regularization='none'", id="regularization"),
+    ],
+)
+def test_settings_name_what_is_wrong(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        TrackingSettings(**kwargs)
+
+
+def test_settings_attributes_are_netcdf_safe():
+    attrs = TrackingSettings().as_attrs()
+    assert attrs["setting_epsilon"] == "auto" and attrs["setting_intorder"] == -1
+    assert all(isinstance(v, str | int | float) for v in attrs.values())
