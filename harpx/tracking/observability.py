@@ -124,9 +124,12 @@ class Observability:
         One dof per unseen mode held in each linear solve (its value restored afterwards
         by the mode shift), so that the solve is never singular.
     unseen_directions : list of str
-        Human-readable unseen rigid motions (e.g. ``"translation along z (0, 0, 1)"``).
+        Human-readable unseen rigid motions that were removed (e.g. ``"translation along z
+        (0, 0, 1)"``).
     body_rank : int
         Seen directions of the body as a whole.
+    unseen_axes : ndarray, shape (3 - body_rank, 3)
+        Unit vectors spanning the directions that no tag sees anywhere in the body.
     """
 
     projectors: FloatArray
@@ -138,6 +141,7 @@ class Observability:
     pinned_dofs: IntArray
     unseen_directions: list[str]
     body_rank: int
+    unseen_axes: FloatArray
 
     def remove_unseen(self, u: FloatArray) -> FloatArray:
         """``u`` with the amplitude of every unseen rigid mode set to zero, mm."""
@@ -222,7 +226,7 @@ def observability(
         held = modes_dof[:, fixed_dofs]
         gram = gram + held @ held.T / max(1, fixed_dofs.size)
     w, v = np.linalg.eigh(gram / max(float(np.trace(gram)), 1e-300))
-    unseen = v[:, w < UNSEEN_TOLERANCE]
+    unseen = _canonical(v[:, w < UNSEEN_TOLERANCE])
     modes = unseen.T @ modes_dof  # (m, ndof)
     if modes.shape[0]:
         # mass-orthonormalise so that remove_unseen is a projection
@@ -230,7 +234,9 @@ def observability(
         L = np.linalg.cholesky(gram_m)
         modes = np.linalg.solve(L, modes)
     pinned = _pin_dofs(modes) if modes.shape[0] else np.zeros(0, dtype=np.int64)
-    body_seen = seen_projectors(directions, valid.any(axis=0)[None])[1]
+    body_projector, body_seen = seen_projectors(directions, valid.any(axis=0)[None])
+    w_axes, v_axes = np.linalg.eigh(np.eye(3) - body_projector[0])
+    unseen_axes = v_axes[:, w_axes > 0.5].T
     return Observability(
         projectors=projectors,
         point_rank=point_rank,
@@ -241,6 +247,7 @@ def observability(
         pinned_dofs=pinned,
         unseen_directions=[_describe(c) for c in unseen.T],
         body_rank=int(body_seen[0]),
+        unseen_axes=unseen_axes,
     )
 
 
@@ -254,6 +261,23 @@ def _rigid_about(points: FloatArray, centre: FloatArray, radius: float) -> Float
         axis[a] = 1.0
         modes[3 + a] = np.cross(axis, centred) / radius
     return modes.reshape(6, -1)
+
+
+def _canonical(basis: FloatArray) -> FloatArray:
+    """The same span of rigid modes (6, m) in reduced echelon form: axis-aligned when it can.
+
+    A null space from an eigensolver is any orthonormal basis of it (e.g. a mix of the y and
+    z translations); naming the modes needs the basis that has one pure mode per pivot.
+    """
+    if not basis.shape[1]:
+        return basis
+    from scipy.linalg import qr
+
+    _, _, pivots = qr(basis.T, pivoting=True, mode="economic")
+    chosen = np.sort(pivots[: basis.shape[1]])
+    coeffs = np.linalg.solve(basis[chosen].T, basis.T)  # (m, 6) with identity on ``chosen``
+    coeffs[np.abs(coeffs) < 1e-9] = 0.0
+    return coeffs.T
 
 
 def _pin_dofs(modes: FloatArray) -> IntArray:

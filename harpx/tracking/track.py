@@ -90,22 +90,33 @@ def _check_data(phase: xr.Dataset, constraint: PhaseConstraint) -> None:
         )
 
 
+def _vector(v: np.ndarray) -> str:
+    v = v * np.sign(v[np.argmax(np.abs(v))])
+    name = "xyz"[int(np.argmax(np.abs(v)))] + " " if np.abs(v).max() > 0.999 else ""
+    return f"{name}({v[0]:.2g}, {v[1]:.2g}, {v[2]:.2g})"
+
+
 def _warn_unseen(constraint: PhaseConstraint) -> None:
     seen = constraint.observability
     assert seen is not None
-    if not seen.unseen_directions:
+    if seen.body_rank == 3:
         return
     tags = ", ".join(
-        f"{label} ({d[0]:.2g}, {d[1]:.2g}, {d[2]:.2g})"
+        f"{label} {_vector(d)}"
         for label, d in zip(constraint.phase["tag"].values, constraint.directions, strict=True)
     )
+    unseen = " and ".join(_vector(a) for a in seen.unseen_axes)
+    removed = (
+        f"the rigid-body motion the tags cannot see ({'; '.join(seen.unseen_directions)}) was "
+        "removed (held at zero mean)"
+        if seen.unseen_directions
+        else "the Dirichlet conditions hold its rigid-body part"
+    )
     warnings.warn(
-        f"the tags ({tags}) see only {seen.body_rank} of 3 directions of the body's motion: "
-        f"{'; '.join(seen.unseen_directions)} is not seen by any tag. That rigid-body motion "
-        "was removed (held at zero); any motion along the unseen direction comes from the "
-        "mechanics alone (see 'observed_directions' per cell). Add a tag along it (e.g. "
-        "long-axis slices with a through-plane tag) or hold the body with a Dirichlet "
-        "condition along it to make that explicit.",
+        f"no tag sees motion along {unseen} (tags: {tags}): there the tracked motion comes "
+        f"from the mechanics alone; {removed}. 'observed_directions' per cell says what each "
+        "cell's tags see. To measure it, add tags along it (e.g. long-axis slices with a "
+        "through-plane tag); to set it, hold the body there with a Dirichlet condition.",
         HarpxWarning,
         stacklevel=3,
     )
