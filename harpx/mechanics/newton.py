@@ -21,16 +21,19 @@ moves with it. Steps are full Newton steps (keeping quadratic convergence, which
 the volumetric energy yet lands in the basin of convergence: measured 4--5 instead of 7--12
 iterations per step at κ/C1 = 10⁴). The line search is a safeguard: a trial with an inverted
 element or NaN is halved (:math:`\alpha = 1, 1/2, \dots`; if the trial still moves the
-prescribed boundary the step fails at once, so that the load increment is halved), and once :math:`\|R_F\|` has
-grown in two consecutive iterations the energy-slope line search takes over, accepting
-:math:`\alpha` when :math:`|\delta u \cdot R_F(u + \alpha\delta u)| \le 0.9\,
+prescribed boundary the step fails at once, so that the load increment is halved), and
+once :math:`\|R_F\|` has grown in two consecutive iterations the energy-slope line search
+takes over, accepting :math:`\alpha` when :math:`|\delta u \cdot R_F(u + \alpha\delta u)| \le 0.9\,
 |\delta u \cdot R_F(u)|` and otherwise moving to the secant zero of that slope (it needs
 only residuals, so it serves non-conservative terms too). Convergence: the boundary values
 are reached and :math:`\|R_F\| \le \max(\mathrm{tol}\cdot\rho, \mathrm{atol})`, with the
 force scale :math:`\rho` = the larger of the free residual at the start and the reaction
-norm :math:`\|R_D\|`. A step that diverges (``‖R_F‖`` grows four times in a row), stalls
-(no new smallest ``‖R_F‖`` in six iterations, or ``max_iterations``), produces NaN or inverts
-an element is retried with half the load increment, at most ``max_cutbacks`` times in a row
+norm :math:`\|R_D\|`. A step that diverges (``‖R_F‖`` grows four times in a row, or
+exceeds :math:`10^8\rho`), stalls (the smallest ``‖R_F‖`` of the last six iterates is no
+smaller than the smallest of the six before them: a residual that still decreases, however
+far it first rose above the starting value, is never abandoned), runs out of
+``max_iterations``, produces a non-finite state or inverts an element is retried with half
+the load increment, at most ``max_cutbacks`` times in a row
 and never below ``1/(steps · 2**max_cutbacks)`` (otherwise, near a limit point, a converged
 tiny step between failures would reset the count and the load factor would creep towards it
 forever); after a converged step the increment doubles again up to ``1/steps``.
@@ -73,6 +76,9 @@ class SolveResult:
         ``‖R_F‖`` (mN) at every iterate of each accepted load step.
     cutbacks : int
         Number of halved load increments.
+    cutback_reasons : list of str
+        Why each failed attempt was cut back: ``"inverted"``, ``"diverged"``, ``"nan"``
+        (a non-finite state), ``"stalled"`` or ``"max_iterations"``.
     min_jacobian : float
         Smallest ``det F`` at the Gauss points of ``u``.
     time_assembly, time_solve : float
@@ -91,6 +97,7 @@ class SolveResult:
     step_iterations: list[int] = field(default_factory=list)
     residual_history: list[list[float]] = field(default_factory=list)
     cutbacks: int = 0
+    cutback_reasons: list[str] = field(default_factory=list)
     min_jacobian: float = float("nan")
     time_assembly: float = 0.0
     time_solve: float = 0.0
@@ -243,14 +250,27 @@ class _Newton:
         self.time_assembly += time.perf_counter() - t0
         return _Assembled(R, data, symmetric, internal.min_jacobian, internal.inverted_cells)
 
+    def _stalled(self, history: list[float]) -> bool:
+        """No progress: the last ``k`` residuals never undercut the ``k`` before them."""
+        k = self.stall_iterations
+        if len(history) < 2 * k:
+            return False
+        return min(history[-k:]) >= min(history[-2 * k : -k])
+
     def run(self, u0: FloatArray, s: float) -> _Outcome:
+        # trial states far from equilibrium may overflow or turn NaN (an inverted or
+        # exploded element): that is detected and answered by a cut-back, so numpy's
+        # RuntimeWarnings would only alarm the user
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            return self._run(u0, s)
+
+    def _run(self, u0: FloatArray, s: float) -> _Outcome:
         body = self.body
         u = np.array(u0, dtype=np.float64, copy=True)
         g = self.boundary_values(s)
         history: list[float] = []
         scale = 0.0
         growth = 0
-        best_rn, best_it = np.inf, 0
         asm = self.assemble(u, s)
         for it in range(self.max_iterations + 1):
             if asm.R is None or asm.data is None:
@@ -306,9 +326,7 @@ class _Newton:
             elif it > 0:
                 growth = 0
             damping = self.line_search and growth >= 2
-            if not pending and rn < best_rn:
-                best_rn, best_it = rn, it
-            if growth >= 4 or (not pending and it - best_it >= self.stall_iterations):
+            if growth >= 4 or (not pending and self._stalled(history)):
                 # diverging, or no progress: give up early, the caller halves the increment
                 reason = "diverged" if growth >= 4 else "stalled"
                 return _Outcome(False, u, history, it, reason, min_jacobian=asm.min_jacobian)
@@ -559,6 +577,7 @@ def solve(
             ds = min(2.0 * ds, nominal) if ds < nominal else ds
             continue
         res.cutbacks += 1
+        res.cutback_reasons.append(out.reason)
         consecutive += 1
         if out.reason == "inverted":
             inverted = (out.cells, s, out.history)

@@ -7,6 +7,8 @@ Coarse meshes so the tests are fast.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from scipy.optimize import brentq
@@ -21,12 +23,14 @@ from harpx.mechanics import (
     Guccione,
     NeoHookean,
     Prescribed,
+    Pressure,
     box,
     equilibrate,
     solve,
 )
 from harpx.mechanics.assembly import cauchy_stress, first_piola, internal_forces
 from harpx.mechanics.linsolve import LinearSolver, available_methods
+from harpx.mechanics.newton import _Newton
 
 C1, KAPPA = 1.0, 120.0
 NEO = NeoHookean(c1=C1, kappa=KAPPA)
@@ -274,6 +278,50 @@ def test_stalled_newton_raises_convergence_error():
     pull = Prescribed("top", lambda X, s: 0.8 * s * np.ones_like(X), components=(2,))
     with pytest.raises(ConvergenceError, match="max_iterations"):
         solve(body, [Fixed("bottom"), pull], steps=1, max_iterations=1, max_cutbacks=0)
+
+
+def test_step_whose_residual_still_falls_is_not_abandoned():
+    # the first Newton step overshoots (‖R_F‖ rises ~3e4-fold above the start) and then
+    # falls monotonically: the step must be finished, not cut back as "stalled"
+    mesh = box((10.0, 1.0, 1.0), (20, 2, 2))
+    material = Guccione(c=2, bf=8, bt=2, bfs=4, kappa=2000)
+    body = Body(mesh, material, fibers=np.tile([1.0, 0.0, 0.0], (80, 1)))
+    loads = [Fixed("left"), Pressure("bottom", 0.004)]
+    res = equilibrate(body, loads, s=0.2)
+    history = res.residual_history[0]
+    assert res.converged and res.iterations <= 12
+    assert max(history) > 1e3 * history[0]  # the overshoot the old stall test gave up on
+    assert history[-1] <= 1e-8 * max(history)
+
+
+def test_no_progress_is_a_stall():
+    newton = _Newton(
+        Body(box((1.0, 1.0, 1.0), (1, 1, 1)), NEO),
+        [Fixed("bottom")],
+        tol=1e-8,
+        atol=None,
+        max_iterations=25,
+        line_search=True,
+        linear_solver="auto",
+    )
+    k = newton.stall_iterations
+    falling = list(np.geomspace(1e4, 1.0, 2 * k))
+    assert not newton._stalled([1.0, 3e4, *falling])  # rose, then falls: not stalled
+    cycling = [5.0, 10.0] * k  # oscillates without a new smallest value
+    assert newton._stalled(cycling) and not newton._stalled(cycling[:-1] + [4.9])
+
+
+def test_exploded_state_leaks_no_numpy_warnings():
+    # a state of 1e160 mm overflows in the kinematics: Newton must answer with its own
+    # error (the cut-back signal), not numpy's "overflow"/"invalid value" RuntimeWarnings
+    body = Body(box((1.0, 1.0, 1.0), (2, 2, 2)), NEO)
+    u0 = (1e160 * body.dof_points).ravel()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        res = equilibrate(body, [Fixed("bottom")], u0=u0, raise_on_failure=False)
+        with pytest.raises(ElementInversionError, match="invert"):
+            equilibrate(body, [Fixed("bottom")], u0=u0)
+    assert not res.converged and "invert" in res.message
 
 
 # ----------------------------------------------------------------------------- API
