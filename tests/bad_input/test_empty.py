@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 import skfem
 
-from harpx.errors import ArchiveError
+from harpx.errors import ArchiveError, SchemaError
 from harpx.mechanics.body import Body
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import hex_mesh
+from harpx.schema import validate
+from tests.test_schema import make_tagged, make_tracked
 
 MAT = NeoHookean(c1=1.0, kappa=120.0)
 
@@ -40,3 +42,15 @@ def test_mesh_file_without_hexahedra_is_named(tmp_path: Path) -> None:
     meshio.write(path, meshio.Mesh(np.eye(3), [("triangle", np.array([[0, 1, 2]]))]))
     with pytest.raises(ValueError, match=r"has no hexahedra \(cell blocks \{'triangle': 1\}\)"):
         Body(path, MAT)
+
+
+@pytest.mark.parametrize("dim", ["time", "x", "tag"])
+def test_a_dataset_with_an_empty_dimension_is_named(dim: str) -> None:
+    ds = make_tagged().isel({dim: slice(0, 0)})
+    with pytest.raises(SchemaError, match=rf"dimension '{dim}' has length 0"):
+        validate(ds)
+
+
+def test_a_tracked_dataset_without_nodes_is_named() -> None:
+    with pytest.raises(SchemaError, match="dimension 'node' has length 0"):
+        validate(make_tracked().isel(node=slice(0, 0)))
