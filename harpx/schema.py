@@ -646,7 +646,8 @@ def _check_tags(ds: xr.Dataset, problems: list[str]) -> None:
         f = freq[i] if freq is not None else None
         if f is not None and not (np.isfinite(f) and f > 0):
             problems.append(
-                f"tag_frequency of tag {tag!r} is {float(f)!r}; expected a positive frequency in cycles/mm"
+                f"tag_frequency of tag {tag!r} is {float(f)!r}; expected a positive frequency "
+                "in cycles/mm"
             )
             f = None
         s = slice_axes[i] if slice_axes is not None else None
