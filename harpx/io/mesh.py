@@ -58,7 +58,12 @@ import xarray as xr
 
 from harpx._typing import FloatArray, IntArray, PathLike
 from harpx.errors import ArchiveError, SchemaError
-from harpx.io.netcdf import _fsync_directory
+from harpx.io.netcdf import (
+    _fsync_directory,
+    check_writable_target,
+    remove_stale_temporaries,
+    temporary_prefix,
+)
 from harpx.mechanics.mesh import MeshSpec, hex_mesh
 from harpx.schema import validate
 
@@ -187,6 +192,8 @@ def to_meshio(
             )
         for name in names:
             _fsync(tmp / name)
+        for name in names:  # never replace a link, device node or read-only file
+            check_writable_target(directory / name)
         index, data = names[0], names[1:]
         for name in [*data, index]:  # the index file last: it only ever lists complete files
             os.replace(tmp / name, directory / name)
@@ -357,7 +364,8 @@ def _write_xdmf(
 
 @contextmanager
 def _staging(directory: Path, name: str) -> Iterator[Path]:
-    tmp = Path(tempfile.mkdtemp(dir=directory, prefix=f".{name}.", suffix=".tmp"))
+    remove_stale_temporaries(directory, name)
+    tmp = Path(tempfile.mkdtemp(dir=directory, prefix=temporary_prefix(name), suffix=".tmp"))
     try:
         yield tmp
     finally:
