@@ -70,3 +70,11 @@ class ArchiveError(HarpxError, OSError):
 
 class HarpxWarning(UserWarning):
     """Base class of harpx warnings."""
+
+
+class CoincidentNodesWarning(HarpxWarning):
+    """A mesh has coincident (unmerged duplicate) nodes: its cells there are not connected.
+
+    Intended for cut bodies (:func:`harpx.mechanics.cut.opening_angle`); anywhere else it
+    usually means a mesh export did not merge the nodes of its blocks.
+    """

@@ -23,6 +23,7 @@ to fix it.
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -276,6 +277,8 @@ _REQUIRED_ATTRS: dict[str, tuple[str, ...]] = {
 # Relative tolerance on grid spacing (fraction of the mean spacing) and on unit-vector norms.
 _SPACING_RTOL = 1e-3
 _UNIT_NORM_TOL = 1e-6
+# Smallest plausible voxel spacing, mm (10 µm): a grid in metres labelled mm is far below it.
+_MIN_SPACING = 1e-2
 
 
 def validate(ds: xr.Dataset, kind: str | None = None) -> None:
@@ -325,6 +328,11 @@ def validate(ds: xr.Dataset, kind: str | None = None) -> None:
     ...     print(err.problems[0])
     missing data variable 'image' with dims ('tag', 'time', 'z', 'y', 'x')
     """
+    if not isinstance(ds, xr.Dataset):
+        raise TypeError(
+            f"validate(ds) needs an xarray.Dataset, got {type(ds).__name__!r}; for a "
+            "DataArray use da.to_dataset(), for a file harpx.open_dataset(path)"
+        )
     schema = _resolve_kind(ds, kind)
     problems: list[str] = []
     attr_schema = ds.attrs.get("harpx_schema")
@@ -332,33 +340,38 @@ def validate(ds: xr.Dataset, kind: str | None = None) -> None:
         problems.append(
             f"missing dataset attribute 'harpx_schema'; set ds.attrs['harpx_schema'] = {schema!r}"
         )
-    elif attr_schema != schema:
+    elif not isinstance(attr_schema, str) or attr_schema != schema:
         problems.append(
             f"dataset attribute 'harpx_schema' is {attr_schema!r} but {schema!r} was expected"
         )
     for attr in _REQUIRED_ATTRS[schema]:
         if attr not in ds.attrs:
             problems.append(f"missing dataset attribute {attr!r} required by {schema!r}")
-    if "sequence" in ds.attrs and ds.attrs["sequence"] not in SEQUENCES:
+    sequence = ds.attrs.get("sequence")
+    if "sequence" in ds.attrs and not (isinstance(sequence, str) and sequence in SEQUENCES):
         problems.append(
-            f"dataset attribute 'sequence' is {ds.attrs['sequence']!r}; "
-            f"expected one of {sorted(SEQUENCES)}"
+            f"dataset attribute 'sequence' is {sequence!r}; expected one of {sorted(SEQUENCES)} "
+            "(a single string)"
         )
+    if schema == SCHEMA_PHASE:
+        _check_filter_attrs(ds, problems)
 
     specs = SCHEMAS[schema]
-    _check_layout(ds, specs, problems)
-    _check_dtypes(ds, problems)
-    _check_attrs(ds, problems)
-    present = {name for name in specs if name in ds.variables}
-    if "axis" in present:
-        _check_axis(ds, problems)
+    checks: list[tuple[str, Any]] = [
+        ("layout", lambda: _check_layout(ds, specs, problems)),
+        ("dtypes", lambda: _check_dtypes(ds, problems)),
+        ("attributes", lambda: _check_attrs(ds, problems)),
+        ("sizes", lambda: _check_sizes(ds, specs, problems)),
+    ]
+    if "axis" in ds.variables and "axis" in specs:
+        checks.append(("axis", lambda: _check_axis(ds, problems)))
     for dim in GRID_DIMS:
         if dim in ds.coords:
-            _check_grid_coord(ds, dim, problems)
+            checks.append((dim, lambda dim=dim: _check_grid_coord(ds, dim, problems)))
     if "time" in ds.coords:
-        _check_time(ds, problems)
+        checks.append(("time", lambda: _check_time(ds, problems)))
     if schema in (SCHEMA_TAGGED, SCHEMA_PHASE):
-        _check_tags(ds, problems)
+        checks.append(("tags", lambda: _check_tags(ds, problems)))
         if "mask" in ds.variables and ds["mask"].dtype != bool:
             problems.append(
                 f"'mask' has dtype {str(ds['mask'].dtype)!r}; expected bool "
@@ -367,15 +380,57 @@ def validate(ds: xr.Dataset, kind: str | None = None) -> None:
         value_vars = ("image",) if schema == SCHEMA_TAGGED else ("phase", "magnitude")
         for name in value_vars:
             if name in ds.variables:
-                _check_finite(ds, name, problems)
+                checks.append((name, lambda name=name: _check_finite(ds, name, problems)))
         if schema == SCHEMA_PHASE:
-            _check_phase_values(ds, problems)
+            checks.append(("phase values", lambda: _check_phase_values(ds, problems)))
         if "body" in ds.variables:
-            _check_range(ds, "body", 0.0, 1.0, problems)
+            checks.append(("body", lambda: _check_range(ds, "body", 0.0, 1.0, problems)))
     else:
-        _check_tracked(ds, problems)
+        checks.append(("tracked", lambda: _check_tracked(ds, problems)))
+    for what, check in checks:
+        try:
+            check()
+        except Exception as exc:  # a malformed value must not hide the problems found so far
+            problems.append(
+                f"could not check the {what} of the dataset ({type(exc).__name__}: {exc}); "
+                "fix the problems above first"
+            )
     if problems:
         raise SchemaError(problems)
+
+
+def _check_filter_attrs(ds: xr.Dataset, problems: list[str]) -> None:
+    """``upsample`` a positive integer, ``radius`` a positive finite number."""
+    for name, integer in (("upsample", True), ("radius", False)):
+        if name not in ds.attrs:
+            continue
+        value = ds.attrs[name]
+        number = isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
+        ok = number and np.isfinite(value) and value > 0
+        if ok and integer:
+            ok = float(value) == int(value)
+        if not ok:
+            kind = "a positive integer" if integer else "a positive finite number"
+            problems.append(
+                f"dataset attribute {name!r} is {value!r}; expected {kind} (the filter "
+                "setting extract_phase used)"
+            )
+
+
+def _check_sizes(ds: xr.Dataset, specs: Mapping[str, VarSpec], problems: list[str]) -> None:
+    """Every dim of a schema variable must have at least one entry.
+
+    ``cell`` and ``vertex`` may be empty: a point cloud (conventional HARP) has no cells.
+    """
+    empty = sorted(
+        {str(d) for name in specs if name in ds.variables for d in ds.variables[name].dims}
+        & {str(d) for d, n in ds.sizes.items() if n == 0} - {"cell", "vertex"}
+    )
+    for dim in empty:
+        problems.append(
+            f"dimension {dim!r} has length 0; the dataset holds no data along it (check the "
+            "selection or the source files)"
+        )
 
 
 def _resolve_kind(ds: xr.Dataset, kind: str | None) -> str:
@@ -387,11 +442,13 @@ def _resolve_kind(ds: xr.Dataset, kind: str | None) -> str:
                 "kind='tagged' | 'phase' | 'tracked' or set ds.attrs['harpx_schema'] "
                 "(e.g. 'tagged/1')"
             )
-        if attr not in SCHEMAS:
+        if not isinstance(attr, str) or attr not in SCHEMAS:
             raise SchemaError(
                 f"dataset attribute 'harpx_schema' is {attr!r}; known schemas: {sorted(SCHEMAS)}"
             )
         return str(attr)
+    if not isinstance(kind, str):
+        raise TypeError(f"kind={kind!r} must be a str, one of {sorted(KINDS)}")
     if kind in KINDS:
         return KINDS[kind]
     if kind in SCHEMAS:
@@ -507,6 +564,14 @@ def _check_grid_coord(ds: xr.Dataset, dim: str, problems: list[str]) -> None:
         )
         return
     mean_step = (values[-1] - values[0]) / (values.size - 1)
+    if mean_step < _MIN_SPACING:
+        problems.append(
+            f"coordinate {dim!r} has a spacing of {mean_step:.3g} mm, below the "
+            f"{_MIN_SPACING:g} mm of any MRI voxel: are the coordinates in metres labelled "
+            f"mm? convert with ds = ds.assign_coords({dim}=ds[{dim!r}] * 1000) (and the tag "
+            "frequencies / 1000)"
+        )
+        return
     ideal = values[0] + mean_step * np.arange(values.size)
     deviation = float(np.max(np.abs(values - ideal)))
     if deviation > _SPACING_RTOL * mean_step:
@@ -522,6 +587,13 @@ def _check_time(ds: xr.Dataset, problems: list[str]) -> None:
     if values.dtype.kind not in "fiu":
         problems.append(
             f"coordinate 'time' has dtype {str(values.dtype)!r}; expected float ms after tagging"
+        )
+        return
+    if not np.all(np.isfinite(values)):
+        bad = np.flatnonzero(~np.isfinite(values))
+        problems.append(
+            f"coordinate 'time' has {bad.size} non-finite values (NaN/inf) at indices "
+            f"{bad[:10].tolist()}; expected finite ms after tagging"
         )
         return
     if values.size > 1 and np.any(np.diff(values.astype(np.float64)) <= 0):
@@ -541,13 +613,22 @@ def _check_tags(ds: xr.Dataset, problems: list[str]) -> None:
     tags = [str(t) for t in np.asarray(ds["tag"].values).ravel()]
     if len(set(tags)) != len(tags):
         problems.append(f"coordinate 'tag' has duplicate labels {tags!r}; labels must be unique")
-    if ds["tag"].dtype.kind not in "OU":
-        problems.append(f"coordinate 'tag' has dtype {str(ds['tag'].dtype)!r}; expected str labels")
+    raw = np.asarray(ds["tag"].values).ravel()
+    if ds["tag"].dtype.kind not in "OU" or not all(isinstance(t, str) for t in raw):
+        problems.append(
+            f"coordinate 'tag' has dtype {str(ds['tag'].dtype)!r} (labels {tags!r}); expected "
+            "str labels such as 'x', 'y', 'z'"
+        )
     have_dir = "tag_direction" in ds.coords and ds["tag_direction"].dims == ("tag", "axis")
     have_dir = have_dir and ds.sizes.get("axis") == 3
+    have_dir = have_dir and ds["tag_direction"].dtype.kind in "fiu"  # else _check_dtypes says
     direction = np.asarray(ds["tag_direction"].values, dtype=np.float64) if have_dir else None
     freq = None
-    if "tag_frequency" in ds.coords and ds["tag_frequency"].dims == ("tag",):
+    if (
+        "tag_frequency" in ds.coords
+        and ds["tag_frequency"].dims == ("tag",)
+        and ds["tag_frequency"].dtype.kind in "fiu"
+    ):
         freq = np.asarray(ds["tag_frequency"].values, dtype=np.float64)
     slice_axes: list[str] | None = None
     if "slice_axis" in ds.coords and ds["slice_axis"].dims == ("tag",):
@@ -565,7 +646,8 @@ def _check_tags(ds: xr.Dataset, problems: list[str]) -> None:
         f = freq[i] if freq is not None else None
         if f is not None and not (np.isfinite(f) and f > 0):
             problems.append(
-                f"tag_frequency of tag {tag!r} is {f!r}; expected a positive frequency in cycles/mm"
+                f"tag_frequency of tag {tag!r} is {float(f)!r}; expected a positive frequency "
+                "in cycles/mm"
             )
             f = None
         s = slice_axes[i] if slice_axes is not None else None
@@ -703,8 +785,9 @@ def _check_tracked(ds: xr.Dataset, problems: list[str]) -> None:
                         f"'cells' refers to node ids in [{data.min()}, {data.max()}] but there "
                         f"are {nnode} nodes"
                     )
-    if "points" in ds.variables:
-        _check_finite(ds, "points", problems)
+    for name in ("points", "displacement"):
+        if name in ds.variables:
+            _check_finite(ds, name, problems)
     if "displacement_grid" in ds.variables:
         for dim in GRID_DIMS:
             if dim not in ds.coords:

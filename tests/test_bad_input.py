@@ -296,7 +296,7 @@ def test_non_finite_image_is_never_written(
 @given(
     dim=st.sampled_from(["z", "y", "x"]),
     position=st.integers(0, 7),
-    fraction=st.floats(2e-3, 0.4).flatmap(lambda f: st.sampled_from([f, -f])),
+    fraction=st.floats(5e-3, 0.4).flatmap(lambda f: st.sampled_from([f, -f])),
 )
 def test_uneven_coordinate_is_never_written(
     tmp_path: Path, dim: str, position: int, fraction: float
@@ -304,7 +304,8 @@ def test_uneven_coordinate_is_never_written(
     ds = make_tagged(nz=3)
     values = ds[dim].values.copy()
     step = values[1] - values[0]
-    # a shift of 0.2 % to 40 % of a voxel: above validate's 0.1 % tolerance, still increasing
+    # a shift of 0.5 % to 40 % of a voxel: an end value shifted by f moves the fitted line by
+    # f/2 at the middle, so the deviation stays above validate's 0.1 % tolerance
     values[position % values.size] += fraction * step
     ds = ds.assign_coords({dim: (dim, values, standard_attrs(dim))})
     _refused(ds, tmp_path, f"coordinate '{dim}' is not evenly spaced")

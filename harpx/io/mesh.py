@@ -38,6 +38,8 @@ the index file (``.xdmf`` / ``.pvd``) last. An error leaves the previous files u
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import shutil
@@ -56,11 +58,16 @@ import xarray as xr
 
 from harpx._typing import FloatArray, IntArray, PathLike
 from harpx.errors import ArchiveError, SchemaError
-from harpx.io.netcdf import _fsync_directory
+from harpx.io.netcdf import (
+    _fsync_directory,
+    check_writable_target,
+    remove_stale_temporaries,
+    temporary_prefix,
+)
 from harpx.mechanics.mesh import MeshSpec, hex_mesh
 from harpx.schema import validate
 
-__all__ = ["MESHIO_CELL_TYPES", "read_body_mesh", "to_meshio"]
+__all__ = ["MESHIO_CELL_TYPES", "read_body_mesh", "read_meshio", "to_meshio"]
 
 #: harpx element name (``cells.attrs["element"]``) → meshio cell type (same node order).
 MESHIO_CELL_TYPES: dict[str, str] = {
@@ -185,6 +192,8 @@ def to_meshio(
             )
         for name in names:
             _fsync(tmp / name)
+        for name in names:  # never replace a link, device node or read-only file
+            check_writable_target(directory / name)
         index, data = names[0], names[1:]
         for name in [*data, index]:  # the index file last: it only ever lists complete files
             os.replace(tmp / name, directory / name)
@@ -355,7 +364,8 @@ def _write_xdmf(
 
 @contextmanager
 def _staging(directory: Path, name: str) -> Iterator[Path]:
-    tmp = Path(tempfile.mkdtemp(dir=directory, prefix=f".{name}.", suffix=".tmp"))
+    remove_stale_temporaries(directory, name)
+    tmp = Path(tempfile.mkdtemp(dir=directory, prefix=temporary_prefix(name), suffix=".tmp"))
     try:
         yield tmp
     finally:
@@ -423,10 +433,39 @@ def read_body_mesh(path: PathLike) -> MeshSpec:
     return _mesh_spec(mesh, names, path)
 
 
+def read_meshio(path: PathLike) -> meshio.Mesh:
+    """``meshio.read`` with clear errors: a missing file, or any parse failure.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A mesh file meshio reads (format from its suffix).
+
+    Returns
+    -------
+    meshio.Mesh
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` is not an existing file (a directory is named as such).
+    ArchiveError
+        If meshio cannot parse the file (meshio's own ``ReadError`` and the ``sys.exit``
+        it calls for unreadable files are turned into this); names the path.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise FileNotFoundError(f"cannot read mesh {str(path)!r}: it is a directory, not a file")
+    if not path.is_file():
+        raise FileNotFoundError(f"cannot read mesh {str(path)!r}: no such file")
+    return _read(path)
+
+
 def _read(path: Path) -> meshio.Mesh:
     """``meshio.read`` with its failures (including its ``sys.exit``) as ArchiveError."""
     try:
-        return meshio.read(path)
+        with contextlib.redirect_stdout(io.StringIO()):  # meshio prints before it exits
+            return meshio.read(path)
     except SystemExit:  # meshio 5 exits the interpreter when no reader can parse the file
         reason = "meshio cannot parse it"
     except Exception as exc:

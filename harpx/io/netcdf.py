@@ -21,6 +21,10 @@ from __future__ import annotations
 import json
 import numbers
 import os
+import re
+import shutil
+import socket
+import stat
 import tempfile
 from collections.abc import Hashable, Mapping
 from pathlib import Path
@@ -63,14 +67,18 @@ def to_netcdf(ds: xr.Dataset, path: PathLike) -> Path:
         If the dataset declares a harpx schema and breaks it (no file is touched).
     ArchiveError
         If an attribute cannot be stored in NetCDF (no file is touched), the directory does
-        not exist, or writing fails; the previous content of ``path`` is then left intact.
+        not exist or is not writable, the target is a symbolic link, a directory, a device
+        node or a read-only file (never replaced: :func:`check_writable_target`), or writing
+        fails (a full disk is named as such); the previous content of ``path`` is then left
+        intact.
 
     Notes
     -----
     Numeric and boolean data variables are compressed with zlib at level
     ``COMPRESSION_LEVEL`` (4). Only a process killed mid-write (e.g. SIGKILL) can leave a
-    stray temporary file ``.<name>.*.tmp`` beside the target; the target itself is never
-    partial.
+    stray temporary file ``.<name>.harpx-<host>-<pid>-*.tmp`` beside the target; the target
+    itself is never partial, and the next write of the same target removes such leftovers
+    once their process is gone (:func:`remove_stale_temporaries`).
 
     Examples
     --------
@@ -88,15 +96,19 @@ def to_netcdf(ds: xr.Dataset, path: PathLike) -> Path:
         validate(ds)
     path = Path(path)
     encoded = _encode_attrs(ds)
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise ArchiveError(
-            f"cannot write {str(path)!r}: directory {str(directory)!r} does not exist; "
-            "create it first"
-        )
+    directory = check_writable_target(path)
     encoding = _compression(encoded)
     mode = _target_mode(path)
-    fd, tmp_name = tempfile.mkstemp(dir=directory, prefix=f".{path.name}.", suffix=".tmp")
+    remove_stale_temporaries(directory, path.name)
+    try:
+        fd, tmp_name = tempfile.mkstemp(
+            dir=directory, prefix=temporary_prefix(path.name), suffix=".tmp"
+        )
+    except OSError as exc:
+        raise ArchiveError(
+            f"cannot write {str(path)!r}: cannot create a file in {str(directory)!r} "
+            f"({exc.strerror or exc}); check the directory's permissions or choose another"
+        ) from exc
     os.close(fd)
     tmp = Path(tmp_name)
     try:
@@ -109,8 +121,9 @@ def to_netcdf(ds: xr.Dataset, path: PathLike) -> Path:
             os.replace(tmp, path)
         except Exception as exc:
             raise ArchiveError(
-                f"writing {str(path)!r} failed ({type(exc).__name__}: {exc}); the previous "
-                "content of the file, if any, is unchanged"
+                f"writing {str(path)!r} failed ({type(exc).__name__}: {exc})"
+                f"{_space_hint(directory, ds)}; the previous content of the file, if any, is "
+                "unchanged"
             ) from exc
         _fsync_directory(directory)
     finally:
@@ -119,7 +132,142 @@ def to_netcdf(ds: xr.Dataset, path: PathLike) -> Path:
     return path
 
 
-def open_dataset(path: PathLike, *, chunks: Mapping[str, int] | str | None = None) -> xr.Dataset:
+def check_writable_target(path: Path) -> Path:
+    """Refuse targets harpx must never replace; return the target's directory.
+
+    An existing target must be a regular file (not a symbolic link, directory, device
+    node, FIFO or socket) that the user may write: :func:`os.replace` would otherwise
+    turn a link into a file, replace a device node, or overwrite a file its owner made
+    read-only.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The file about to be written.
+
+    Returns
+    -------
+    pathlib.Path
+        Its directory (``.`` for a bare name).
+
+    Raises
+    ------
+    ArchiveError
+        Naming the path and what it is, and what to do instead.
+    """
+    directory = path.parent if str(path.parent) else Path(".")
+    if not directory.is_dir():
+        raise ArchiveError(
+            f"cannot write {str(path)!r}: directory {str(directory)!r} does not exist; "
+            "create it first"
+        )
+    if path.is_symlink():
+        raise ArchiveError(
+            f"refusing to write {str(path)!r}: it is a symbolic link (to "
+            f"{os.readlink(path)!r}), which the atomic write would replace by a file; write to "
+            "the link's target path instead, or remove the link"
+        )
+    if not path.exists():
+        return directory
+    st = path.stat()
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+        raise ArchiveError(
+            f"refusing to write {str(path)!r}: it is {kind} (mode {stat.filemode(st.st_mode)}); "
+            "choose a file name"
+        )
+    if not (st.st_mode & 0o222 and os.access(path, os.W_OK)):  # root may write any file
+        raise ArchiveError(
+            f"refusing to overwrite {str(path)!r}: the file is read-only; make it writable "
+            "(chmod u+w) if it may be replaced, or write elsewhere"
+        )
+    return directory
+
+
+def temporary_prefix(name: str) -> str:
+    """Prefix of the temporary files harpx writes beside ``name`` (host and process id).
+
+    The prefix lets :func:`remove_stale_temporaries` tell the leftovers of a killed
+    harpx write from the temporary file of a write still running.
+    """
+    return f".{name}.harpx-{socket.gethostname()}-{os.getpid()}-"
+
+
+def remove_stale_temporaries(directory: Path, name: str) -> list[Path]:
+    """Delete temporary files of earlier harpx writes of ``name`` whose process has died.
+
+    Only names harpx itself makes (:func:`temporary_prefix`, ``.tmp`` suffix) on this host
+    are considered, and only when no process with the recorded id is alive; anything
+    else beside the target is left alone.
+
+    Parameters
+    ----------
+    directory : pathlib.Path
+        Directory of the target.
+    name : str
+        File name of the target.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files or directories removed.
+    """
+    pattern = re.compile(rf"^\.{re.escape(name)}\.harpx-(?P<host>.+)-(?P<pid>\d+)-[^/]*\.tmp$")
+    host = socket.gethostname()
+    removed = []
+    try:
+        entries = list(directory.iterdir())
+    except OSError:
+        return removed
+    for entry in entries:
+        match = pattern.match(entry.name)
+        if match is None or match["host"] != host or _alive(int(match["pid"])):
+            continue
+        try:
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry)
+            else:
+                entry.unlink()
+        except OSError:
+            continue
+        removed.append(entry)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists but not ours (EPERM)
+        return True
+    return True
+
+
+def _space_hint(directory: Path, ds: xr.Dataset) -> str:
+    """'; the disk is full ...' when the directory has less free space than the data."""
+    try:
+        free = shutil.disk_usage(directory).free
+    except OSError:
+        return ""
+    need = int(ds.nbytes)
+    if free >= max(need, 1 << 20):
+        return ""
+    return (
+        f"; the disk holding {str(directory)!r} is full or nearly so ({free / 2**20:.1f} MiB "
+        f"free, the dataset is {need / 2**20:.1f} MiB before compression): free space or "
+        "write elsewhere"
+    )
+
+
+def open_dataset(
+    path: PathLike,
+    *,
+    chunks: Mapping[str, int] | str | None = None,
+    max_bytes: int | None = None,
+) -> xr.Dataset:
     """Open a NetCDF archive written by :func:`to_netcdf` (or any NetCDF-4 file).
 
     Parameters
@@ -130,6 +278,10 @@ def open_dataset(path: PathLike, *, chunks: Mapping[str, int] | str | None = Non
         None loads everything into memory and closes the file. Otherwise the variables are
         dask arrays with these chunks (as in :func:`xarray.open_dataset`) and the file stays
         open until the dataset is closed. ``{}`` uses the chunks stored in the file.
+    max_bytes : int, optional
+        Largest in-memory size (bytes) an eager load (``chunks=None``) may have; checked
+        from the sizes the file declares, before anything is read. Default: half the
+        memory currently available (``MemAvailable``), or 8 GiB where that is unknown.
 
     Returns
     -------
@@ -140,10 +292,16 @@ def open_dataset(path: PathLike, *, chunks: Mapping[str, int] | str | None = Non
     Raises
     ------
     ArchiveError
-        If the file does not exist, is truncated or corrupt, or is not NetCDF; the message
+        If the file does not exist or is a directory, is truncated or corrupt, is not
+        NetCDF, or declares more data than ``max_bytes`` for an eager load; the message
         names the path.
     """
     path = Path(path)
+    if path.is_dir():
+        raise ArchiveError(
+            f"cannot open {str(path)!r}: it is a directory; pass one .nc file in it "
+            "(e.g. sorted(Path(folder).glob('*.nc')))"
+        )
     if not path.is_file():
         raise ArchiveError(f"cannot open {str(path)!r}: no such file")
     try:
@@ -156,13 +314,41 @@ def open_dataset(path: PathLike, *, chunks: Mapping[str, int] | str | None = Non
         )
         if chunks is None:
             with ds:
+                _check_size(ds, path, max_bytes)
                 ds = ds.load()
         return _decode(ds)
+    except ArchiveError:
+        raise
     except Exception as exc:
         raise ArchiveError(
             f"cannot read {str(path)!r} as a NetCDF archive ({type(exc).__name__}: {exc}); "
             "the file may be truncated, corrupt or not NetCDF"
         ) from exc
+
+
+def _available_memory() -> int:
+    """Bytes of memory available now (Linux ``MemAvailable``), else 16 GiB."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return 16 << 30
+
+
+def _check_size(ds: xr.Dataset, path: Path, max_bytes: int | None) -> None:
+    """Refuse an eager load larger than ``max_bytes`` (from declared sizes, nothing read)."""
+    limit = _available_memory() // 2 if max_bytes is None else int(max_bytes)
+    need = int(ds.nbytes)
+    if need > limit:
+        biggest = max(ds.variables.items(), key=lambda kv: kv[1].nbytes)
+        raise ArchiveError(
+            f"cannot load {str(path)!r} into memory: it declares {need / 2**30:.3g} GiB "
+            f"(largest variable {str(biggest[0])!r} {dict(biggest[1].sizes)!r}), above the "
+            f"{limit / 2**30:.3g} GiB allowed (max_bytes); open it lazily with "
+            "open_dataset(path, chunks={}) or pass a larger max_bytes"
+        )
 
 
 # --- encoding helpers --------------------------------------------------------------------

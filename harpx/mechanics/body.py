@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import os
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
@@ -26,10 +27,11 @@ from scipy import sparse
 from skfem.io.meshio import HEX_MAPPING
 
 from harpx._typing import FloatArray, IntArray
+from harpx.errors import CoincidentNodesWarning
 from harpx.mechanics import kinematics
-from harpx.mechanics.mesh import MeshSpec
+from harpx.mechanics.mesh import MeshSpec, check_nodes, check_unused_nodes, coincident_nodes
 
-__all__ = ["Body", "ELEMENTS"]
+__all__ = ["Body", "ELEMENTS", "check_fits_image"]
 
 #: element name -> (scalar skfem element factory, quadrature order giving the Gauss rule)
 ELEMENTS: dict[str, tuple[Any, int, int]] = {
@@ -45,13 +47,19 @@ _VTK_EDGES = np.array(
 
 
 def _read_mesh(path: str | os.PathLike[str]) -> tuple[skfem.MeshHex1, FloatArray | None]:
-    """Read a hexahedral mesh (meshio ``hexahedron`` or ``hexahedron20``) and cell fibres."""
-    m = meshio.read(path)
+    """Read a hexahedral mesh (meshio ``hexahedron`` or ``hexahedron20``) and cell fibres.
+
+    Nodes that no hexahedron uses (points of other cell blocks, stray points) are dropped.
+    """
+    from harpx.io.mesh import read_meshio  # io builds on mechanics: import on use
+
+    m = read_meshio(path)
     kinds = m.cells_dict
-    if "hexahedron" not in kinds and "hexahedron20" not in kinds:
+    if not any(len(v) for k, v in kinds.items() if k in ("hexahedron", "hexahedron20")):
         raise ValueError(
-            f"mesh file {os.fspath(path)!r} has cells {sorted(kinds)!r}; "
-            "expected 'hexahedron' or 'hexahedron20' cells"
+            f"mesh file {os.fspath(path)!r} has no hexahedra (cell blocks "
+            f"{ {k: len(v) for k, v in kinds.items()}!r}); expected 'hexahedron' or "
+            "'hexahedron20' cells"
         )
     fibers = None
     if "hexahedron20" in kinds and "hexahedron" not in kinds:
@@ -61,11 +69,132 @@ def _read_mesh(path: str | os.PathLike[str]) -> tuple[skfem.MeshHex1, FloatArray
         used, inv = np.unique(corners, return_inverse=True)
         cell_data = {name: [np.asarray(v[k])] for name, v in m.cell_data.items()}
         m = meshio.Mesh(m.points[used], [("hexahedron", inv.reshape(-1, 8))], cell_data=cell_data)
+    k = [i for i, c in enumerate(m.cells) if c.type == "hexahedron"][0]
+    used, inv = np.unique(m.cells[k].data, return_inverse=True)
+    if used.size != len(m.points) or len(m.cells) > 1:  # keep the hexahedra and their nodes
+        cell_data = {name: [np.asarray(v[k])] for name, v in m.cell_data.items()}
+        m = meshio.Mesh(m.points[used], [("hexahedron", inv.reshape(-1, 8))], cell_data=cell_data)
     if "fiber" in m.cell_data:
         k = [i for i, c in enumerate(m.cells) if c.type == "hexahedron"][0]
         fibers = np.asarray(m.cell_data["fiber"][k], dtype=np.float64)
     mesh = skfem.io.meshio.from_meshio(m)
     return mesh, fibers
+
+
+# VTK hexahedron edges grouped by the reference direction they run along (xi, eta, zeta)
+_EDGES_BY_DIRECTION = np.array(
+    [[[0, 1], [3, 2], [4, 5], [7, 6]], [[0, 3], [1, 2], [4, 7], [5, 6]],
+     [[0, 4], [1, 5], [2, 6], [3, 7]]]
+)  # fmt: skip
+# bytes held per constraint quadrature point and basis function (values, gradients, work
+# arrays), plus per point (positions, weights, phase samples): a generous estimate
+_BYTES_PER_POINT_BASIS = 64
+_BYTES_PER_POINT = 400
+
+
+def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> None:
+    """Raise before tracking if a body's size or position cannot match an image grid.
+
+    Cheap checks (a pass over nodes and cells) that catch a mesh in the wrong units or
+    with stray nodes before the tracker allocates its constraint quadrature, whose point
+    count grows with (cell size / voxel size)³:
+
+    * every node lies within one field of view (the largest extent of the grid) of the
+      image's field of view;
+    * the mesh is larger than one voxel;
+    * the constraint quadrature, points at most one acquired voxel apart as the tracker
+      places them, has at most ``max_points`` points.
+
+    Parameters
+    ----------
+    body : Body
+        The tracking body (mm).
+    grid : xarray.Dataset
+        A ``tagged/1`` or ``phase/1`` dataset: coordinates ``z``, ``y``, ``x`` (mm) and,
+        for phase images, the ``upsample`` attribute (the acquired voxel is ``upsample``
+        grid steps).
+    max_points : int, default 10_000_000
+        Largest constraint quadrature allowed (about 1 kB of memory per point).
+
+    Raises
+    ------
+    ValueError
+        Naming the nodes far outside the field of view, the mesh and field-of-view sizes,
+        the estimated point count and memory, and a likely unit mix-up (µm or m instead
+        of mm) when the size ratio suggests one.
+
+    Examples
+    --------
+    >>> import numpy as np, xarray as xr
+    >>> from harpx.mechanics.mesh import box
+    >>> from harpx.mechanics.materials import NeoHookean
+    >>> grid = xr.Dataset(coords={d: np.arange(16.0) for d in "zyx"})
+    >>> body = Body(box((8.0, 8.0, 8.0), (2, 2, 2), origin=(4.0, 4.0, 4.0)), NeoHookean(1, 120))
+    >>> check_fits_image(body, grid)  # inside, in mm: nothing to say
+    >>> far = Body(box((8e3, 8e3, 8e3), (2, 2, 2)), NeoHookean(1, 120))  # micrometres
+    >>> try:
+    ...     check_fits_image(far, grid)
+    ... except ValueError as err:
+    ...     print(str(err).split(": ")[-1])
+    are its coordinates in micrometres (divide by 1000)?
+    """
+    low, high, step = [], [], []
+    for axis in ("x", "y", "z"):
+        if axis not in grid.coords:
+            raise ValueError(f"grid has no coordinate {axis!r} (voxel centres in mm)")
+        values = np.asarray(grid[axis].values, dtype=np.float64)
+        if values.size == 0 or not np.all(np.isfinite(values)):
+            raise ValueError(f"grid coordinate {axis!r} is empty or not finite")
+        d = float((values[-1] - values[0]) / (values.size - 1)) if values.size > 1 else 0.0
+        low.append(values[0] - d / 2)
+        high.append(values[-1] + d / 2)
+        if values.size > 1:
+            step.append(abs(d))
+    lo, hi = np.array(low), np.array(high)
+    fov = float((hi - lo).max())
+    voxel = float(grid.attrs.get("upsample", 1)) * min(step) if step else fov
+    nodes = np.asarray(body.nodes)
+    size = float(np.ptp(nodes, axis=0).max())
+    ratio = size / fov if fov > 0 else np.inf
+    hint = ""
+    if ratio > 20:
+        hint = (
+            f"; the mesh is {ratio:.3g} times larger than the image: are its coordinates in "
+            "micrometres (divide by 1000)?"
+        )
+    elif size < voxel:
+        hint = (
+            "; the mesh is smaller than one voxel: are its coordinates in metres (multiply "
+            "by 1000)?"
+        )
+    outside = np.maximum(lo - nodes, nodes - hi).max(axis=1)  # mm beyond the field of view
+    far = np.flatnonzero(outside > fov)
+    if far.size:
+        shown = ", ".join(str(int(i)) for i in far[:10]) + (", ..." if far.size > 10 else "")
+        raise ValueError(
+            f"mesh nodes [{shown}] lie up to {outside.max():.4g} mm outside the image field "
+            f"of view ({lo.round(3).tolist()} to {hi.round(3).tolist()} mm, x/y/z); the mesh "
+            f"spans {size:.4g} mm, the field of view {fov:.4g} mm"
+            f"{hint if 2 * far.size > len(nodes) else '; move or fix those nodes'}"
+        )
+    if size < voxel:
+        raise ValueError(
+            f"the mesh spans {size:.4g} mm but one acquired voxel is {voxel:.4g} mm{hint}"
+        )
+    corners = nodes[body.cells[:, :8]]  # (ncell, 8, 3)
+    count = 1
+    for edges in _EDGES_BY_DIRECTION:  # the tracker's rule: n points along the longest edge
+        length = np.linalg.norm(corners[:, edges[:, 0]] - corners[:, edges[:, 1]], axis=-1)
+        count *= max(1, int(np.ceil(float(length.max()) / voxel)))
+    points = count * body.ncell
+    if points > max_points:
+        gib = points * (_BYTES_PER_POINT + _BYTES_PER_POINT_BASIS * body.nbasis) / 2**30
+        raise ValueError(
+            f"tracking this mesh would place {points:.3g} constraint points (~{gib:.3g} GiB; "
+            f"limit max_points={max_points:.3g}): its longest cells are "
+            f"{count ** (1 / 3):.3g} voxels ({voxel:.4g} mm) across{hint or ''}; refine the "
+            "mesh (smaller cells) or check its units (mm)"
+        )
 
 
 # reference corners and centre of the unit hexahedron, where the geometry Jacobian is checked
@@ -237,7 +366,19 @@ class Body:
         self.active = active
         self.ncell = int(mesh.nelements)
 
+        check_nodes(np.asarray(mesh.p).T, np.asarray(mesh.t).T, nvertex=8)
+        pairs = coincident_nodes(np.asarray(mesh.p).T)
+        if pairs.size:
+            warnings.warn(
+                f"mesh has {pairs.shape[0]} pairs of coincident nodes, e.g. nodes "
+                f"{pairs[0].tolist()} at {np.asarray(mesh.p)[:, pairs[0, 0]].tolist()} mm: the "
+                "cells on either side are not connected and move independently; if that is "
+                "not a deliberate cut, merge them (mesh = mesh.remove_duplicate_nodes())",
+                CoincidentNodesWarning,
+                stacklevel=2,
+            )
         _check_cells(mesh)
+        check_unused_nodes(mesh.p.shape[1], np.asarray(mesh.t).T)
         factory, intorder, nqp = ELEMENTS[element]
         self._scalar_element = factory()
         self._intorder = intorder

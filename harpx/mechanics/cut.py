@@ -36,6 +36,7 @@ References
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -44,7 +45,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
-from harpx.errors import ConvergenceError
+from harpx.errors import CoincidentNodesWarning, ConvergenceError
 from harpx.mechanics.body import Body
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.mechanics.mesh import hex_mesh
@@ -425,7 +426,9 @@ def opening_angle(
     faces = (np.nonzero(on_cut)[0], copy[on_cut])
 
     kwargs: dict[str, Any] = {} if fibers is None else {"fibers": fibers}
-    ring = Body(hex_mesh(pts, local), body.material, **kwargs)
+    with warnings.catch_warnings():  # the cut's nodes coincide on purpose
+        warnings.simplefilter("ignore", CoincidentNodesWarning)
+        ring = Body(hex_mesh(pts, local), body.material, **kwargs)
     # same cells in the same vertex order: the Gauss points (and so the growth) transfer
     if u_reference is None and not np.allclose(
         ring.quadrature_points, body.quadrature_points[keep], atol=1e-9 * size

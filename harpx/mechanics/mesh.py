@@ -21,7 +21,18 @@ import skfem
 from numpy.typing import NDArray
 from skfem.io.meshio import HEX_MAPPING
 
-__all__ = ["MeshSpec", "box", "cylinder", "tube", "hex_mesh", "facets_where", "labelled_spec"]
+__all__ = [
+    "MeshSpec",
+    "box",
+    "check_nodes",
+    "check_unused_nodes",
+    "coincident_nodes",
+    "cylinder",
+    "tube",
+    "hex_mesh",
+    "facets_where",
+    "labelled_spec",
+]
 
 #: skfem local vertex k of a hexahedron is VTK vertex ``_VTK_TO_SKFEM[k]``.
 _VTK_TO_SKFEM = np.array([HEX_MAPPING[:8].index(i) for i in range(8)])
@@ -69,15 +80,124 @@ def hex_mesh(points: NDArray[np.float64], cells_vtk: NDArray[np.int64]) -> skfem
     Raises
     ------
     ValueError
-        If a cell is inverted, twisted (bow-tie) or collapsed: its corner Jacobian
-        det[e1, e2, e3] (edges to the three neighbouring corners) is not positive.
+        If the mesh is empty, a node coordinate is not finite, a cell refers to a node that
+        does not exist (:func:`check_nodes`), a node is used by no cell
+        (:func:`check_unused_nodes`), or a cell is inverted, twisted (bow-tie) or collapsed: its
+        corner Jacobian det[e1, e2, e3] (edges to the three neighbouring corners) is not
+        positive.
     """
     points = np.asarray(points, dtype=np.float64)
     cells_vtk = np.asarray(cells_vtk)
+    check_nodes(points, cells_vtk, nvertex=8)
     check_hexahedra(points, cells_vtk)
+    check_unused_nodes(points.shape[0], cells_vtk)
     p = np.ascontiguousarray(points.T)
     t = np.ascontiguousarray(cells_vtk[:, _VTK_TO_SKFEM].T.astype(np.int32))
     return skfem.MeshHex1(p, t)
+
+
+def _ids(ids: NDArray[np.int64]) -> str:
+    shown = ", ".join(str(int(i)) for i in ids[:10])
+    return f"[{shown}{', ...' if ids.size > 10 else ''}]"
+
+
+def check_nodes(
+    points: NDArray[np.float64], cells: NDArray[np.int64], *, nvertex: int | None = None
+) -> None:
+    """Raise a ValueError if a mesh is empty, has non-finite nodes or dangling cells.
+
+    A mesh must have at least one cell; every node coordinate must be finite; every cell
+    must refer to existing nodes. Each message names the offending node or
+    cell ids and how to fix them. Coincident nodes are allowed here (a cut body has them
+    on purpose); :func:`coincident_nodes` finds them.
+
+    Parameters
+    ----------
+    points : ndarray, shape (npoint, 3)
+        Node coordinates in mm.
+    cells : ndarray, shape (ncell, nvertex)
+        Node ids of each cell (any vertex order).
+    nvertex : int, optional
+        Expected number of vertices per cell.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> spec = box((1.0, 1.0, 1.0), (1, 1, 1))
+    >>> points = spec.mesh.p.T.copy()
+    >>> points[3, 0] = np.nan
+    >>> try:
+    ...     check_nodes(points, spec.mesh.t.T)
+    ... except ValueError as err:
+    ...     print(str(err)[:48])
+    mesh has 1 nodes with a NaN or infinite coordina
+    """
+    points = np.asarray(points)
+    cells = np.asarray(cells)
+    if points.ndim != 2 or points.shape[1:] != (3,):
+        raise ValueError(f"mesh nodes have shape {points.shape!r}; expected (npoint, 3) in mm")
+    if cells.ndim != 2 or (nvertex is not None and cells.shape[1] != nvertex) or cells.size == 0:
+        raise ValueError(
+            f"mesh cells have shape {cells.shape!r}; expected (ncell >= 1, "
+            f"{nvertex or 'nvertex'}) node ids; an empty mesh cannot be tracked (check the "
+            "mesh file or the builder's arguments)"
+        )
+    if points.dtype.kind not in "fiu":
+        raise ValueError(f"mesh nodes have dtype {str(points.dtype)!r}; expected float mm")
+    if cells.dtype.kind not in "iu":
+        raise ValueError(f"mesh cells have dtype {str(cells.dtype)!r}; expected integer node ids")
+    bad = np.flatnonzero(~np.all(np.isfinite(points), axis=1))
+    if bad.size:
+        raise ValueError(
+            f"mesh has {bad.size} nodes with a NaN or infinite coordinate: nodes {_ids(bad)}; "
+            "fix or remove them"
+        )
+    npoint = points.shape[0]
+    if cells.min() < 0 or cells.max() >= npoint:
+        wrong = np.flatnonzero(np.any((cells < 0) | (cells >= npoint), axis=1))
+        raise ValueError(
+            f"mesh cells {_ids(wrong)} refer to node ids outside [0, {npoint}); fix the "
+            "connectivity"
+        )
+
+
+def check_unused_nodes(npoint: int, cells: NDArray[np.int64]) -> None:
+    """Raise a ValueError naming nodes that no cell uses (they make the tangent singular).
+
+    Parameters
+    ----------
+    npoint : int
+        Number of nodes.
+    cells : ndarray of int, shape (ncell, nvertex)
+        Valid node ids of each cell.
+    """
+    unused = np.flatnonzero(np.bincount(np.asarray(cells).ravel(), minlength=npoint) == 0)
+    if unused.size:
+        raise ValueError(
+            f"mesh has {unused.size} nodes that no cell uses: nodes {_ids(unused)}; remove them "
+            "(e.g. mesh = mesh.remove_unused_nodes() for a skfem mesh)"
+        )
+
+
+def coincident_nodes(points: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Pairs of nodes closer than 1e-9 of the mesh extent (unmerged duplicates).
+
+    Parameters
+    ----------
+    points : ndarray, shape (npoint, 3)
+        Finite node coordinates in mm.
+
+    Returns
+    -------
+    ndarray of int, shape (npair, 2)
+        Node id pairs, each ``i < j``.
+    """
+    from scipy.spatial import cKDTree
+
+    points = np.asarray(points, dtype=np.float64)
+    extent = float(np.ptp(points, axis=0).max()) if points.size else 0.0
+    tree = cKDTree(points)
+    return tree.query_pairs(r=1e-9 * max(extent, 1e-300), output_type="ndarray").astype(np.int64)
 
 
 # neighbours of each VTK hexahedron corner along its three edges, right-handed for a valid cell

@@ -1,0 +1,46 @@
+"""NaN and inf never pass: not in time, not in tracked displacement, not in one image block."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from harpx.errors import SchemaError
+from harpx.io.mesh import to_meshio
+from harpx.io.netcdf import to_netcdf
+from harpx.schema import validate
+from tests.test_schema import make_tagged, make_tracked
+
+
+@pytest.mark.parametrize("value", [np.nan, np.inf], ids=["nan", "inf"])
+def test_non_finite_time_is_refused_and_never_written(value: float, tmp_path: Path) -> None:
+    ds = make_tagged()
+    ds = ds.assign_coords(time=("time", [0.0, value], ds.time.attrs))
+    match = r"coordinate 'time' has 1 non-finite values \(NaN/inf\) at indices \[1\]"
+    with pytest.raises(SchemaError, match=match):
+        validate(ds)
+    with pytest.raises(SchemaError, match=match):
+        to_netcdf(ds, tmp_path / "a.nc")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_nan_in_tracked_displacement_is_refused_written_nor_exported(tmp_path: Path) -> None:
+    ds = make_tracked()
+    ds["displacement"][1, 3, 2] = np.nan
+    match = r"'displacement' has 1 non-finite values .*first at index \{time=1, node=3, axis=2\}"
+    with pytest.raises(SchemaError, match=match):
+        validate(ds)
+    with pytest.raises(SchemaError, match=match):
+        to_netcdf(ds, tmp_path / "a.nc")
+    with pytest.raises(SchemaError, match=match):
+        to_meshio(ds, tmp_path / "a.xdmf")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_nan_tag_frequency_is_named_as_a_number() -> None:
+    ds = make_tagged()
+    ds = ds.assign_coords(tag_frequency=("tag", [np.nan, 0.125], ds.tag_frequency.attrs))
+    with pytest.raises(SchemaError, match=r"tag_frequency of tag 'x' is nan; expected a positive"):
+        validate(ds)

@@ -1,0 +1,64 @@
+"""Input in the wrong units or absurdly large is refused before any large allocation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import skfem
+import xarray as xr
+
+from harpx.mechanics.body import Body, check_fits_image
+from harpx.mechanics.materials import NeoHookean
+from harpx.mechanics.mesh import box
+
+MAT = NeoHookean(c1=1.0, kappa=120.0)
+# a 48 x 48 x 16 mm field of view of 2 mm voxels centred on 0, like an 8 x 24 x 24 grid
+GRID = xr.Dataset(
+    coords={
+        "z": -7.0 + 2.0 * np.arange(8),
+        "y": -23.0 + 2.0 * np.arange(24),
+        "x": -23.0 + 2.0 * np.arange(24),
+    }
+)
+
+
+def _body(scale: float = 1.0, divisions: tuple[int, int, int] = (3, 3, 2)) -> Body:
+    lengths = (6.0 * scale, 6.0 * scale, 4.0 * scale)
+    origin = (-3.0 * scale, -3.0 * scale, -2.0 * scale)
+    return Body(box(lengths, divisions, origin=origin), MAT)
+
+
+def test_a_mesh_in_mm_inside_the_image_passes() -> None:
+    check_fits_image(_body(), GRID)
+
+
+def test_micrometre_mesh_is_named_before_allocation() -> None:
+    # before: 147 s and "Unable to allocate 141 GiB"
+    with pytest.raises(ValueError, match=r"125 times larger than the image.*micrometres"):
+        check_fits_image(_body(1000.0), GRID)
+
+
+def test_metre_mesh_is_named() -> None:
+    with pytest.raises(ValueError, match=r"spans 0.006 mm but one acquired voxel is 2 mm.*metres"):
+        check_fits_image(_body(1e-3), GRID)
+
+
+def test_one_node_far_outside_the_field_of_view_is_named() -> None:
+    m = _body().mesh
+    p = m.p.copy()
+    corner = int(np.argmax(p.sum(axis=0)))  # the (+x, +y, +z) corner: moving it out keeps J > 0
+    p[:, corner] += 1e5
+    with pytest.raises(
+        ValueError,
+        match=rf"mesh nodes \[{corner}\] lie up to 9.999e\+04 mm outside.*move or fix those nodes",
+    ):
+        check_fits_image(Body(skfem.MeshHex1(p, m.t), MAT), GRID)
+
+
+def test_the_acquired_voxel_sets_the_point_budget() -> None:
+    # one 40 mm cell: ceil(40 / 2) x ceil(40 / 2) x ceil(12 / 2) = 2400 points at 2 mm, and
+    # 10 x 10 x 3 = 300 when the images were upsampled twice (4 mm acquired voxels)
+    coarse = Body(box((40.0, 40.0, 12.0), (1, 1, 1), origin=(-20.0, -20.0, -6.0)), MAT)
+    with pytest.raises(ValueError, match=r"place 2.4e\+03 constraint points.*max_points=2e\+03"):
+        check_fits_image(coarse, GRID, max_points=2000)
+    check_fits_image(coarse, GRID.assign_attrs(upsample=2), max_points=2000)
