@@ -4,7 +4,14 @@ Three kinds of :class:`xarray.Dataset` flow through harpx (DESIGN §3). Each car
 ``ds.attrs["harpx_schema"]``:
 
 ``tagged/1``
-    ``image`` (tag, time, z, y, x): SPAMM magnitude or CSPAMM difference images.
+    ``image`` (tag, time, z, y, x): SPAMM magnitude or CSPAMM difference images. Optional
+    ``mask`` (tag, z, y, x) bool: where that tag's acquisition has data, i.e. its field of
+    view and slice slab. It is a fixed region of space, not the tissue: tissue moving
+    within the acquisition stays inside it, so samplers test a point's *current* position
+    against it (a short-axis stack's mask is its slab along z, whatever the tissue does).
+    The tissue's support at the reference frame (time index 0) is the optional ``body``
+    (z, y, x), a voxel-averaged density in [0, 1]; ``displacement_true`` (time, axis, z, y,
+    x) is NaN outside it. :func:`harpx.imaging.stacks.tagged_dataset` builds one.
 ``phase/1``
     ``phase`` (tag, time, z, y, x) wrapped to [-π, π) and ``magnitude`` (same dims) >= 0.
 ``tracked/1``

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
+from harpx.imaging.stacks import image_coords
 from harpx.schema import standard_attrs
 
 
@@ -46,21 +47,16 @@ def ideal_phase(motion, *, shape, spacing, times, tag_period=8.0, body=None, tag
                 standard_attrs("displacement_true"),
             ),
         },
-        coords={
-            "tag": ("tag", list(tags), standard_attrs("tag")),
-            "axis": ("axis", ["x", "y", "z"], standard_attrs("axis")),
-            "tag_direction": (("tag", "axis"), dirs, standard_attrs("tag_direction")),
-            "tag_frequency": ("tag", freq, standard_attrs("tag_frequency")),
-            "slice_axis": (
-                "tag",
-                ["z" if t != "z" else "y" for t in tags],
-                standard_attrs("slice_axis"),
-            ),
-            "time": ("time", np.asarray(times, float), standard_attrs("time")),
-            "z": ("z", z, standard_attrs("z")),
-            "y": ("y", y, standard_attrs("y")),
-            "x": ("x", x, standard_attrs("x")),
-        },
+        coords=image_coords(
+            tag=list(tags),
+            tag_direction=dirs,
+            tag_frequency=freq,
+            slice_axis=["z" if t != "z" else "y" for t in tags],
+            time=times,
+            z=z,
+            y=y,
+            x=x,
+        ),
         attrs={"harpx_schema": "phase/1", "sequence": "CSPAMM", "upsample": 1, "radius": 0.5},
     )
     return ds

@@ -24,13 +24,14 @@ wrong tag line (a "tag jump"), and points near tissue edges follow the blurred p
 from __future__ import annotations
 
 import time as _time
+import warnings
 from typing import Any
 
 import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
-from harpx.errors import SchemaError
+from harpx.errors import HarpxWarning, SchemaError
 from harpx.imaging.sample import PhaseSampler, wrap
 from harpx.schema import AXES, GRID_DIMS, standard_attrs, validate
 
@@ -65,9 +66,12 @@ def track_harp(
     xarray.Dataset
         A ``tracked/1`` dataset with ``method="harp"``: ``points`` (node, axis),
         ``cells`` (empty, ``element="points"``), ``displacement`` (time, node, axis) in mm
-        (NaN where the point has no valid phase: outside the field of view, the mask or the
-        magnitude floor), per-frame ``epsilon`` (mean absolute wrapped residual over the
-        valid points, rad), ``iterations`` (sweeps run) and ``wall_time`` (s), and
+        (NaN only outside the acquired field of view: off the grid or outside a tag's
+        ``mask``; a point whose harmonic magnitude falls below the sampler's floor, i.e. that
+        has left the tissue signal, keeps its last position), attribute ``points_lost``
+        (points valid at frame 0 that are NaN in some later frame), per-frame ``epsilon``
+        (mean absolute wrapped residual over the points with a valid phase, rad),
+        ``iterations`` (sweeps run) and ``wall_time`` (s), and
         ``displacement_grid`` (time, axis, z, y, x) when ``points`` is None (NaN outside the
         tracked voxels).
 
@@ -75,6 +79,11 @@ def track_harp(
     ------
     SchemaError
         If ``ds`` is neither a valid ``phase/1`` nor a ``tagged/1`` dataset.
+
+    Warns
+    -----
+    HarpxWarning
+        If any point is lost (``points_lost > 0``).
     ValueError
         If ``points`` is not (n, 3) or ``iterations < 1``.
 
@@ -83,7 +92,8 @@ def track_harp(
     Frames are tracked in order, each started from the previous frame's positions
     (frame-to-frame tracking, JHU ``TrackPointHarp``), but the target phase is always the
     reference phase :math:`\\varphi_0(X)`, so errors do not accumulate through the phase.
-    A point that becomes invalid during a frame keeps its last position for the next frame.
+    A point that becomes invalid during a frame (no tissue signal, or outside the
+    acquisition) keeps its last position for the next frame.
 
     Examples
     --------
@@ -143,10 +153,24 @@ def track_harp(
         valid &= valid0
         residual = np.abs(wrap(phi[valid] - phi0[valid]))
         epsilon[t] = float(residual.mean()) if residual.size else np.nan
-        displacement[t, valid] = position[valid] - X[valid]
+        # NaN only outside the acquisition; a point without tissue signal keeps its position
+        acquired = valid0 & sampler.acquired(position).all(axis=1)
+        displacement[t, acquired] = position[acquired] - X[acquired]
         wall[t] = _time.perf_counter() - start
 
     out = _assemble(ds, X, displacement, epsilon, sweeps, wall, int(iterations))
+    lost = int(np.count_nonzero(valid0 & np.isnan(displacement[1:, :, 0]).any(axis=0)))
+    out.attrs["points_lost"] = lost
+    if lost:
+        warnings.warn(
+            f"conventional HARP lost {lost} of {int(valid0.sum())} points "
+            f"({100.0 * lost / max(int(valid0.sum()), 1):.1f} %): they left the acquired field "
+            "of view (the grid or a tag's mask) in some frame, and their displacement is NaN "
+            "there (out.attrs['points_lost']); acquire a larger field of view or track "
+            "points farther from its edges",
+            HarpxWarning,
+            stacklevel=2,
+        )
     if grid_points:
         assert flat_index is not None
         out["displacement_grid"] = _on_grid(grid, displacement, flat_index)

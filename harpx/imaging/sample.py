@@ -308,6 +308,23 @@ class PhaseSampler:
         demod, _, valid_tags = self._evaluate(pts, derivatives=False)
         return np.abs(demod), valid_tags.all(axis=1)
 
+    def acquired(self, points: ArrayLike) -> NDArray[np.bool_]:
+        """Which tags have data at points: inside the field of view and the tag's ``mask``.
+
+        The acquisition only, a fixed region of space: unlike the validity of
+        :meth:`sample`, the magnitude floor (whether there is tissue signal) is not tested.
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            Positions in mm, columns (x, y, z).
+
+        Returns
+        -------
+        numpy.ndarray of bool, shape (n, ntag)
+        """
+        return self._locate(_as_points(points))[1]
+
     # ------------------------------------------------------------------------------------
     def _remodulate(self, pts: NDArray[np.float64], demod: NDArray[np.complex128]) -> Any:
         position = pts.copy()
@@ -321,14 +338,7 @@ class PhaseSampler:
         n = pts.shape[0]
         d = len(self._active)
         ntag = self._ntag
-        u = (pts[:, self._columns] - self._origin) / self._spacing  # (n, d) in voxels
-        inside = np.all(np.isfinite(u), axis=1)
-        inside &= np.all((u >= -_FOV_TOL) & (u <= self._shape - 1 + _FOV_TOL), axis=1)
-        u = np.clip(np.where(inside[:, None], u, 0.0), 0.0, self._shape - 1)
-        tag_ok = np.repeat(inside[:, None], ntag, axis=1)  # (n, ntag)
-        if self._mask is not None and inside.any():
-            nearest = tuple(np.rint(u[inside]).astype(np.int64).T)
-            tag_ok[inside] = self._mask[(slice(None), *nearest)].T
+        u, tag_ok = self._locate(pts)
         needed = tag_ok.any(axis=1)
         nq = 1 + d if derivatives else 1
         if needed.all():
@@ -348,6 +358,18 @@ class PhaseSampler:
         signal = np.all(((size >= self._floor) & (size > 0)) | ~tag_ok, axis=1)
         valid_tags = tag_ok & signal[:, None]
         return demod, deriv, valid_tags
+
+    def _locate(self, pts: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """Voxel coordinates (n, d) (clipped into the grid) and which tags acquired each point."""
+        u = (pts[:, self._columns] - self._origin) / self._spacing  # (n, d) in voxels
+        inside = np.all(np.isfinite(u), axis=1)
+        inside &= np.all((u >= -_FOV_TOL) & (u <= self._shape - 1 + _FOV_TOL), axis=1)
+        u = np.clip(np.where(inside[:, None], u, 0.0), 0.0, self._shape - 1)
+        tag_ok = np.repeat(inside[:, None], self._ntag, axis=1)  # (n, ntag)
+        if self._mask is not None and inside.any():
+            nearest = tuple(np.rint(u[inside]).astype(np.int64).T)
+            tag_ok[inside] = self._mask[(slice(None), *nearest)].T
+        return u, tag_ok
 
     def _spline(self, u: NDArray[np.float64], nq: int) -> NDArray[np.float64]:
         """Spline value (q=0) and derivatives along each active axis (q=1..d) at ``u``."""

@@ -33,7 +33,7 @@ says when the motion cannot be inverted (e.g. it folds).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import xarray as xr
@@ -42,9 +42,10 @@ from scipy import ndimage
 
 from harpx.errors import ConvergenceError
 from harpx.imaging.fft import fft2, ifft2
-from harpx.schema import AXES, GRID_DIMS, standard_attrs
+from harpx.imaging.stacks import tagged_dataset
+from harpx.schema import AXES, GRID_DIMS
 
-__all__ = ["gridded_displacement", "invert_motion", "synthesize_tagged"]
+__all__ = ["gridded_displacement", "invert_motion", "synthesize_tagged", "voxel_density"]
 
 Motion = Callable[[NDArray[np.float64], float], NDArray[np.float64]]
 Density = Callable[[NDArray[np.float64]], NDArray[np.float64]]
@@ -324,6 +325,49 @@ def _voxel_mean(values: NDArray[np.float64], nvox_z: int, centres, offsets) -> N
     return values.reshape(nsub, -1).mean(axis=0).reshape(nvox_z, cy.size, cx.size)
 
 
+def voxel_density(
+    body: Density,
+    centres: Sequence[ArrayLike],
+    spacing: ArrayLike,
+    *,
+    oversample: int = 3,
+) -> NDArray[np.float64]:
+    """Voxel-averaged density of a body on a grid (partial volume).
+
+    Parameters
+    ----------
+    body : callable
+        Density ``ρ(X)`` in [0, 1] of points (n, 3) mm, columns (x, y, z).
+    centres : sequence of 3 array_like
+        Voxel-centre coordinates ``(z, y, x)``, mm.
+    spacing : array_like, shape (3,)
+        Voxel size ``(dz, dy, dx)``, mm.
+    oversample : int, default 3
+        Sub-samples per voxel and axis (``oversample**3`` per voxel), at the centres of equal
+        sub-intervals.
+
+    Returns
+    -------
+    ndarray, shape (nz, ny, nx)
+        Mean density over each voxel (dimensionless).
+
+    Examples
+    --------
+    >>> from harpx.imaging.synth import voxel_density
+    >>> half = lambda X: (X[:, 0] < 0.0).astype(float)  # the half space x < 0
+    >>> voxel_density(half, ([0.0], [0.0], [-1.0, 0.0, 1.0]), (1, 1, 1), oversample=2)[0, 0]
+    array([1. , 0.5, 0. ])
+    """
+    axes = [np.asarray(c, dtype=np.float64).ravel() for c in centres]
+    step = np.asarray(spacing, dtype=np.float64)
+    offsets = [_offsets(int(oversample), step[k]) for k in range(3)]
+    out = np.empty(tuple(a.size for a in axes))
+    for zs, pts in _lattice_blocks(axes, offsets):
+        rho = np.clip(np.asarray(body(pts), dtype=np.float64), 0.0, 1.0)
+        out[zs] = _voxel_mean(rho, zs.stop - zs.start, axes, offsets)
+    return out
+
+
 def _crop_kspace(volume: NDArray[np.float64], plane: tuple[int, int], fraction: float) -> NDArray:
     """Keep the centred ``fraction`` of each slice's k-space along both in-plane axes."""
     moved = np.moveaxis(volume, plane, (-2, -1))
@@ -413,10 +457,12 @@ def synthesize_tagged(
     Returns
     -------
     xarray.Dataset
-        ``tagged/1`` with ``image`` (tag, time, z, y, x), ``mask`` (tag, z, y, x) = body
-        support (voxel-averaged density >= 0.5 at the reference frame), ``body`` (z, y, x)
-        voxel-averaged density, ``displacement_true`` (time, axis, z, y, x) = ``u`` at the
-        voxel centres (NaN outside the body), tag coords, and attrs ``sequence``,
+        ``tagged/1`` with ``image`` (tag, time, z, y, x), ``mask`` (tag, z, y, x) True
+        everywhere (each voxel of the grid is a sample of the acquisition: the grid is its
+        field of view and slab; the mask is not the tissue), ``body`` (z, y, x)
+        voxel-averaged density at the reference frame (the tissue's support),
+        ``displacement_true`` (time, axis, z, y, x) = ``u`` at the voxel centres (NaN where
+        ``body < 0.5``), tag coords, and attrs ``sequence``,
         ``noise_sigma``, ``t1``, ``flip_angle``, ``oversample``, ``kspace_fraction``.
 
     Raises
@@ -492,9 +538,7 @@ def synthesize_tagged(
 
     # reference frame: body density (voxel averaged) and truth at the voxel centres
     iso = [_offsets(oversample, spacing_arr[k]) for k in range(3)]
-    body_img = np.empty(shape)
-    for zs, pts in _lattice_blocks(centres, iso):
-        body_img[zs] = _voxel_mean(density(pts), zs.stop - zs.start, centres, iso)
+    body_img = voxel_density(density, centres, spacing_arr, oversample=oversample)
     inside = body_img >= 0.5
     voxel_pts = _lattice_blocks(centres, [np.zeros(1)] * 3)
     u0 = np.concatenate([np.asarray(u(p, float(times_arr[0]))) for _, p in voxel_pts])
@@ -568,33 +612,7 @@ def synthesize_tagged(
     elif sequence == "SPAMM":
         image = np.abs(image)
 
-    tag_dims = ("tag", "time", *GRID_DIMS)
-    coords = {
-        "tag": ("tag", np.array(labels, dtype=object), standard_attrs("tag")),
-        "axis": ("axis", np.array(AXES, dtype=object), standard_attrs("axis")),
-        "tag_direction": (("tag", "axis"), direction, standard_attrs("tag_direction")),
-        "tag_frequency": ("tag", frequency, standard_attrs("tag_frequency")),
-        "slice_axis": ("tag", np.array(slice_axes, dtype=object), standard_attrs("slice_axis")),
-        "time": ("time", times_arr, standard_attrs("time")),
-        **{d: (d, centres[k], standard_attrs(d)) for k, d in enumerate(GRID_DIMS)},
-    }
-    data_vars = {
-        "image": (tag_dims, image, standard_attrs("image")),
-        "mask": (
-            ("tag", *GRID_DIMS),
-            np.broadcast_to(inside, (len(labels), *shape)).copy(),
-            standard_attrs("mask"),
-        ),
-        "body": (GRID_DIMS, body_img, standard_attrs("body")),
-        "displacement_true": (
-            ("time", "axis", *GRID_DIMS),
-            truth,
-            standard_attrs("displacement_true"),
-        ),
-    }
-    attrs = {
-        "harpx_schema": "tagged/1",
-        "sequence": sequence,
+    attrs: dict[str, Any] = {
         "noise_sigma": float(sigma),
         "t1": float(t1),
         "flip_angle": beta_deg,
@@ -605,4 +623,21 @@ def synthesize_tagged(
         attrs["snr"] = float(snr)
     if slice_thickness is not None:
         attrs["slice_thickness"] = float(slice_thickness)
-    return xr.Dataset(data_vars, coords=coords, attrs=attrs)
+    # every voxel of the grid is a sample of the acquisition: the mask (field of view and
+    # slab) is the whole grid; the tissue is `body`
+    return tagged_dataset(
+        image,
+        tag=labels,
+        tag_direction=direction,
+        tag_frequency=frequency,
+        slice_axis=slice_axes,
+        time=times_arr,
+        z=centres[0],
+        y=centres[1],
+        x=centres[2],
+        sequence=sequence,
+        mask=np.ones(shape, dtype=bool),
+        body=body_img,
+        displacement_true=truth,
+        attrs=attrs,
+    )

@@ -25,10 +25,10 @@ the slice normal ``n = r × c`` (slices ordered by ``(P - P_0)·n``, not by file
 
 Resampling and masks
 --------------------
-Each stack is resampled with (tri)linear interpolation in its own (slice, row, column) index
-space (:func:`scipy.ndimage.map_coordinates`, ``order=1``); between slices the interpolation
-is linear in the slice position, so uneven slice spacing is handled. A grid point has data
-from a stack (``mask`` True) when
+Each stack is resampled onto one grid by :func:`harpx.imaging.stacks.resample_stack`
+((tri)linear in the stack's own (slice, row, column) index space, linear in the slice
+position between slices, so uneven slice spacing is handled). A grid point has data from a
+stack (``mask`` True) when
 
 * in plane, it lies within the hull of the pixel centres (0 ≤ column index ≤ Columns-1 and
   0 ≤ row index ≤ Rows-1), where bilinear interpolation needs no extrapolation, and
@@ -38,9 +38,11 @@ from a stack (``mask`` True) when
   face the nearest slice is used, since a slice's signal is an average over its thickness.
   Gaps between slices count as data (linear interpolation across them).
 
-Outside its mask a tag's image is 0. The grid is aligned so that its points fall on the pixel
-centres of an axis-aligned stack whose pixel spacing equals the grid spacing (no
-interpolation at all in that case) and it covers the union of all slabs.
+The mask is the acquisition's field of view and slab, a fixed region of space; DICOM says
+nothing about where the tissue is, so the result has no ``body``. Outside its mask a tag's
+image is 0. The grid (:func:`harpx.imaging.stacks.common_grid`) is aligned so that its
+points fall on the pixel centres of an axis-aligned stack whose pixel spacing equals the grid
+spacing (no interpolation at all in that case) and it covers the union of all slabs.
 """
 
 from __future__ import annotations
@@ -57,11 +59,11 @@ from typing import Any
 import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from harpx._typing import FloatArray, PathLike
 from harpx.errors import HarpxError, HarpxWarning
-from harpx.schema import AXES, SEQUENCES, standard_attrs, validate
+from harpx.imaging.stacks import SliceStack, common_grid, resample_stack, tagged_dataset
+from harpx.schema import AXES, SEQUENCES
 
 __all__ = ["read_tagged", "voxel_positions"]
 
@@ -74,8 +76,6 @@ SLICE_TOL = 1e-2
 INPLANE_TOL = 1e-2
 #: Output images larger than this (bytes) trigger a :class:`~harpx.errors.HarpxWarning`.
 LARGE_OUTPUT_BYTES = 2**31
-_INDEX_EPS = 1e-6  # index units: rounding slack of the in-plane mask test
-_SLAB_EPS = 1e-6  # mm: rounding slack of the through-plane mask test
 _TIME_DUPLICATE = 1e-3  # ms: two frames of one slice closer than this are duplicates
 
 
@@ -348,31 +348,18 @@ class _Stack:
     images: list[list[_Image]]  # [slice][frame]
 
     @property
-    def affine(self) -> FloatArray:
-        """Columns map (column index, row index, normal offset mm) to patient offsets (mm)."""
-        return np.column_stack(
-            [
-                self.along_row * self.pixel_spacing[1],
-                self.along_column * self.pixel_spacing[0],
-                self.normal,
-            ]
+    def geometry(self) -> SliceStack:
+        """The stack's slice geometry (patient coordinates, mm)."""
+        return SliceStack(
+            origin=self.origin,
+            along_row=self.along_row,
+            along_column=self.along_column,
+            pixel_spacing=(float(self.pixel_spacing[0]), float(self.pixel_spacing[1])),
+            rows=self.rows,
+            columns=self.columns,
+            offsets=self.offsets,
+            slab=self.slab,
         )
-
-    def corners(self) -> tuple[FloatArray, FloatArray]:
-        """Patient positions (8, 3) of the corners of the pixel-centre hull and of the slab."""
-
-        def box(low: float, high: float) -> FloatArray:
-            local = np.array(
-                [
-                    (j, i, o)
-                    for j in (0.0, self.columns - 1.0)
-                    for i in (0.0, self.rows - 1.0)
-                    for o in (low, high)
-                ]
-            )
-            return self.origin + local @ self.affine.T
-
-        return box(self.offsets[0], self.offsets[-1]), box(*self.slab)
 
     def name(self) -> str:
         return f"series {self.description!r} ({self.uid})"
@@ -698,46 +685,6 @@ def _frequencies(tag_period: float | Mapping[str, float] | None, labels: list[st
 # resampling
 
 
-def _grid(stacks: list[_Stack], spacing: float) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """x, y, z voxel-centre coordinates (mm) covering the union of the slabs."""
-    hulls, slabs = zip(*(s.corners() for s in stacks), strict=True)
-    centre_lo = np.min([h.min(axis=0) for h in hulls], axis=0)
-    slab_lo = np.min([s.min(axis=0) for s in slabs], axis=0)
-    slab_hi = np.max([s.max(axis=0) for s in slabs], axis=0)
-    start = centre_lo - spacing * np.floor((centre_lo - slab_lo) / spacing + 1e-9)
-    count = np.floor((slab_hi - start) / spacing + 1e-9).astype(int) + 1
-    x, y, z = (start[a] + spacing * np.arange(count[a]) for a in range(3))
-    return x, y, z
-
-
-def _resample(
-    stack: _Stack, volume: NDArray[np.float64], x: FloatArray, y: FloatArray, z: FloatArray
-) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """Image (time, z, y, x) and mask (z, y, x) of one stack on the grid."""
-    inverse = np.linalg.inv(stack.affine)
-    dx, dy, dz = x - stack.origin[0], y - stack.origin[1], z - stack.origin[2]
-    column, row, offset = (
-        inverse[m, 0] * dx[None, None, :]
-        + inverse[m, 1] * dy[None, :, None]
-        + inverse[m, 2] * dz[:, None, None]
-        for m in range(3)
-    )
-    mask = (
-        (column >= -_INDEX_EPS)
-        & (column <= stack.columns - 1 + _INDEX_EPS)
-        & (row >= -_INDEX_EPS)
-        & (row <= stack.rows - 1 + _INDEX_EPS)
-        & (offset >= stack.slab[0] - _SLAB_EPS)
-        & (offset <= stack.slab[1] + _SLAB_EPS)
-    )
-    slice_index = np.interp(offset[mask], stack.offsets, np.arange(stack.offsets.size))
-    coords = np.stack([slice_index, row[mask], column[mask]])
-    image = np.zeros((volume.shape[0], *mask.shape), dtype=np.float64)
-    for t in range(volume.shape[0]):
-        image[t][mask] = ndimage.map_coordinates(volume[t], coords, order=1, mode="nearest")
-    return image, mask
-
-
 # ---------------------------------------------------------------------------------------------
 # public entry point
 
@@ -856,7 +803,7 @@ def read_tagged(
     step = float(min(s.pixel_spacing.min() for s in stacks)) if spacing is None else spacing
     if not (math.isfinite(step) and step > 0):
         raise HarpxError(f"spacing is {spacing!r}; expected a positive grid spacing in mm")
-    x, y, z = _grid(stacks, step)
+    x, y, z = common_grid([s.geometry for s in stacks], step)
     nbytes = len(triples) * times.size * x.size * y.size * z.size * 8
     if nbytes > LARGE_OUTPUT_BYTES:
         warnings.warn(
@@ -866,38 +813,30 @@ def read_tagged(
             stacklevel=2,
         )
     volumes = dict(zip(by_series, _load_pixels(stacks), strict=True))
-    resampled = {uid: _resample(stack, volumes[uid], x, y, z) for uid, stack in by_series.items()}
+    resampled = {
+        uid: resample_stack(stack.geometry, volumes[uid], x, y, z)
+        for uid, stack in by_series.items()
+    }
     image = np.stack([resampled[s.uid][0] for s in tag_stacks])
     mask = np.stack([resampled[s.uid][1] for s in tag_stacks])
     slice_axes = [AXES[int(np.argmax(np.abs(s.normal)))] for s in tag_stacks]
 
-    def coord(name: str, dims: Any, values: Any) -> tuple[Any, Any, dict[str, str]]:
-        return dims, values, standard_attrs(name)
-
-    ds = xr.Dataset(
-        {
-            "image": coord("image", ("tag", "time", "z", "y", "x"), image),
-            "mask": coord("mask", ("tag", "z", "y", "x"), mask),
-        },
-        coords={
-            "tag": coord("tag", "tag", np.array(labels, dtype=str)),
-            "axis": coord("axis", "axis", np.array(AXES, dtype=str)),
-            "tag_direction": coord("tag_direction", ("tag", "axis"), directions),
-            "tag_frequency": coord("tag_frequency", "tag", frequencies),
-            "slice_axis": coord("slice_axis", "tag", np.array(slice_axes, dtype=str)),
-            "time": coord("time", "time", times),
-            "z": coord("z", "z", z),
-            "y": coord("y", "y", y),
-            "x": coord("x", "x", x),
-        },
+    return tagged_dataset(
+        image,
+        tag=labels,
+        tag_direction=directions,
+        tag_frequency=frequencies,
+        slice_axis=slice_axes,
+        time=times,
+        z=z,
+        y=y,
+        x=x,
+        sequence=kind,
+        mask=mask,
         attrs={
-            "harpx_schema": "tagged/1",
-            "sequence": kind,
             "source": "DICOM",
             "dicom_series": "; ".join(
                 f"{label}: {s.uid}" for label, s in zip(labels, tag_stacks, strict=True)
             ),
         },
     )
-    validate(ds, "tagged")
-    return ds

@@ -88,6 +88,7 @@ from scipy.spatial import cKDTree
 
 from harpx._typing import FloatArray, IntArray
 from harpx.errors import ConvergenceError
+from harpx.imaging.stacks import resample_stacks, tagged_dataset
 from harpx.imaging.synth import synthesize_tagged
 from harpx.mechanics.body import Body
 from harpx.mechanics.cut import GrowthField, NodeFixed, release, set_growth
@@ -98,7 +99,6 @@ from harpx.mechanics.materials import ActiveContraction, Guccione
 from harpx.mechanics.mesh import MeshSpec
 from harpx.mechanics.newton import equilibrate
 from harpx.mechanics.ventricle import VentricleGeometry, ventricle
-from harpx.schema import GRID_DIMS, standard_attrs, validate
 
 __all__ = [
     "FEMotion",
@@ -602,19 +602,6 @@ class FEMotion:
 # ------------------------------------------------------------------------------ images
 
 
-def _stack_weights(
-    centres: FloatArray, thickness: float, target: FloatArray
-) -> tuple[IntArray, FloatArray, np.ndarray]:
-    """Linear interpolation between slice centres onto ``target`` and the slab coverage."""
-    h = float(centres[1] - centres[0])
-    f = np.clip((target - centres[0]) / h, 0.0, centres.size - 1.0)
-    i0 = np.minimum(np.floor(f).astype(np.int64), centres.size - 2)
-    covered = (target >= centres[0] - 0.5 * thickness - 1e-9) & (
-        target <= centres[-1] + 0.5 * thickness + 1e-9
-    )
-    return i0, f - i0, covered
-
-
 def _acquire(
     motion: FEMotion,
     size: LVSize,
@@ -669,74 +656,39 @@ def _acquire(
         slice_thickness=h_la,
         **common,
     )
-    i_sa, w_sa, cov_sa = _stack_weights(z_sa, h_sa, z)
-    i_la, w_la, cov_la = _stack_weights(y_la, h_la, xy)
-    im_sa = sa["image"].values  # (2, time, n_sa, y, x)
-    im_la = la["image"].values  # (1, time, z, n_la, x)
-    w3 = w_sa[:, None, None]
-    img_sa = (1 - w3) * im_sa[:, :, i_sa] + w3 * im_sa[:, :, i_sa + 1]
-    img_sa *= cov_sa[:, None, None]
-    w3 = w_la[None, :, None]
-    img_la = (1 - w3) * im_la[:, :, :, i_la] + w3 * im_la[:, :, :, i_la + 1]
-    img_la *= cov_la[None, :, None]
-    image = np.concatenate([img_sa, img_la], axis=0)
+    image, mask = resample_stacks([sa, la], xy, xy, z)
     shape = (n_z, n_xy, n_xy)
-    mask = np.zeros((3, *shape), dtype=bool)
-    mask[:2] = cov_sa[:, None, None]
-    mask[2] = cov_la[None, :, None]
     Zg, Yg, Xg = np.meshgrid(z, xy, xy, indexing="ij")
     voxels = np.stack([Xg.ravel(), Yg.ravel(), Zg.ravel()], axis=1)
     truth = motion.displacement(voxels)  # (time, n, 3)
     truth = truth.reshape(times.size, *shape, 3).transpose(0, 4, 1, 2, 3)
-    body = np.isfinite(truth[0, 0]).astype(np.float64)
-    coords = {
-        "tag": ("tag", np.array(["x", "y", "z"], dtype=object), standard_attrs("tag")),
-        "axis": ("axis", np.array(["x", "y", "z"], dtype=object), standard_attrs("axis")),
-        "tag_direction": (("tag", "axis"), np.eye(3), standard_attrs("tag_direction")),
-        "tag_frequency": (
-            "tag",
-            np.full(3, 1.0 / size.tag_period),
-            standard_attrs("tag_frequency"),
-        ),
-        "slice_axis": (
-            "tag",
-            np.array(["z", "z", "y"], dtype=object),
-            standard_attrs("slice_axis"),
-        ),
-        "time": ("time", times, standard_attrs("time")),
-        "z": ("z", z, standard_attrs("z")),
-        "y": ("y", xy, standard_attrs("y")),
-        "x": ("x", xy.copy(), standard_attrs("x")),
+    attrs: dict[str, Any] = {
+        "noise_sigma": float(sa.attrs["noise_sigma"]),
+        "t1": float(sa.attrs["t1"]),
+        "flip_angle": float(sa.attrs["flip_angle"]),
+        "oversample": int(size.oversample),
+        "sa_slice_positions_mm": z_sa,
+        "la_slice_positions_mm": y_la,
+        "sa_slice_thickness_mm": h_sa,
+        "la_slice_thickness_mm": h_la,
     }
-    ds = xr.Dataset(
-        {
-            "image": (("tag", "time", *GRID_DIMS), image, standard_attrs("image")),
-            "mask": (("tag", *GRID_DIMS), mask, standard_attrs("mask")),
-            "body": (GRID_DIMS, body, standard_attrs("body")),
-            "displacement_true": (
-                ("time", "axis", *GRID_DIMS),
-                truth,
-                standard_attrs("displacement_true"),
-            ),
-        },
-        coords=coords,
-        attrs={
-            "harpx_schema": "tagged/1",
-            "sequence": "CSPAMM",
-            "noise_sigma": float(sa.attrs["noise_sigma"]),
-            "t1": float(sa.attrs["t1"]),
-            "flip_angle": float(sa.attrs["flip_angle"]),
-            "oversample": int(size.oversample),
-            "sa_slice_positions_mm": z_sa,
-            "la_slice_positions_mm": y_la,
-            "sa_slice_thickness_mm": h_sa,
-            "la_slice_thickness_mm": h_la,
-        },
-    )
     if snr is not None:
-        ds.attrs["snr"] = float(snr)
-    validate(ds, "tagged")
-    return ds
+        attrs["snr"] = float(snr)
+    return tagged_dataset(
+        image,
+        tag=["x", "y", "z"],
+        tag_frequency=1.0 / size.tag_period,
+        slice_axis=["z", "z", "y"],
+        time=times,
+        z=z,
+        y=xy,
+        x=xy,
+        sequence="CSPAMM",
+        mask=mask,
+        body=np.isfinite(truth[0, 0]).astype(np.float64),
+        displacement_true=truth,
+        attrs=attrs,
+    )
 
 
 # ------------------------------------------------------------------------- prestretch

@@ -36,7 +36,8 @@ import xarray as xr
 
 from harpx._typing import FloatArray
 from harpx.imaging.harp import extract_phase
-from harpx.imaging.synth import synthesize_tagged
+from harpx.imaging.stacks import resample_stacks, tagged_dataset
+from harpx.imaging.synth import synthesize_tagged, voxel_density
 from harpx.inverse.activation import simulate_activation
 from harpx.mechanics.body import Body
 from harpx.mechanics.loads import Fixed
@@ -365,52 +366,6 @@ def _slice_centres(lo: float, hi: float, count: int) -> tuple[FloatArray, float]
     return lo + spacing * (np.arange(count) + 0.5), spacing
 
 
-def _resample_stack(
-    stack: xr.Dataset, dim: str, target: FloatArray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Linear interpolation of ``image`` (tag, time, z, y, x) along the slice axis ``dim``.
-
-    Between slice centres: linear; from the outer slice centre to the slab face (half a
-    slice spacing): the nearest slice; outside the slab: no data (mask False, image 0).
-    """
-    centres = np.asarray(stack[dim].values, dtype=np.float64)
-    half = 0.5 * (centres[1] - centres[0]) if centres.size > 1 else 0.5
-    covered = (target >= centres[0] - half - 1e-9) & (target <= centres[-1] + half + 1e-9)
-    pos = np.interp(target, centres, np.arange(centres.size))
-    lo = np.clip(np.floor(pos).astype(int), 0, centres.size - 1)
-    hi = np.clip(lo + 1, 0, centres.size - 1)
-    w = pos - lo
-    axis = stack["image"].dims.index(dim)
-    image = np.asarray(stack["image"].values)
-    out = np.take(image, lo, axis=axis) * _along(1.0 - w, axis, image.ndim) + np.take(
-        image, hi, axis=axis
-    ) * _along(w, axis, image.ndim)
-    out = out * _along(covered.astype(float), axis, image.ndim)
-    return out, covered
-
-
-def _along(v: np.ndarray, axis: int, ndim: int) -> np.ndarray:
-    shape = [1] * ndim
-    shape[axis] = v.size
-    return v.reshape(shape)
-
-
-def _density_grid(
-    z: FloatArray, y: FloatArray, x: FloatArray, g: TongueGeometry, sub: int = 2
-) -> np.ndarray:
-    """Voxel-averaged tongue density on a grid (``sub``³ samples per voxel)."""
-    step = g.pixel
-    offs = step * ((np.arange(sub) + 0.5) / sub - 0.5)
-    total = np.zeros((z.size, y.size, x.size))
-    for dz in offs:  # sub³ <= 8 shifted lattices, each vectorised over all voxels
-        for dy in offs:
-            for dx in offs:
-                Z, Y, X = np.meshgrid(z + dz, y + dy, x + dx, indexing="ij")
-                pts = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
-                total += tongue_inside(pts, g.length, g.width, g.height).reshape(total.shape)
-    return total / sub**3
-
-
 def _acquire(
     g: TongueGeometry,
     truth_body: Body,
@@ -480,69 +435,38 @@ def _acquire(
         slice_axis="y",
         **common,
     )
-    img_cor, cov_x = _resample_stack(coronal, "x", x)
-    img_sag, cov_y = _resample_stack(sagittal, "y", y)
-    image = np.concatenate([img_sag, img_cor], axis=0)  # tags x, y, z
-    rho = _density_grid(z, y, x, g)
-    inside = rho >= 0.5
-    mask = np.stack(
-        [
-            inside & cov_y[None, :, None],
-            inside & cov_x[None, None, :],
-            inside & cov_x[None, None, :],
-        ]
-    )
+    image, mask = resample_stacks([sagittal, coronal], x, y, z)  # tags x, y, z
+    rho = voxel_density(density, (z, y, x), (g.pixel,) * 3, oversample=2)
     Z, Y, X = np.meshgrid(z, y, x, indexing="ij")
     vox = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
     ut, _ = _interpolate_truth(truth_body, U, vox)
     truth = ut.reshape(U.shape[0], *Z.shape, 3).transpose(0, 4, 1, 2, 3)
-    truth[:, :, ~inside] = np.nan
-    direction = np.eye(3)
-    tags = ["x", "y", "z"]
-    tagged = xr.Dataset(
-        {
-            "image": (("tag", "time", "z", "y", "x"), image, standard_attrs("image")),
-            "mask": (("tag", "z", "y", "x"), mask, standard_attrs("mask")),
-            "body": (("z", "y", "x"), rho, standard_attrs("body")),
-            "displacement_true": (
-                ("time", "axis", "z", "y", "x"),
-                truth,
-                standard_attrs("displacement_true"),
-            ),
-        },
-        coords={
-            "tag": ("tag", np.array(tags, dtype=object), standard_attrs("tag")),
-            "axis": ("axis", np.array(["x", "y", "z"], dtype=object), standard_attrs("axis")),
-            "tag_direction": (("tag", "axis"), direction, standard_attrs("tag_direction")),
-            "tag_frequency": (
-                "tag",
-                np.full(3, 1.0 / g.tag_period),
-                standard_attrs("tag_frequency"),
-            ),
-            "slice_axis": (
-                "tag",
-                np.array(["y", "x", "x"], dtype=object),
-                standard_attrs("slice_axis"),
-            ),
-            "time": ("time", times, standard_attrs("time")),
-            "z": ("z", z, standard_attrs("z")),
-            "y": ("y", y, standard_attrs("y")),
-            "x": ("x", x, standard_attrs("x")),
-        },
-        attrs={
-            "harpx_schema": "tagged/1",
-            "sequence": "CSPAMM",
-            "scene": f"tongue/{size}",
-            "noise_sigma": float(coronal.attrs["noise_sigma"]),
-            "coronal_slices": int(cor.size),
-            "sagittal_slices": int(sag.size),
-            "coronal_slice_spacing": float(dx_cor),
-            "sagittal_slice_spacing": float(dy_sag),
-        },
-    )
+    truth[:, :, rho < 0.5] = np.nan
+    attrs: dict[str, Any] = {
+        "scene": f"tongue/{size}",
+        "noise_sigma": float(coronal.attrs["noise_sigma"]),
+        "coronal_slices": int(cor.size),
+        "sagittal_slices": int(sag.size),
+        "coronal_slice_spacing": float(dx_cor),
+        "sagittal_slice_spacing": float(dy_sag),
+    }
     if snr is not None:
-        tagged.attrs["snr"] = float(snr)
-    return tagged
+        attrs["snr"] = float(snr)
+    return tagged_dataset(
+        image,
+        tag=["x", "y", "z"],
+        tag_frequency=1.0 / g.tag_period,
+        slice_axis=["y", "x", "x"],
+        time=times,
+        z=z,
+        y=y,
+        x=x,
+        sequence="CSPAMM",
+        mask=mask,
+        body=rho,
+        displacement_true=truth,
+        attrs=attrs,
+    )
 
 
 def tongue(

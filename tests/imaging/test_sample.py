@@ -187,6 +187,10 @@ def test_outside_fov_masked_and_faded_points_are_invalid() -> None:
                                 [True, False], [False, False], [False, False]]  # fmt: skip
     np.testing.assert_array_equal(phi_t[valid], phi[valid])
     assert phi_t[4, 1] == 0 and np.all(grad_t[4, 1] == 0) and np.any(grad_t[4, 0] != 0)
+    # the acquisition alone (field of view and masks): faded tissue is still acquired
+    assert PhaseSampler(ds, 0).acquired(points).tolist() == [
+        [True, True], [False, False], [False, False], [False, False],
+        [True, False], [True, True], [True, True]]  # fmt: skip
 
 
 def test_linear_order_is_second_order(rng: np.random.Generator) -> None:
