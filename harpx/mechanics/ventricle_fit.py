@@ -382,7 +382,7 @@ def ventricle_contours(
     structure[tuple(plane)] = ndi.generate_binary_structure(2, 1)
     cavity = ndi.binary_fill_holes(inside, structure=structure) & ~inside
 
-    def crossings(dim: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def crossings(dim: int) -> tuple[FloatArray, Any, Any]:
         lo = [slice(None)] * 3
         hi = [slice(None)] * 3
         lo[dim], hi[dim] = slice(None, -1), slice(1, None)
