@@ -352,7 +352,7 @@ def cardiac_strain(
         )  # fmt: skip
         local = _local_strain(E, template.local_basis(centres))
         dims = ("time", "cell", "component")
-        out = tracked.assign(measures.variables)
+        out = tracked.assign_coords(measures.coords).assign(measures.data_vars)
         out["strain_lv"] = xr.DataArray(
             local, dims=dims,
             attrs={"units": "1", "long_name": "Green-Lagrange strain in the LV frame"},
@@ -389,7 +389,7 @@ def cardiac_strain(
     )  # fmt: skip
     seg = np.zeros(len(pts), dtype=np.int64)
     seg[finite] = aha_segments(pts[finite], template, anterior=anterior)
-    out = tracked.assign(measures.drop_vars("time", errors="ignore").variables)
+    out = tracked.assign_coords(measures.drop_vars("time").coords).assign(measures.data_vars)
     shape = tuple(u.sizes[d] for d in ("z", "y", "x"))
     out["aha_segment_grid"] = xr.DataArray(
         seg.reshape(shape), dims=("z", "y", "x"),

@@ -130,3 +130,9 @@ def test_bullseye_draws_17_segments_and_rejects_others():
 def test_dataset_without_displacement_is_named():
     with pytest.raises(ValueError, match="needs a finite-element tracked/1 dataset"):
         cardiac_strain(xr.Dataset({"a": ("x", [1.0])}), TEMPLATE)
+
+
+def test_segment_coordinates_survive_on_the_result():
+    out = cardiac_strain(_fe_dataset(_dilation), TEMPLATE)
+    assert str(out.segment_name.sel(segment=17).values) == "apex"
+    assert out.component.values.tolist() == ["radial", "circumferential", "longitudinal"]
