@@ -44,8 +44,6 @@ from harpx.cardiac.strain import lv_measures
 from harpx.io.dicom import read_tagged
 from harpx.io.dicom_write import write_tagged
 from harpx.mechanics.body import Body
-from harpx.mechanics.cut import NodeFixed
-from harpx.mechanics.loads import Fixed
 from harpx.mechanics.segmentation import mesh_from_labels, read_labels
 from harpx.mechanics.ventricle_fit import fit_ventricle_to_mask
 from harpx.plotting import bullseye
@@ -95,38 +93,22 @@ print("residual (mm):", {k: round(v, 2) for k, v in fit_report.items()})
 
 
 # %%
-def is_base(centres, normals):
-    near = np.abs(template.to_local(centres)[:, 2] - g.truncation) < 3.0
-    return near & (normals @ template.axis > 0.7)
-
-
-def is_endo(centres, normals):
-    return ~is_base(centres, normals) & (template.transmural(centres) < 0.5)
-
-
-def is_epi(centres, normals):
-    return ~is_base(centres, normals) & (template.transmural(centres) >= 0.5)
-
-
 segmented = mesh_from_labels(
     mask, element_size=6.0, names={1: "myocardium"},
-    boundaries={"base": is_base, "endo": is_endo, "epi": is_epi}, fibers=template.fibers,
+    boundaries=template.facet_predicates(), fibers=template.fibers,
 )  # fmt: skip
 quality = segmented.quality
 print(quality)
 body = Body(segmented.spec, myocardium())
+print({name: len(ids) for name, ids in body.boundaries.items()}, "facets")
 
 # %% [markdown]
-# Boundary conditions like the scene's: the base held along the long axis, and four
-# mid-wall base nodes pinned in-plane against rigid rotation and translation.
+# Boundary conditions like the scene's: the base held along the long axis (here the image
+# z axis), and four mid-wall base nodes pinned in-plane against rigid rotation and
+# translation.
 
 # %%
-a_mid = float(g.semi_axes(0.5)[0]) * np.sqrt(1 - (g.truncation / float(g.semi_axes(0.5)[1])) ** 2)
-pins = template.to_image(
-    [[a_mid, 0, g.truncation], [0, a_mid, g.truncation], [-a_mid, 0, g.truncation],
-     [0, -a_mid, g.truncation]]
-)  # fmt: skip
-dirichlet = [Fixed("base", (2,)), NodeFixed(pins, (1, 0, 1, 0))]
+dirichlet = template.base_conditions()
 
 # %% [markdown]
 # ## 5. Track and read the strain

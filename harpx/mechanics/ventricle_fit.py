@@ -42,6 +42,7 @@ Units: mm, degrees for the fibre angles.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -51,6 +52,7 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from harpx._typing import FloatArray
+from harpx.errors import HarpxWarning
 from harpx.mechanics.mesh import MeshSpec, hex_mesh, labelled_spec
 from harpx.mechanics.segmentation import read_labels
 from harpx.mechanics.ventricle import VentricleGeometry, ventricle
@@ -161,6 +163,71 @@ class VentricleTemplate:
         """Unit helical fibres at image points (helix angles in degrees, endo to epi)."""
         f = self.geometry.fibers(self.to_local(points), fiber_endo=fiber_endo, fiber_epi=fiber_epi)
         return np.asarray(f @ self.rotation.T)
+
+    def facet_predicates(self, *, base_tolerance: float = 3.0) -> dict[str, Any]:
+        """Predicates naming ``"base"``, ``"endo"`` and ``"epi"`` facets of any wall mesh.
+
+        For the ``boundaries`` argument of
+        :func:`~harpx.mechanics.segmentation.mesh_from_labels`: a facet is basal when its
+        centre lies within ``base_tolerance`` (mm) of the base plane and its outward normal
+        is within 45° of the long axis; the other facets are endocardial where the
+        transmural fraction of their centre is below 1/2, epicardial otherwise.
+
+        Parameters
+        ----------
+        base_tolerance : float, default 3
+            Distance from the base plane, mm (about half an element).
+
+        Returns
+        -------
+        dict of str to callable
+            ``predicate(centres, normals) -> bool array``.
+        """
+        zb = self.geometry.truncation
+
+        def base(centres: FloatArray, normals: FloatArray) -> Any:
+            near = np.abs(self.to_local(centres)[:, 2] - zb) < base_tolerance
+            return near & (np.asarray(normals) @ self.axis > np.sqrt(0.5))
+
+        def endo(centres: FloatArray, normals: FloatArray) -> Any:
+            return ~base(centres, normals) & (self.transmural(centres) < 0.5)
+
+        def epi(centres: FloatArray, normals: FloatArray) -> Any:
+            return ~base(centres, normals) & (self.transmural(centres) >= 0.5)
+
+        return {"base": base, "endo": endo, "epi": epi}
+
+    def base_conditions(self) -> list[Any]:
+        """Base held along z and four mid-wall base nodes pinned in-plane (rigid modes).
+
+        Returns
+        -------
+        list
+            ``[Fixed("base", (2,)), NodeFixed(...)]`` for ``dirichlet=``: the ``"base"``
+            facets keep their z, and the nodes nearest the mid-wall base points on the
+            template's ±x (±y) axes keep their y (x). Components are image components, so
+            this matches the scene's conditions when the long axis is the image z axis; a
+            :class:`~harpx.errors.HarpxWarning` flags a long axis more than 5° off z.
+        """
+        from harpx.mechanics.cut import NodeFixed
+        from harpx.mechanics.loads import Fixed
+
+        tilt = float(np.degrees(np.arccos(np.clip(abs(self.axis[2]), 0.0, 1.0))))
+        if tilt > 5.0:
+            warnings.warn(
+                f"the long axis is {tilt:.1f} degrees off the image z axis; base_conditions "
+                "holds image components (z on the base, x/y pins), which no longer align "
+                "with the ventricle; resample the images along the long axis or write your "
+                "own conditions",
+                HarpxWarning,
+                stacklevel=2,
+            )
+        g = self.geometry
+        a, c = (float(v) for v in g.semi_axes(0.5))
+        zb = g.truncation
+        r = a * np.sqrt(max(0.0, 1.0 - (zb / c) ** 2))
+        local = [[r, 0.0, zb], [0.0, r, zb], [-r, 0.0, zb], [0.0, -r, zb]]
+        return [Fixed("base", (2,)), NodeFixed(self.to_image(local), (1, 0, 1, 0))]
 
     def mesh(self, **options: Any) -> MeshSpec:
         """The template's hexahedral mesh in the image (see :func:`ventricle`).

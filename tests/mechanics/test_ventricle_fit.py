@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from harpx.errors import HarpxWarning
 from harpx.mechanics.ventricle import VentricleGeometry
 from harpx.mechanics.ventricle_fit import (
     VentricleTemplate,
@@ -94,3 +95,22 @@ def test_bad_input_is_named():
         fit_ventricle(np.zeros((3, 3)), np.zeros((30, 3)))
     with pytest.raises(ValueError, match="orthonormal"):
         VentricleTemplate(GEOMETRY, rotation=2 * np.eye(3))
+
+
+def test_facet_predicates_and_base_conditions():
+    template = VentricleTemplate(GEOMETRY, centre=(1.0, 0.0, -2.0))
+    names = template.facet_predicates()
+    normals = np.array([template.axis, [1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    # a point on the base plane facing up; endocardial and epicardial points at z = -30
+    a0 = GEOMETRY.inner[0] * np.sqrt(1 - (30 / 60) ** 2)
+    a1 = GEOMETRY.outer[0] * np.sqrt(1 - (30 / 68) ** 2)
+    pts = template.to_image([[26.0, 0, 8.0], [a0 + 0.1, 0, -30.0], [a1 - 0.1, 0, -30.0]])
+    assert names["base"](pts, normals).tolist() == [True, False, False]
+    assert names["endo"](pts, normals).tolist() == [False, True, False]
+    assert names["epi"](pts, normals).tolist() == [False, False, True]
+    fixed, pins = template.base_conditions()
+    assert fixed.facet == "base" and pins.components == (1, 0, 1, 0)
+    assert np.allclose(template.to_local(pins.points)[:, 2], GEOMETRY.truncation)
+    tilted = VentricleTemplate(GEOMETRY, rotation=_rotation(10, 0))
+    with pytest.warns(HarpxWarning, match="10.0 degrees off the image z axis"):
+        tilted.base_conditions()
