@@ -120,3 +120,30 @@ def test_bad_grids_are_named():
         mesh_from_labels(_grid(np.full(_radius().shape, np.nan)), element_size=2.0)
     with pytest.raises(ValueError, match="expected \\('z', 'y', 'x'\\)"):
         read_labels(xr.DataArray(np.zeros((2, 2)), dims=("y", "x")))
+
+
+def test_nifti_affine_becomes_lps_coordinates(monkeypatch, tmp_path):
+    # nibabel is optional: a stand-in module with the two attributes read_labels uses
+    import sys
+    import types
+
+    data = np.zeros((4, 3, 2))  # (i, j, k) = (x, y, z) voxel axes
+    data[1, 2, 0] = 7
+    affine = np.diag([2.0, 3.0, 4.0, 1.0])
+    affine[:3, 3] = [10.0, -5.0, 1.0]
+    fake = types.SimpleNamespace(
+        load=lambda path: types.SimpleNamespace(dataobj=data, affine=affine)
+    )
+    monkeypatch.setitem(sys.modules, "nibabel", fake)
+    labels = read_labels(tmp_path / "mask.nii.gz")
+    # RAS (10 + 2i, -5 + 3j, 1 + 4k) -> LPS (-R, -A, S), sorted increasing
+    assert labels.x.values.tolist() == [-16.0, -14.0, -12.0, -10.0]
+    assert labels.y.values.tolist() == [-1.0, 2.0, 5.0]
+    assert labels.z.values.tolist() == [1.0, 5.0]
+    hit = labels.where(labels == 7, drop=True)
+    assert (hit.x.item(), hit.y.item(), hit.z.item()) == (-12.0, -1.0, 1.0)
+    oblique = affine.copy()
+    oblique[0, 1] = 0.5
+    fake.load = lambda path: types.SimpleNamespace(dataobj=data, affine=oblique)
+    with pytest.raises(ValueError, match="oblique affine"):
+        read_labels(tmp_path / "mask.nii")
