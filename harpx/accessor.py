@@ -56,6 +56,12 @@ class PlotMethods:
 
         return fiber_stretch_by_region(self._ds, **kwargs)
 
+    def bullseye(self, **kwargs: Any) -> Any:
+        """AHA 17-segment bull's-eye of a segment value. See Also: harpx.plotting.bullseye."""
+        from harpx.plotting import bullseye
+
+        return bullseye(self._ds, **kwargs)
+
 
 @xr.register_dataset_accessor("harp")
 class HarpAccessor:
@@ -168,6 +174,19 @@ class HarpAccessor:
         from harpx.tracking.results import tracking_error
 
         return tracking_error(self._ds, truth, where=where)
+
+    def cardiac_strain(
+        self, template: Any, *, anterior: float = 0.0, body: xr.DataArray | None = None
+    ) -> xr.Dataset:
+        """LV-frame strain, AHA segments, twist and torsion.
+
+        See Also
+        --------
+        harpx.cardiac.strain.cardiac_strain
+        """
+        from harpx.cardiac.strain import cardiac_strain
+
+        return cardiac_strain(self._ds, template, anterior=anterior, body=body)
 
     def to_meshio(self, path: PathLike, *, series: Literal["vtu", "xdmf"] = "xdmf") -> list[Path]:
         """Write a tracked result as a ParaView time series (XDMF, or VTU files and a PVD).

@@ -303,3 +303,97 @@ def fiber_stretch_by_region(ds: xr.Dataset, *, time: float | None = None, ax: An
     ax.axhline(1.0, color="0.6", lw=0.8)
     ax.set_ylabel("fibre stretch")
     return ax
+
+
+def bullseye(
+    values: xr.Dataset | xr.DataArray | Sequence[float],
+    *,
+    variable: str = "peak_strain",
+    component: str = "circumferential",
+    ax: Any = None,
+    cmap: str = "RdBu_r",
+    vmin: float | None = None,
+    vmax: float | None = None,
+    label: str | None = None,
+    annotate: bool = True,
+) -> Any:
+    """AHA 17-segment bull's-eye plot of one value per segment.
+
+    Rings from outside in: basal (1–6, 60° sectors), mid (7–12), apical (13–16, 90°
+    sectors) and the apex (17) in the centre; segment 1 starts at 0° (east) and the
+    numbers run counter-clockwise, as in :func:`harpx.cardiac.strain.aha_segments`.
+
+    Parameters
+    ----------
+    values : xarray.Dataset, xarray.DataArray or sequence of 17 floats
+        A dataset from :func:`harpx.cardiac.strain.cardiac_strain` (``variable`` and
+        ``component`` select the value), a DataArray with a ``segment`` dim (1..17), or 17
+        numbers.
+    variable : str, default "peak_strain"
+        Variable of a dataset.
+    component : str, default "circumferential"
+        ``component`` to select when the variable has one.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw in.
+    cmap : str, default "RdBu_r"
+        Colour map.
+    vmin, vmax : float, optional
+        Colour limits (default symmetric about 0 over the finite values).
+    label : str, optional
+        Colour-bar label.
+    annotate : bool, default True
+        Write each segment's value in it.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+
+    Raises
+    ------
+    ValueError
+        If there are not 17 values.
+    """
+    from matplotlib.patches import Wedge
+
+    da: Any = values
+    if isinstance(da, xr.Dataset):
+        if variable not in da:
+            raise ValueError(f"the dataset has no {variable!r}; run cardiac_strain first")
+        da = da[variable]
+    if isinstance(da, xr.DataArray):
+        if "component" in da.dims:
+            da = da.sel(component=component)
+        if "time" in da.dims:
+            raise ValueError("select one frame first (e.g. .isel(time=-1)): values have 'time'")
+        label = label or str(da.attrs.get("long_name", variable))
+    v = np.asarray(da, dtype=np.float64).ravel()
+    if v.size != 17:
+        raise ValueError(f"bullseye needs 17 segment values, got {v.size}")
+    finite = v[np.isfinite(v)]
+    bound = float(np.abs(finite).max()) if finite.size else 1.0
+    lo = -bound if vmin is None else vmin
+    hi = bound if vmax is None else vmax
+    norm = matplotlib.colors.Normalize(lo, hi)
+    colours = matplotlib.colormaps[cmap]
+    ax = ax or plt.subplots(figsize=(4.6, 4))[1]
+    rings = [(0.75, 1.0, range(0, 6), 60.0, 0.0), (0.5, 0.75, range(6, 12), 60.0, 0.0),
+             (0.25, 0.5, range(12, 16), 90.0, -45.0)]  # fmt: skip
+    for r0, r1, ids, width, start in rings:  # three rings of a few sectors
+        for n, k in enumerate(ids):
+            a0 = start + n * width
+            colour = colours(norm(v[k])) if np.isfinite(v[k]) else "0.85"
+            ax.add_patch(Wedge((0, 0), r1, a0, a0 + width, width=r1 - r0, fc=colour, ec="k"))
+            if annotate:
+                mid = np.deg2rad(a0 + width / 2)
+                rm = 0.5 * (r0 + r1)
+                ax.text(rm * np.cos(mid), rm * np.sin(mid), f"{v[k]:.3g}", ha="center",
+                        va="center", fontsize=7)  # fmt: skip
+    colour = colours(norm(v[16])) if np.isfinite(v[16]) else "0.85"
+    ax.add_patch(Wedge((0, 0), 0.25, 0, 360, fc=colour, ec="k"))
+    if annotate:
+        ax.text(0, 0, f"{v[16]:.3g}", ha="center", va="center", fontsize=7)
+    ax.set(xlim=(-1.05, 1.05), ylim=(-1.05, 1.05), aspect="equal")
+    ax.axis("off")
+    mappable = matplotlib.cm.ScalarMappable(norm=norm, cmap=colours)
+    plt.colorbar(mappable, ax=ax, label=label or "", shrink=0.8)
+    return ax

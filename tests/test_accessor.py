@@ -10,6 +10,7 @@ import xarray as xr
 
 import harpx  # noqa: F401  (registers ds.harp)
 from harpx.accessor import HarpAccessor
+from harpx.cardiac.strain import cardiac_strain
 from harpx.imaging.harp import extract_phase
 from harpx.imaging.harptrack import track_harp
 from harpx.io.mesh import to_meshio
@@ -26,6 +27,7 @@ FORWARDS = [
     pytest.param("error", tracking_error, id="error"),
     pytest.param("to_netcdf", to_netcdf, id="to_netcdf"),
     pytest.param("to_meshio", to_meshio, id="to_meshio"),
+    pytest.param("cardiac_strain", cardiac_strain, id="cardiac_strain"),
 ]
 
 

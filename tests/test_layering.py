@@ -11,10 +11,11 @@ PACKAGE = Path(__file__).resolve().parents[1] / "harpx"
 
 # subpackage -> harpx subpackages it must never import
 FORBIDDEN = {
-    "imaging": {"mechanics", "tracking", "scenes", "inverse", "cli", "batch"},
-    "mechanics": {"imaging", "tracking", "scenes", "inverse", "cli", "batch"},
-    "tracking": {"scenes", "inverse", "cli", "batch"},
-    "io": {"tracking", "scenes", "inverse", "cli", "batch"},
+    "imaging": {"mechanics", "tracking", "scenes", "inverse", "cli", "batch", "cardiac"},
+    "mechanics": {"imaging", "tracking", "scenes", "inverse", "cli", "batch", "cardiac"},
+    "tracking": {"scenes", "inverse", "cli", "batch", "cardiac"},
+    "io": {"tracking", "scenes", "inverse", "cli", "batch", "cardiac"},
+    "cardiac": {"scenes", "inverse", "cli", "batch"},
 }
 
 
