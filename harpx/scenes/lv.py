@@ -84,7 +84,6 @@ from typing import Any, Literal
 import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike
-from scipy.spatial import cKDTree
 
 from harpx._typing import FloatArray, IntArray
 from harpx.errors import ConvergenceError
@@ -95,6 +94,7 @@ from harpx.mechanics.cut import GrowthField, NodeFixed, release, set_growth
 from harpx.mechanics.kinematics import growth_tensor
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.mechanics.loads import Fixed, Pressure
+from harpx.mechanics.locate import HexLocator, trilinear
 from harpx.mechanics.materials import ActiveContraction, Guccione
 from harpx.mechanics.mesh import MeshSpec
 from harpx.mechanics.newton import equilibrate
@@ -389,102 +389,6 @@ def simulate_systole(
 
 # ------------------------------------------------------------------------ FE motion
 
-_CORNERS = np.array(
-    [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]],
-    dtype=bool,
-)
-# monomials 1, ξ, η, ζ, ξη, ξζ, ηζ, ξηζ at the corners; coefficients = inverse @ values
-_MONOMIAL_COEFFS = np.linalg.inv(
-    np.array([[1, a, b, c, a * b, a * c, b * c, a * b * c] for a, b, c in _CORNERS.astype(float)])
-)
-
-
-def _trilinear(xi: FloatArray) -> FloatArray:
-    """Trilinear shape functions (m, 8) at ``xi`` (m, 3)."""
-    w = np.where(_CORNERS[None], xi[:, None, :], 1.0 - xi[:, None, :])  # (m, 8, 3)
-    return w[:, :, 0] * w[:, :, 1] * w[:, :, 2]
-
-
-class _HexLocator:
-    """Point location in a trilinear hexahedral mesh (VTK vertex order), vectorised.
-
-    Candidate cells are the ``k`` nearest by centroid (KD-tree) whose own bounding sphere
-    holds the point; the trilinear map of each candidate is inverted by Newton's method in
-    monomial form for all (point, candidate) pairs at once.
-    """
-
-    def __init__(self, vertices: FloatArray, cells: IntArray) -> None:
-        self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
-        self.cells = np.ascontiguousarray(cells, dtype=np.int64)
-        x = self.vertices[self.cells]  # (ncell, 8, 3)
-        centroids = x.mean(axis=1)
-        self.cell_radius = np.linalg.norm(x - centroids[:, None], axis=-1).max(axis=1) * 1.001
-        self.radius = float(self.cell_radius.max())
-        self.tree = cKDTree(centroids)
-        self.lo = self.vertices.min(axis=0) - 1e-9
-        self.hi = self.vertices.max(axis=0) + 1e-9
-        # x(ξ) = Σ_m coeffs[:, m] * monomial_m(ξ)
-        self.coeffs = np.einsum("ma,cai->cmi", _MONOMIAL_COEFFS, x)  # (ncell, 8, 3)
-
-    def _invert(self, cells: IntArray, pts: FloatArray, iterations: int = 8) -> FloatArray:
-        b = self.coeffs[cells]  # (m, 8, 3)
-        b0, b1, b2, b3, b4, b5, b6, b7 = (b[:, k] for k in range(8))
-        xi = np.full(pts.shape, 0.5)
-        for _ in range(iterations):  # Newton (quadratic; the map is trilinear)
-            u, v, w = xi[:, 0:1], xi[:, 1:2], xi[:, 2:3]
-            x = b0 + b1 * u + b2 * v + b3 * w + b4 * u * v + b5 * u * w + b6 * v * w
-            x = x + b7 * u * v * w
-            cu = b1 + b4 * v + b5 * w + b7 * v * w  # dx/dξ
-            cv = b2 + b4 * u + b6 * w + b7 * u * w
-            cw = b3 + b5 * u + b6 * v + b7 * u * v
-            r = pts - x
-            # Cramer's rule for [cu cv cw] δ = r
-            cvw, cwu, cuv = np.cross(cv, cw), np.cross(cw, cu), np.cross(cu, cv)
-            det = np.einsum("mi,mi->m", cu, cvw)
-            det = np.where(np.abs(det) > 1e-300, det, 1e-300)
-            step = (
-                np.stack(
-                    [
-                        np.einsum("mi,mi->m", r, cvw),
-                        np.einsum("mi,mi->m", r, cwu),
-                        np.einsum("mi,mi->m", r, cuv),
-                    ],
-                    axis=1,
-                )
-                / det[:, None]
-            )
-            xi = np.clip(xi + step, -1.0, 2.0)
-        return xi
-
-    def locate(
-        self, points: FloatArray, *, candidates: int = 8, chunk: int = 262144
-    ) -> tuple[IntArray, FloatArray]:
-        """Containing cell (-1 outside) and reference coordinates in [0, 1]³ of points."""
-        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        cells_out = np.full(len(points), -1, dtype=np.int64)
-        xi_out = np.zeros((len(points), 3))
-        near = np.nonzero(np.all((points >= self.lo) & (points <= self.hi), axis=1))[0]
-        k = min(candidates, self.tree.n)
-        for begin in range(0, near.size, chunk):  # memory-bounded blocks of points
-            ids = near[begin : begin + chunk]
-            dist, cand = self.tree.query(points[ids], k=k, distance_upper_bound=self.radius)
-            dist, cand = dist.reshape(len(ids), k), cand.reshape(len(ids), k)
-            ok = np.isfinite(dist)
-            ok[ok] = dist[ok] <= self.cell_radius[cand[ok]]
-            todo = np.arange(len(ids))
-            for rank in range(k):  # candidates by centroid distance; most points stop at 0
-                todo = todo[np.any(ok[todo, rank:], axis=1)]
-                try_now = todo[ok[todo, rank]]
-                if try_now.size == 0:
-                    continue
-                c = cand[try_now, rank]
-                xi = self._invert(c, points[ids[try_now]])
-                inside = np.all((xi >= -1e-7) & (xi <= 1.0 + 1e-7), axis=1)
-                cells_out[ids[try_now[inside]]] = c[inside]
-                xi_out[ids[try_now[inside]]] = xi[inside]
-                todo = np.setdiff1d(todo, try_now[inside], assume_unique=True)
-        return cells_out, np.clip(xi_out, 0.0, 1.0)
-
 
 class FEMotion:
     """A hex8 finite-element displacement history as a motion ``u(X, t)`` with its inverse.
@@ -520,8 +424,8 @@ class FEMotion:
             raise ValueError(
                 f"U has shape {self.U.shape!r}; expected ({self.times.size}, {body.ndof})"
             )
-        self._reference = _HexLocator(body.nodes, body.cells)
-        self._deformed: dict[int, _HexLocator] = {}
+        self._reference = HexLocator(body.nodes, body.cells)
+        self._deformed: dict[int, HexLocator] = {}
         # synthesize_tagged asks for density(inverse(x)) and for u at the same voxel centres
         # every frame: remember the last located arrays instead of locating them again
         self._last_inverse: tuple[FloatArray, np.ndarray] | None = None
@@ -559,7 +463,7 @@ class FEMotion:
         out = np.full((self.times.size, len(cells), 3), np.nan)
         inside = cells >= 0
         if inside.any():
-            N = _trilinear(xi[inside])
+            N = trilinear(xi[inside])
             vert = self.body.cells[cells[inside]]  # (m, 8)
             nodal = self.U.reshape(self.times.size, -1, 3)  # (ntime, nnode, 3)
             out[:, inside] = np.einsum("ma,tmai->tmi", N, nodal[:, vert])
@@ -571,7 +475,7 @@ class FEMotion:
         cells, xi = self._locate_reference(np.asarray(X, dtype=np.float64).reshape(-1, 3))
         out = np.full((len(cells), 3), np.nan)
         inside = cells >= 0
-        N = _trilinear(xi[inside])
+        N = trilinear(xi[inside])
         out[inside] = np.einsum("ma,mai->mi", N, self._nodal(n)[self.body.cells[cells[inside]]])
         return out
 
@@ -582,11 +486,11 @@ class FEMotion:
         if n == 0:
             return x.copy()
         if n not in self._deformed:
-            self._deformed[n] = _HexLocator(self.body.nodes + self._nodal(n), self.body.cells)
+            self._deformed[n] = HexLocator(self.body.nodes + self._nodal(n), self.body.cells)
         cells, xi = self._deformed[n].locate(x)
         X = x + self.FAR
         inside = cells >= 0
-        N = _trilinear(xi[inside])
+        N = trilinear(xi[inside])
         X[inside] = np.einsum("ma,mai->mi", N, self.body.nodes[self.body.cells[cells[inside]]])
         self._last_inverse = (X, inside)
         return X

@@ -1,10 +1,8 @@
 """Evaluate a finite-element displacement at arbitrary reference points (e.g. voxel centres).
 
-Points are located in the hexahedral mesh without Python loops over cells: the ``k`` cells
-with the nearest centroids are candidates, the trilinear geometry map of each candidate is
-inverted by Newton's method for all (point, candidate) pairs at once, and the first candidate
-whose reference coordinates fall in the unit cube wins. Points in no cell are reported as
-outside (NaN displacement), never extrapolated.
+Points are located in the hexahedral mesh by :func:`harpx.mechanics.locate.locate`
+(vectorised, no Python loop over cells). Points in no cell are reported as outside (NaN
+displacement), never extrapolated.
 """
 
 from __future__ import annotations
@@ -12,12 +10,11 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import skfem
-from scipy.spatial import cKDTree
 
-from harpx._typing import FloatArray, IntArray
+from harpx._typing import FloatArray
+from harpx.mechanics.locate import locate
 
-_GEOMETRY = skfem.ElementHex1()
+__all__ = ["interpolate_displacement", "locate"]
 
 
 def _shape_values(element: Any, xi: FloatArray, nbasis: int) -> tuple[FloatArray, FloatArray]:
@@ -29,71 +26,6 @@ def _shape_values(element: Any, xi: FloatArray, nbasis: int) -> tuple[FloatArray
         vals[:, a] = phi
         grads[:, a, :] = dphi.T
     return vals, grads
-
-
-def locate(
-    mesh: skfem.MeshHex1, points: FloatArray, *, candidates: int = 8, tol: float = 1e-7
-) -> tuple[IntArray, FloatArray]:
-    """Find the cell and reference coordinates of each point.
-
-    Parameters
-    ----------
-    mesh : skfem.MeshHex1
-        Hexahedral mesh (trilinear geometry), mm.
-    points : ndarray, shape (n, 3)
-        Physical points, mm.
-    candidates : int, default 8
-        Nearest cells (by centroid) tried per point.
-    tol : float, default 1e-7
-        Tolerance on the reference coordinates' unit-cube bounds (dimensionless).
-
-    Returns
-    -------
-    cells : ndarray of int, shape (n,)
-        Containing cell, or -1 where the point lies in no cell.
-    xi : ndarray, shape (n, 3)
-        Reference coordinates in [0, 1]³ (meaningless where ``cells == -1``).
-    """
-    points = np.asarray(points, dtype=float).reshape(-1, 3)
-    n = points.shape[0]
-    cells_out = np.full(n, -1, dtype=np.int64)
-    xi_out = np.zeros((n, 3))
-    if n == 0:
-        return cells_out, xi_out
-    vertices = mesh.p.T[mesh.t.T]  # (ncell, 8, 3)
-    centroids = vertices.mean(axis=1)
-    radius = np.linalg.norm(vertices - centroids[:, None], axis=-1).max()
-    k = min(candidates, centroids.shape[0])
-    dist, cand = cKDTree(centroids).query(points, k=k)
-    dist = dist.reshape(n, k)
-    cand = cand.reshape(n, k)
-    unresolved = np.nonzero(dist[:, 0] <= radius * (1 + 1e-9))[0]
-    for rank in range(k):  # candidates in order of centroid distance; most points stop at 0
-        if unresolved.size == 0:
-            break
-        cell = cand[unresolved, rank]
-        xi = _invert_trilinear(vertices[cell], points[unresolved])
-        inside = np.all((xi >= -tol) & (xi <= 1 + tol), axis=1)
-        cells_out[unresolved[inside]] = cell[inside]
-        xi_out[unresolved[inside]] = xi[inside]
-        unresolved = unresolved[~inside]
-    return cells_out, np.clip(xi_out, 0.0, 1.0)
-
-
-def _invert_trilinear(verts: FloatArray, pts: FloatArray, iterations: int = 25) -> FloatArray:
-    """Reference coordinates of ``pts`` (m, 3) in the trilinear cells ``verts`` (m, 8, 3)."""
-    xi = np.full((pts.shape[0], 3), 0.5)
-    active = np.arange(pts.shape[0])
-    for _ in range(iterations):  # Newton, only on the pairs that have not converged
-        vals, grads = _shape_values(_GEOMETRY, xi[active].T, 8)
-        x = np.einsum("ma,mai->mi", vals, verts[active])
-        jac = np.einsum("mai,maj->mij", verts[active], grads)  # dx_i/dxi_j
-        step = np.linalg.solve(jac, (pts[active] - x)[..., None])[..., 0]
-        xi[active] = np.clip(xi[active] + step, -1.0, 2.0)
-        active = active[np.abs(step).max(axis=1) > 1e-12]
-        if active.size == 0:
-            break
-    return xi
 
 
 def interpolate_displacement(

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import skfem
 
+from harpx.mechanics.locate import locate
 from harpx.mechanics.tongue_mesh import (
     MUSCLES,
     muscle_atlas,
@@ -14,7 +15,6 @@ from harpx.mechanics.tongue_mesh import (
     tongue_map,
     tongue_reference,
 )
-from harpx.tracking.resample import locate
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,266 @@
+r"""Point location in trilinear hexahedral meshes: containing cell and reference coordinates.
+
+One locator serves every caller that needs "which cell holds this point, and where in it":
+evaluating a finite-element field at voxel centres (:mod:`harpx.tracking.resample`), and
+mapping spatial points back to the reference through a deformed mesh
+(:class:`harpx.scenes.lv.FEMotion`).
+
+Algorithm (no Python loop over cells or points):
+
+1. Candidates are the ``k`` cells with the nearest centroids (KD-tree) whose bounding
+   sphere (centred at the centroid, radius the farthest vertex) holds the point. A point of
+   a trilinear cell is a convex combination of its vertices, so no containing cell is
+   missed this way.
+2. The trilinear map of every (point, candidate) pair is inverted at once by Newton's
+   method. In monomial form :math:`x(\xi) = \sum_m b_m\,\mu_m(\xi)` with
+   :math:`\mu = (1, \xi, \eta, \zeta, \xi\eta, \xi\zeta, \eta\zeta, \xi\eta\zeta)`, each
+   step solves the 3 × 3 system :math:`[\partial_\xi x\;\partial_\eta x\;\partial_\zeta x]
+   \,\delta = r` by Cramer's rule. Pairs whose step is below 1e-12 stop iterating.
+3. Candidates are tried in order of centroid distance; the first whose reference
+   coordinates lie in :math:`[0, 1]^3` (to ``tol``) and map back onto the point (Newton
+   converged: distance below 1e-6 of the cell's radius) wins. Points in no cell get cell -1,
+   never an extrapolated one.
+
+The vertex order of a cell is given by ``corners``, the reference coordinates of its eight
+vertices: :data:`VTK_CORNERS` (VTK/meshio ``hexahedron``, :attr:`Body.cells
+<harpx.mechanics.body.Body.cells>`) or :data:`SKFEM_CORNERS` (``skfem.MeshHex1.t``, the
+order of ``skfem.ElementHex1``'s basis). The reference coordinates returned are those of the
+same convention, so they can be fed to the matching shape functions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import skfem
+from scipy.spatial import cKDTree
+
+from harpx._typing import FloatArray, IntArray
+
+__all__ = ["SKFEM_CORNERS", "VTK_CORNERS", "HexLocator", "locate", "trilinear"]
+
+#: reference coordinates of the eight vertices in VTK/meshio ``hexahedron`` order
+VTK_CORNERS: FloatArray = np.array(
+    [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]],
+    dtype=np.float64,
+)
+#: reference coordinates of the eight vertices in scikit-fem ``MeshHex1`` order
+SKFEM_CORNERS: FloatArray = np.asarray(skfem.ElementHex1().doflocs, dtype=np.float64)
+
+
+def _monomial_coefficients(corners: FloatArray) -> FloatArray:
+    """Matrix taking vertex values (8,) to the coefficients of 1, ξ, η, ζ, ξη, ξζ, ηζ, ξηζ."""
+    a, b, c = corners.T
+    return np.linalg.inv(np.stack([np.ones(8), a, b, c, a * b, a * c, b * c, a * b * c], axis=1))
+
+
+def trilinear(xi: FloatArray, corners: FloatArray = VTK_CORNERS) -> FloatArray:
+    """Trilinear shape functions at reference points.
+
+    Parameters
+    ----------
+    xi : ndarray, shape (m, 3)
+        Reference coordinates in [0, 1]³ (dimensionless).
+    corners : ndarray, shape (8, 3), default VTK_CORNERS
+        Reference coordinates of the vertices, in the cell's vertex order.
+
+    Returns
+    -------
+    ndarray, shape (m, 8)
+        Value of each vertex's shape function; rows sum to 1.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from harpx.mechanics.locate import trilinear
+    >>> trilinear(np.array([[0.5, 0.5, 0.5]])).round(3).tolist()
+    [[0.125, 0.125, 0.125, 0.125, 0.125, 0.125, 0.125, 0.125]]
+    """
+    on = corners.astype(bool)
+    w = np.where(on[None], xi[:, None, :], 1.0 - xi[:, None, :])  # (m, 8, 3)
+    return w[:, :, 0] * w[:, :, 1] * w[:, :, 2]
+
+
+class HexLocator:
+    """Point location in a trilinear hexahedral mesh, vectorised (see the module docstring).
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (nvertex, 3)
+        Vertex positions, mm.
+    cells : ndarray of int, shape (ncell, 8)
+        Vertex ids per cell (further columns, e.g. hex20 edge nodes, are ignored).
+    corners : ndarray, shape (8, 3), default VTK_CORNERS
+        Reference coordinates of the eight vertices in the order of ``cells``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from harpx.mechanics.locate import HexLocator
+    >>> from harpx.mechanics.mesh import box
+    >>> from harpx.mechanics.body import Body
+    >>> from harpx.mechanics.materials import NeoHookean
+    >>> body = Body(box((2.0, 1.0, 1.0), (2, 1, 1)), NeoHookean(c1=1.0, kappa=100.0))
+    >>> cells, xi = HexLocator(body.nodes, body.cells).locate(np.array([[1.5, 0.5, 0.25]]))
+    >>> int(cells[0] >= 0), xi.round(6).tolist()
+    (1, [[0.5, 0.5, 0.25]])
+    """
+
+    def __init__(
+        self, vertices: FloatArray, cells: IntArray, *, corners: FloatArray = VTK_CORNERS
+    ) -> None:
+        self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+        self.cells = np.ascontiguousarray(np.asarray(cells)[:, :8], dtype=np.int64)
+        self.corners = np.asarray(corners, dtype=np.float64)
+        x = self.vertices[self.cells]  # (ncell, 8, 3)
+        centroids = x.mean(axis=1)
+        self.cell_radius = np.linalg.norm(x - centroids[:, None], axis=-1).max(axis=1) * 1.001
+        self.radius = float(self.cell_radius.max()) if len(x) else 0.0
+        self.tree = cKDTree(centroids)
+        self.lo = self.vertices.min(axis=0) - 1e-9
+        self.hi = self.vertices.max(axis=0) + 1e-9
+        # x(ξ) = Σ_m coeffs[:, m] * monomial_m(ξ)
+        self.coeffs = np.einsum("ma,cai->cmi", _monomial_coefficients(self.corners), x)
+
+    def invert(self, cells: IntArray, points: FloatArray, *, iterations: int = 25) -> FloatArray:
+        """Reference coordinates (m, 3) of ``points`` (m, 3) mm in the trilinear ``cells`` (m,).
+
+        Newton's method from the cell centre, clipped to [-1, 2]³; not checked for
+        containment (see :meth:`locate`).
+        """
+        b = self.coeffs[cells]  # (m, 8, 3)
+        xi = np.full(points.shape, 0.5)
+        active = np.arange(len(points))
+        for _ in range(iterations):  # Newton, quadratic; only pairs that have not converged
+            bb, p = b[active], xi[active]
+            u, v, w = p[:, 0:1], p[:, 1:2], p[:, 2:3]
+            x = bb[:, 0] + bb[:, 1] * u + bb[:, 2] * v + bb[:, 3] * w + bb[:, 4] * u * v
+            x = x + bb[:, 5] * u * w + bb[:, 6] * v * w + bb[:, 7] * u * v * w
+            cu = bb[:, 1] + bb[:, 4] * v + bb[:, 5] * w + bb[:, 7] * v * w  # dx/dξ
+            cv = bb[:, 2] + bb[:, 4] * u + bb[:, 6] * w + bb[:, 7] * u * w
+            cw = bb[:, 3] + bb[:, 5] * u + bb[:, 6] * v + bb[:, 7] * u * v
+            r = points[active] - x
+            # Cramer's rule for [cu cv cw] δ = r
+            cvw, cwu, cuv = np.cross(cv, cw), np.cross(cw, cu), np.cross(cu, cv)
+            det = np.einsum("mi,mi->m", cu, cvw)
+            det = np.where(np.abs(det) > 1e-300, det, 1e-300)
+            step = (
+                np.stack(
+                    [
+                        np.einsum("mi,mi->m", r, cvw),
+                        np.einsum("mi,mi->m", r, cwu),
+                        np.einsum("mi,mi->m", r, cuv),
+                    ],
+                    axis=1,
+                )
+                / det[:, None]
+            )
+            xi[active] = np.clip(p + step, -1.0, 2.0)
+            active = active[np.abs(step).max(axis=1) > 1e-12]
+            if active.size == 0:
+                break
+        return xi
+
+    def _residual(self, cells: IntArray, points: FloatArray, xi: FloatArray) -> FloatArray:
+        """Distance (m,) mm between ``points`` and the image of ``xi`` in ``cells``."""
+        mono = np.stack(
+            [
+                np.ones(len(xi)),
+                xi[:, 0],
+                xi[:, 1],
+                xi[:, 2],
+                xi[:, 0] * xi[:, 1],
+                xi[:, 0] * xi[:, 2],
+                xi[:, 1] * xi[:, 2],
+                xi[:, 0] * xi[:, 1] * xi[:, 2],
+            ],
+            axis=1,
+        )
+        x = np.einsum("mk,mki->mi", mono, self.coeffs[cells])
+        return np.linalg.norm(x - points, axis=1)
+
+    def locate(
+        self,
+        points: FloatArray,
+        *,
+        candidates: int = 8,
+        tol: float = 1e-7,
+        chunk: int = 262144,
+    ) -> tuple[IntArray, FloatArray]:
+        """Containing cell and reference coordinates of each point.
+
+        Parameters
+        ----------
+        points : ndarray, shape (n, 3)
+            Physical points, mm.
+        candidates : int, default 8
+            Nearest cells (by centroid) tried per point.
+        tol : float, default 1e-7
+            Tolerance on the unit-cube bounds of the reference coordinates (dimensionless).
+        chunk : int, default 262144
+            Points processed per block (bounds the memory of the candidate arrays).
+
+        Returns
+        -------
+        cells : ndarray of int, shape (n,)
+            Containing cell, or -1 where the point lies in no cell.
+        xi : ndarray, shape (n, 3)
+            Reference coordinates in [0, 1]³ (0 where ``cells == -1``).
+        """
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        cells_out = np.full(len(points), -1, dtype=np.int64)
+        xi_out = np.zeros((len(points), 3))
+        if len(points) == 0 or self.tree.n == 0:
+            return cells_out, xi_out
+        near = np.nonzero(np.all((points >= self.lo) & (points <= self.hi), axis=1))[0]
+        k = min(candidates, self.tree.n)
+        for begin in range(0, near.size, chunk):  # memory-bounded blocks of points
+            ids = near[begin : begin + chunk]
+            dist, cand = self.tree.query(points[ids], k=k, distance_upper_bound=self.radius)
+            dist, cand = dist.reshape(len(ids), k), cand.reshape(len(ids), k)
+            ok = np.isfinite(dist)
+            ok[ok] = dist[ok] <= self.cell_radius[cand[ok]]
+            todo = np.arange(len(ids))
+            for rank in range(k):  # candidates by centroid distance; most points stop at 0
+                todo = todo[np.any(ok[todo, rank:], axis=1)]
+                try_now = todo[ok[todo, rank]]
+                if try_now.size == 0:
+                    continue
+                c = cand[try_now, rank]
+                xi = self.invert(c, points[ids[try_now]])
+                inside = np.all((xi >= -tol) & (xi <= 1.0 + tol), axis=1)
+                # a Newton run that stalled (distorted or degenerate cell) is no hit
+                inside &= (
+                    self._residual(c, points[ids[try_now]], xi) <= 1e-6 * (self.cell_radius[c])
+                )
+                cells_out[ids[try_now[inside]]] = c[inside]
+                xi_out[ids[try_now[inside]]] = xi[inside]
+                todo = np.setdiff1d(todo, try_now[inside], assume_unique=True)
+        return cells_out, np.clip(xi_out, 0.0, 1.0)
+
+
+def locate(
+    mesh: skfem.MeshHex1, points: FloatArray, *, candidates: int = 8, tol: float = 1e-7
+) -> tuple[IntArray, FloatArray]:
+    """Find the cell and reference coordinates of each point in a scikit-fem hex mesh.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshHex1
+        Hexahedral mesh (trilinear geometry), mm.
+    points : ndarray, shape (n, 3)
+        Physical points, mm.
+    candidates : int, default 8
+        Nearest cells (by centroid) tried per point.
+    tol : float, default 1e-7
+        Tolerance on the reference coordinates' unit-cube bounds (dimensionless).
+
+    Returns
+    -------
+    cells : ndarray of int, shape (n,)
+        Containing cell, or -1 where the point lies in no cell.
+    xi : ndarray, shape (n, 3)
+        Reference coordinates in [0, 1]³ in scikit-fem's convention (the reference element
+        of ``skfem.ElementHex1``/``ElementHexS2``); 0 where ``cells == -1``.
+    """
+    locator = HexLocator(mesh.p.T, mesh.t.T, corners=SKFEM_CORNERS)
+    return locator.locate(points, candidates=candidates, tol=tol)
