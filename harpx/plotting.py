@@ -86,8 +86,8 @@ def displacement_maps(
 ) -> Any:
     """Displacement magnitude and error maps on one slice, one column per method.
 
-    Like the paper's Fig. 1 c/d: the top row shows |u| of each method at ``time`` on the
-    slice nearest ``z``; the bottom row shows the error |u − u_true| against the truth.
+    Like the paper's Fig. 1 c/d: the top row shows ``|u|`` of each method at ``time`` on the
+    slice nearest ``z``; the bottom row shows the error ``|u − u_true|`` against the truth.
 
     Parameters
     ----------

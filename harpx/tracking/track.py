@@ -4,7 +4,7 @@ This is the method of the paper (§3): a hyperelastic model of the organ, in its
 configuration at frame 0, is pulled through the phase images by the phase-conservation
 constraint (:mod:`harpx.tracking.constraint`) with the penalty or the augmented-Lagrangian
 strategy, each frame started from the last (optionally extrapolated). The result is a
-self-contained ``tracked/1`` dataset (DESIGN §3).
+self-contained ``tracked/1`` dataset (:mod:`harpx.schema`).
 """
 
 from __future__ import annotations
@@ -89,7 +89,7 @@ def track(
     method : {"penalty", "augmented-lagrangian"}, default "penalty"
         Constraint enforcement (paper §3.2 "Solution Strategy").
     epsilon : float, default 0.05
-        Target tracking residual ε, mean |W(φ(x, t) − φ0(X))| over the constrained
+        Target tracking residual ε, mean ``|W(φ(x, t) − φ0(X))|`` over the constrained
         volume, rad.
     penalty : float, default 1.0
         Starting λ_max relative to material stiffness and tag wavenumber (dimensionless;
