@@ -146,3 +146,45 @@ def test_plots_of_the_wrong_dataset_kind_name_both_kinds(tracked):
     bare.attrs.pop("harpx_schema")
     with pytest.raises(SchemaError, match=r"needs 'displacement_grid' of a 'tracked/1'"):
         bare.harp.plot.displacement()
+
+
+NOTEBOOK = """
+# %%
+import matplotlib
+import harpx
+from harpx.imaging.synth import synthesize_tagged
+
+tagged = synthesize_tagged(
+    lambda X, t: 0 * X, shape=(2, 16, 16), spacing=(2.0, 1.5, 1.5), times=[0.0],
+    tags=("x",), snr=None, oversample=1,
+)
+print(harpx.__file__)
+
+# %%
+tagged.harp.plot.tag_image();
+
+# %%
+print(matplotlib.get_backend())
+"""
+
+
+@pytest.mark.slow
+def test_a_plot_in_a_notebook_shows_inline():
+    """Run in a real Jupyter kernel, a harpx plot appears under its cell as a PNG."""
+    jupytext = pytest.importorskip("jupytext")
+    nbclient = pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    nb = jupytext.reads(NOTEBOOK.strip(), fmt="py:percent")
+    client = nbclient.NotebookClient(
+        nb, timeout=120, kernel_name="python3", resources={"metadata": {"path": str(root)}}
+    )
+    client.execute()
+    first, plot, backend = (cell.outputs for cell in nb.cells)
+    assert first[0]["text"].strip() == str(root / "harpx" / "__init__.py")  # this checkout
+    assert [k for out in plot for k in out.get("data", {}) if k.startswith("image/")] == [
+        "image/png"
+    ]
+    assert "inline" in backend[0]["text"]
