@@ -1,10 +1,12 @@
-# Quick start: `make demo` runs the phantom scene end to end; `make test` runs the test suite.
+# Quick start: `make demo` runs the phantom scene end to end; `make test` runs the test suite;
+# `make docs` builds the user guide and API reference (warnings are errors) into docs/_build/html.
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+DOCS_STAMP := $(VENV)/.installed-docs
 
-.PHONY: demo test bench clean
+.PHONY: demo test docs bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -12,15 +14,25 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[test]"
 	touch $(STAMP)
 
+$(DOCS_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[test,docs]"
+	touch $(DOCS_STAMP)
+
 demo: $(STAMP)
 	$(BIN)/harpx demo --output harpx-demo
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
+# the tutorials are rendered, not run (the tests run them); the build takes ~10 s of CPU
+docs: $(DOCS_STAMP)
+	rm -rf docs/_build
+	$(BIN)/python -m sphinx -W --keep-going -q -b html docs docs/_build/html
+	@echo "user guide: docs/_build/html/index.html"
+
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_phase.py
 	$(BIN)/python benchmarks/bench_mechanics.py
 
 clean:
-	rm -rf $(VENV) harpx-demo
+	rm -rf $(VENV) harpx-demo docs/_build

@@ -19,7 +19,7 @@ from harpx.errors import (
     SchemaError,
 )
 
-__version__ = "0.1.0"
+__version__ = "0.1.0"  # the only place the version is written (pyproject reads it)
 
 _LAZY: dict[str, str] = {
     "validate": "harpx.schema",

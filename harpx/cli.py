@@ -80,10 +80,14 @@ def _demo(args: argparse.Namespace) -> int:
             f"| {row['method']} | {row['mean']:.3f} ± {row['sd']:.3f} | {row['p95']:.3f} | {row['max']:.2f} | {row['seconds']:.1f} |"
         )
     frame_time = 54.0 if args.size == "paper" else float(scene.tagged.time[-2])
-    displacement_maps(
-        results, scene.tagged, time=frame_time, path=out / "phantom_displacement_maps.png"
+    import matplotlib.pyplot as plt
+
+    plt.close(
+        displacement_maps(
+            results, scene.tagged, time=frame_time, path=out / "phantom_displacement_maps.png"
+        )
     )
-    error_vs_runtime(rows, path=out / "phantom_error_vs_runtime.png")
+    plt.close(error_vs_runtime(rows, path=out / "phantom_error_vs_runtime.png"))
     print(f"\narchives and figures written to {out}/")
     return 0
 

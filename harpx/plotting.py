@@ -1,22 +1,79 @@
-"""Figures (matplotlib): displacement maps and error against run time."""
+"""Figures (matplotlib): slices of harpx datasets, displacement maps, error against run time.
+
+The functions draw with :mod:`matplotlib.pyplot` and never select or switch the matplotlib
+backend: in a notebook the figures show inline, in a script they go wherever the user's
+backend sends them (``plt.show()``, ``fig.savefig``). New figures use constrained layout and
+sizes that keep every title, label and colour bar inside the figure. Each function names
+the dataset kind it draws; any other kind raises :class:`~harpx.errors.SchemaError` naming
+the expected and the actual kind.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+import xarray as xr
 
-matplotlib.use("Agg", force=False)
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import xarray as xr  # noqa: E402
+from harpx._typing import PathLike
+from harpx.errors import SchemaError
+from harpx.schema import KINDS
 
-from harpx._typing import PathLike  # noqa: E402
+# what to do when a plot gets a dataset of another kind: (expected, actual) -> hint
+_KIND_HINTS: dict[tuple[str, str], str] = {
+    ("phase/1", "tagged/1"): "compute the phase first with ds.harp.phase()",
+    ("tracked/1", "tagged/1"): "compute the phase with ds.harp.phase(), then ds.harp.track(body)",
+    ("tracked/1", "phase/1"): "track it first with ds.harp.track(body)",
+    ("tagged/1", "phase/1"): "plot a phase dataset with ds.harp.plot.phase()",
+}
+
+
+def _require(ds: xr.Dataset, kind: str, variables: Sequence[str], plot: str) -> None:
+    """Raise :class:`SchemaError` unless ``ds`` is a ``kind`` dataset holding ``variables``."""
+    if not isinstance(ds, xr.Dataset):
+        raise SchemaError(
+            f"{plot} draws a {KINDS[kind]!r} xarray.Dataset; got a {type(ds).__name__}"
+        )
+    expected = KINDS[kind]
+    actual = ds.attrs.get("harpx_schema")
+    if actual is not None and actual != expected:
+        hint = _KIND_HINTS.get((expected, str(actual)))
+        raise SchemaError(
+            f"{plot} draws a {expected!r} dataset; got a {actual!r} dataset"
+            + (f" ({hint})" if hint else "")
+        )
+    missing = [name for name in variables if name not in ds.variables]
+    if missing:
+        what = f"this {actual!r} dataset" if actual else "this dataset (no 'harpx_schema')"
+        raise SchemaError(
+            f"{plot} needs {', '.join(repr(m) for m in missing)} of a {expected!r} dataset; "
+            f"{what} has no {' or '.join(repr(m) for m in missing)}"
+        )
+
+
+def _axes(ax: Any, figsize: tuple[float, float]) -> Any:
+    """``ax``, or the axes of a new constrained-layout figure of ``figsize`` inches."""
+    if ax is not None:
+        return ax
+    return plt.subplots(figsize=figsize, layout="constrained")[1]
+
+
+def _where(da: xr.DataArray) -> str:
+    """Short title naming the frame and slice of a 2-D selection, e.g. ``t = 36 ms, z = 0.0 mm``."""
+    parts = []
+    if "tag" in da.coords and da["tag"].ndim == 0:
+        parts.append(f"tag {da['tag'].item()}")
+    if "time" in da.coords and da["time"].ndim == 0:
+        parts.append(f"t = {float(da['time']):.0f} ms")
+    if "z" in da.coords and da["z"].ndim == 0:
+        parts.append(f"z = {float(da['z']):.1f} mm")
+    return ", ".join(parts)
 
 
 def _magnitude(da: xr.DataArray) -> xr.DataArray:
-    return np.sqrt((da**2).sum("axis", skipna=False))
+    return (da**2).sum("axis", skipna=False) ** 0.5
 
 
 def displacement_maps(
@@ -29,8 +86,8 @@ def displacement_maps(
 ) -> Any:
     """Displacement magnitude and error maps on one slice, one column per method.
 
-    Like the paper's Fig. 1 c/d: the top row shows |u| of each method at ``time`` on the
-    slice nearest ``z``; the bottom row shows the error |u − u_true| against the truth.
+    Like the paper's Fig. 1 c/d: the top row shows ``|u|`` of each method at ``time`` on the
+    slice nearest ``z``; the bottom row shows the error ``|u − u_true|`` against the truth.
 
     Parameters
     ----------
@@ -48,7 +105,20 @@ def displacement_maps(
     Returns
     -------
     matplotlib.figure.Figure
+
+    Raises
+    ------
+    SchemaError
+        If the dataset is not ``tracked/1`` (the message names the kind it is) or has no
+        ``displacement_grid`` (or ``truth`` has no ``displacement_true``).
     """
+    if "displacement_true" not in truth.variables:
+        raise SchemaError(
+            "displacement_maps needs 'displacement_true' in truth (the images of a scene, "
+            "e.g. scene.tagged); this dataset has none"
+        )
+    for name, ds in results.items():
+        _require(ds, "tracked", ["displacement_grid"], f"displacement_maps (results[{name!r}])")
     true = truth["displacement_true"].sel(time=time, method="nearest")
     zsel = float(true.z[true.sizes["z"] // 2]) if z is None else z
     true = true.sel(z=zsel, method="nearest")
@@ -131,6 +201,17 @@ def _slice(da: xr.DataArray, time: float | None, z: float | None) -> xr.DataArra
     return da
 
 
+def _slice_map(da: xr.DataArray, title: str, ax: Any, *, label: str, **kwargs: Any) -> Any:
+    """Draw a (y, x) slice with a colour bar ``label``, equal aspect and a short ``title``."""
+    ax = _axes(ax, (4.8, 4.2))
+    da.plot.pcolormesh(ax=ax, cbar_kwargs={"label": label}, **kwargs)
+    ax.set_title(title, fontsize=10)
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_aspect("equal")
+    return ax
+
+
 def tag_image(
     ds: xr.Dataset,
     *,
@@ -155,12 +236,16 @@ def tag_image(
     Returns
     -------
     matplotlib.axes.Axes
+
+    Raises
+    ------
+    SchemaError
+        If the dataset is not ``tagged/1`` (the message names the kind it is) or has no
+        ``image``.
     """
+    _require(ds, "tagged", ["image"], "tag_image (ds.harp.plot.tag_image)")
     da = _slice(ds["image"].sel(tag=ds.tag.values[0] if tag is None else tag), time, z)
-    ax = ax or plt.subplots(figsize=(4.5, 4))[1]
-    da.plot(ax=ax, cmap="gray")
-    ax.set_aspect("equal")
-    return ax
+    return _slice_map(da, _where(da), ax, cmap="gray", label="intensity")
 
 
 def phase_map(
@@ -187,12 +272,18 @@ def phase_map(
     Returns
     -------
     matplotlib.axes.Axes
+
+    Raises
+    ------
+    SchemaError
+        If the dataset is not ``phase/1`` (the message names the kind it is) or has no
+        ``phase``.
     """
+    _require(ds, "phase", ["phase"], "phase_map (ds.harp.plot.phase)")
     da = _slice(ds["phase"].sel(tag=ds.tag.values[0] if tag is None else tag), time, z)
-    ax = ax or plt.subplots(figsize=(4.5, 4))[1]
-    da.plot(ax=ax, cmap="twilight", vmin=-np.pi, vmax=np.pi)
-    ax.set_aspect("equal")
-    return ax
+    return _slice_map(
+        da, _where(da), ax, cmap="twilight", label="phase (rad)", vmin=-np.pi, vmax=np.pi
+    )
 
 
 def displacement_map(
@@ -219,17 +310,24 @@ def displacement_map(
     Returns
     -------
     matplotlib.axes.Axes
+
+    Raises
+    ------
+    SchemaError
+        If the dataset is not ``tracked/1`` (the message names the kind it is) or has no
+        ``displacement_grid``.
     """
+    _require(ds, "tracked", ["displacement_grid"], "displacement_map (ds.harp.plot.displacement)")
     da = _slice(ds["displacement_grid"], time, z)
+    title = _where(da)
     da = _magnitude(da) if component is None else da.sel(axis=component)
-    ax = ax or plt.subplots(figsize=(4.5, 4))[1]
-    da.plot(
-        ax=ax,
+    return _slice_map(
+        da,
+        title,
+        ax,
         cmap="viridis" if component is None else "RdBu_r",
-        cbar_kwargs={"label": f"u{'' if component is None else '_' + component} (mm)"},
+        label=f"u{'' if component is None else '_' + component} (mm)",
     )
-    ax.set_aspect("equal")
-    return ax
 
 
 def strain_map(
@@ -258,7 +356,14 @@ def strain_map(
     Returns
     -------
     matplotlib.axes.Axes
+
+    Raises
+    ------
+    SchemaError
+        If the dataset is not ``tracked/1`` (the message names the kind it is) or has no
+        ``green_strain``, ``points`` or ``cells``.
     """
+    _require(ds, "tracked", ["green_strain", "points", "cells"], "strain_map (ds.harp.plot.strain)")
     centres = ds["points"].values[ds["cells"].values[:, :8]].mean(axis=1)
     strain = ds["green_strain"].sel(time=ds.time[-1] if time is None else time, method="nearest")
     values = strain.values[:, i, j]
@@ -266,10 +371,11 @@ def strain_map(
     z = float(np.median(zc)) if z is None else z
     height = np.ptp(ds["points"].values[ds["cells"].values[:, :8], 2], axis=1).mean()
     near = np.abs(zc - z) <= height / 2
-    ax = ax or plt.subplots(figsize=(4.8, 4))[1]
+    ax = _axes(ax, (4.8, 4.2))
     sc = ax.scatter(centres[near, 0], centres[near, 1], c=values[near], cmap="RdBu_r", s=12)
-    plt.colorbar(sc, ax=ax, label=f"E_{'xyz'[i]}{'xyz'[j]}")
+    ax.figure.colorbar(sc, ax=ax, label=f"E_{'xyz'[i]}{'xyz'[j]}")
     ax.set(xlabel="x (mm)", ylabel="y (mm)", aspect="equal")
+    ax.set_title(f"t = {float(strain.time):.0f} ms, z = {z:.1f} mm", fontsize=10)
     return ax
 
 
@@ -288,9 +394,19 @@ def fiber_stretch_by_region(ds: xr.Dataset, *, time: float | None = None, ax: An
     Returns
     -------
     matplotlib.axes.Axes
+
+    Raises
+    ------
+    SchemaError
+        If the dataset is not ``tracked/1`` (the message names the kind it is) or has no
+        ``fiber_stretch``.
     """
+    _require(ds, "tracked", [], "fiber_stretch_by_region (ds.harp.plot.fiber_stretch)")
     if "fiber_stretch" not in ds:
-        raise ValueError("the dataset has no 'fiber_stretch' (the tracked body had no fibres)")
+        raise SchemaError(
+            "fiber_stretch_by_region: the dataset has no 'fiber_stretch' (the tracked body had "
+            "no fibres; give Body(..., fibers=...) to track fibre stretch)"
+        )
     stretch = ds["fiber_stretch"].sel(time=ds.time[-1] if time is None else time, method="nearest")
     if "region" in ds:
         names = ds["region"].attrs.get("flag_meanings", "").split()
@@ -298,10 +414,11 @@ def fiber_stretch_by_region(ds: xr.Dataset, *, time: float | None = None, ax: An
     else:
         names, labels = ["body"], np.zeros(ds.sizes["cell"], dtype=int)
     groups = [stretch.values[labels == k] for k in range(len(names))]
-    ax = ax or plt.subplots(figsize=(1.2 * len(names) + 2, 4))[1]
+    ax = _axes(ax, (max(1.2 * len(names) + 2, 4.0), 4.0))
     ax.boxplot(groups, tick_labels=names)
     ax.axhline(1.0, color="0.6", lw=0.8)
     ax.set_ylabel("fibre stretch")
+    ax.set_title(f"t = {float(stretch.time):.0f} ms", fontsize=10)
     return ax
 
 

@@ -1,6 +1,6 @@
 """Dataset conventions of harpx (schema version 1) and :func:`validate`.
 
-Three kinds of :class:`xarray.Dataset` flow through harpx (DESIGN §3). Each carries its kind in
+Three kinds of :class:`xarray.Dataset` flow through harpx. Each carries its kind in
 ``ds.attrs["harpx_schema"]``:
 
 ``tagged/1``
@@ -163,7 +163,8 @@ def standard_attrs(name: str) -> dict[str, str]:
     Parameters
     ----------
     name : str
-        Variable or coordinate name from DESIGN §3 (e.g. ``"phase"``, ``"x"``).
+        Standard harpx variable or coordinate name (a key of :data:`UNITS`), e.g.
+        ``"phase"`` or ``"x"``.
 
     Returns
     -------
@@ -289,7 +290,7 @@ _MIN_SPACING = 1e-2
 
 
 def validate(ds: xr.Dataset, kind: str | None = None) -> None:
-    """Check a dataset against the harpx conventions (DESIGN §3).
+    """Check a dataset against the harpx conventions (the module docstring lists them).
 
     Every problem found is collected; if there is any, one :class:`~harpx.errors.SchemaError`
     lists them all, one per line (also available as ``err.problems``).

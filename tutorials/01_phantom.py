@@ -5,6 +5,10 @@
 #     text_representation:
 #       extension: .py
 #       format_name: percent
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
 # ---
 
 # %% [markdown]
@@ -26,9 +30,6 @@
 # %%
 import time
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
 import harpx  # noqa: F401  (registers the ds.harp accessor)
@@ -44,9 +45,9 @@ tagged
 # ground-truth displacement of every voxel's material point.
 
 # %%
-tagged.image.sel(tag="x").sel(time=tagged.time[-1], z=0.0, method="nearest").plot(cmap="gray")
-plt.savefig("tagged.png")
-plt.close()
+ax = tagged.harp.plot.tag_image(tag="x", z=0.0)  # last frame by default
+ax.figure.savefig("tagged.png")
+plt.show()
 
 # %% [markdown]
 # ## Harmonic phase
@@ -58,9 +59,9 @@ plt.close()
 start = time.perf_counter()
 phase = tagged.harp.phase(upsample=2)
 phase_seconds = time.perf_counter() - start
-phase.phase.sel(tag="y").sel(time=0.0, z=0.0, method="nearest").plot(cmap="twilight")
-plt.savefig("phase.png")
-plt.close()
+ax = phase.harp.plot.phase(tag="y", time=0.0, z=0.0)
+ax.figure.savefig("phase.png")
+plt.show()
 
 # %% [markdown]
 # ## Conventional HARP and finite-element tracking
@@ -90,6 +91,18 @@ for name, err, seconds in [("HARP", harp_error, harp_seconds), ("FE hex8", fe_er
 tracked[["epsilon", "penalty", "iterations", "wall_time"]].to_dataframe()
 
 # %% [markdown]
+# ## Pictures
+# `ds.harp.plot` draws one slice of any harpx dataset: `tag_image()` of the images,
+# `phase()` of the harmonic phase, `displacement()`, `strain()` and `fiber_stretch()` of a
+# tracked result. Each draws into a new figure, or into the axes given as `ax=`.
+
+# %%
+fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), layout="constrained")
+tracked.harp.plot.displacement(ax=axes[0])
+tracked.harp.plot.strain(i=0, j=1, ax=axes[1])
+plt.show()
+
+# %% [markdown]
 # ## Save and reopen
 # The tracked dataset is self-contained (mesh, displacement, strain, diagnostics), so the
 # archive reopens without the mesh file.
@@ -99,3 +112,15 @@ tracked.harp.to_netcdf("phantom_tracked.nc")
 reopened = open_dataset("phantom_tracked.nc")
 fe_error_reopened = float(reopened.harp.error(tagged).mean_all)
 print(f"reopened archive: mean error {fe_error_reopened:.3f} mm")
+
+# %% [markdown]
+# ## ParaView
+# `to_meshio` writes the tracked mesh as an XDMF time series: open the `.xdmf` file in
+# ParaView and apply *Warp By Vector* to `displacement` to see the deformed body; strain,
+# fibre stretch and the per-cell residual are cell data.
+
+# %%
+from harpx.io.mesh import to_meshio  # noqa: E402
+
+paraview_files = to_meshio(tracked, "phantom_tracked.xdmf")
+print("ParaView files:", [path.name for path in paraview_files])

@@ -5,6 +5,10 @@
 #     text_representation:
 #       extension: .py
 #       format_name: percent
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
 # ---
 
 # %% [markdown]
@@ -32,9 +36,6 @@
 # %%
 import time
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
@@ -66,7 +67,7 @@ tagged.image.sel(tag="z").isel(time=-1).sel(y=0.0, method="nearest").plot(
 axes[1].set_title("z tags, end systole (y = 0)")
 fig.tight_layout()
 fig.savefig("lv_tagged.png")
-plt.close(fig)
+plt.show()
 
 # %% [markdown]
 # ## Harmonic phase
@@ -124,7 +125,7 @@ for ax, (ref, cut) in zip(axes, cuts.items(), strict=True):
     ax.set_title(f"{ref}: opening {cut.degrees:.1f}°")
 fig.tight_layout()
 fig.savefig("lv_radial_cut.png")
-plt.close(fig)
+plt.show()
 print(f"opening angle SFR {opening_angle_sfr:.2f}°, PSR {opening_angle_psr:.1f}°")
 
 # %% [markdown]
@@ -155,7 +156,7 @@ for ax, ref in zip(axes, results, strict=True):
 axes[0].set_ylabel("volume fraction")
 fig.tight_layout()
 fig.savefig("lv_fiber_stretch.png")
-plt.close(fig)
+plt.show()
 
 # %% [markdown]
 # ## Save

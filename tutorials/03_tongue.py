@@ -5,6 +5,10 @@
 #     text_representation:
 #       extension: .py
 #       format_name: percent
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
 # ---
 
 # %% [markdown]
@@ -26,9 +30,6 @@
 # %%
 import time
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
@@ -82,7 +83,7 @@ ax.set(
 )
 ax.legend(fontsize=7, ncols=5, loc="lower left")
 fig.savefig("tongue_fibres.png", dpi=120)
-plt.close(fig)
+plt.show()
 
 # %% [markdown]
 # ## Harmonic phase and tracking
@@ -170,6 +171,9 @@ t_max_error  # noqa: B018  (displayed in Jupyter)
 stretch_agreement = resimulate(body, estimate.t_max, dirichlet=attachments, tracked=tracked)
 true_stretch = scene.true_stretch_by_muscle(body)
 fig = plot_stretch_agreement(stretch_agreement, path="tongue_fig3c.png", truth=true_stretch)
+fig  # noqa: B018  (a matplotlib Figure: displayed in Jupyter)
+
+# %%
 stretch_agreement[
     ["stretch_tracked", "stretch_simulated", "correlation", "mean_abs_difference"]
 ].to_dataframe()

@@ -1,4 +1,4 @@
-r"""Harmonic phase of tagged images: ``tagged/1`` → ``phase/1`` (DESIGN §4, paper §3.2).
+r"""Harmonic phase of tagged images: ``tagged/1`` → ``phase/1`` (paper §3.2).
 
 For every tag the acquisition slices (normal to that tag's ``slice_axis``) are cubic-spline
 upsampled in-plane, band-passed with a disk around the tag frequency and inverse

@@ -3,7 +3,7 @@
 Every material point ``X`` keeps its reference harmonic phase vector
 :math:`\\varphi_0(X) = \\varphi(X, t_0)` (paper eq. 1). In each frame, starting from the
 point's position in the previous frame, the position is refined by Gauss–Newton steps on the
-wrapped phase mismatch (DESIGN §4 "Conventional HARP", REFERENCES §4.4):
+wrapped phase mismatch:
 
 .. math::
 
@@ -16,7 +16,7 @@ component of a step is clamped to one voxel. A point stops iterating when
 :math:`\\|e\\| < 10^{-4}` rad or after ``iterations`` steps.
 
 The method converges to the *nearest* position with the reference phase, so it inherits the
-textbook failures (REFERENCES §4.7) on purpose, as the baseline the FE method must beat: a
+textbook failures of HARP on purpose, as the baseline the FE method must beat: a
 frame-to-frame motion of more than half a tag period along a tag direction is tracked to the
 wrong tag line (a "tag jump"), and points near tissue edges follow the blurred phase there.
 """

@@ -20,7 +20,8 @@ interpolates is smooth:
        \\nabla \\varphi = k_t + \\frac{\\operatorname{Im}(\\bar D \\, \\nabla D)}{|D|^2}
        = \\frac{\\operatorname{Im}(\\bar H \\, \\nabla H)}{|H|^2},
 
-   with :math:`W(a) = \\operatorname{angle}(e^{ia}) \\in [-\\pi, \\pi)` (REFERENCES §4.3).
+   with :math:`W(a) = \\operatorname{angle}(e^{ia}) \\in [-\\pi, \\pi)` (the
+   complex form of the phase gradient, exact wherever :math:`|H| > 0`).
 
 No wrapped difference ever enters the interpolation, so points straddling a phase wrap are
 as accurate as any other. Everything is vectorised over points; the Python loop runs over

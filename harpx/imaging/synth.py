@@ -1,6 +1,6 @@
 r"""Synthetic SPAMM / CSPAMM tagged cine images from a known motion (``tagged/1``).
 
-Image formation (REFERENCES §3.1, DESIGN §5). With :math:`X` the reference position (the
+Image formation. With :math:`X` the reference position (the
 configuration at ``times[0]``) and :math:`x = X + u(X, t)`, the signal of tag :math:`j` at a
 spatial sample :math:`x` is :math:`\rho(X)\, m_j(X, t)` evaluated at
 :math:`X = \chi_t^{-1}(x)` (Eulerian resampling of the material pattern), with
@@ -85,50 +85,48 @@ def invert_motion(
 ) -> NDArray[np.float64]:
     r"""Reference positions :math:`X` with :math:`X + u(X, t) = x` (vectorised over points).
 
-        Parameters
-        ----------
-        displacement : callable
-            ``u(X, t)``: Lagrangian displacement in mm of points ``X`` (n, 3) mm at time ``t`` ms.
-        x : array_like, shape (n, 3)
-            Spatial positions in mm, columns (x, y, z).
-        t : float
-            Time in ms.
-        start : array_like, shape (n, 3), optional
-            Initial guess (default ``x``), e.g. the solution of the previous frame.
-        tol : float, default 1e-9
-            Convergence tolerance on :math:`|X + u(X) - x|_\infty` per point, mm.
-        max_iter : int, default 100
-            Maximum number of iterations.
+    Parameters
+    ----------
+    displacement : callable
+        ``u(X, t)``: Lagrangian displacement in mm of points ``X`` (n, 3) mm at time ``t`` ms.
+    x : array_like, shape (n, 3)
+        Spatial positions in mm, columns (x, y, z).
+    t : float
+        Time in ms.
+    start : array_like, shape (n, 3), optional
+        Initial guess (default ``x``), e.g. the solution of the previous frame.
+    tol : float, default 1e-9
+        Convergence tolerance on :math:`|X + u(X) - x|_\infty` per point, mm.
+    max_iter : int, default 100
+        Maximum number of iterations.
 
-        Returns
-        -------
-        ndarray, shape (n, 3)
-            :math:`X = \chi_t^{-1}(x)` in mm.
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        :math:`X = \chi_t^{-1}(x)` in mm.
 
-        Raises
-        ------
-        ConvergenceError
-            If some points do not converge (the motion folds, or is too large for the
-            iteration); ``history`` holds the largest residual of every iteration.
+    Raises
+    ------
+    ConvergenceError
+        If some points do not converge (the motion folds, or is too large for the
+        iteration); ``history`` holds the largest residual of every iteration.
 
-        Notes
-        -----
-        Fixed-point iteration :math:`X \leftarrow x - u(X, t) = X - r` started at ``start``
-        (or :math:`X = x`). It contracts with rate :math:`|
-    abla u|`; when the residual falls by
-        less than 4× per step the update is preconditioned with :math:`(I +
-    abla u)^{-1}`
-        (forward differences, refreshed whenever progress slows again), which turns it into a
-        chord/Newton iteration. Only points not yet converged are iterated.
+    Notes
+    -----
+    Fixed-point iteration :math:`X \leftarrow x - u(X, t) = X - r` started at ``start``
+    (or :math:`X = x`). It contracts with rate :math:`|\nabla u|`; when the residual falls by
+    less than 4× per step the update is preconditioned with :math:`(I + \nabla u)^{-1}`
+    (forward differences, refreshed whenever progress slows again), which turns it into a
+    chord/Newton iteration. Only points not yet converged are iterated.
 
-        Examples
-        --------
-        >>> from harpx.imaging.synth import invert_motion
-        >>> shift = lambda X, t: np.full_like(X, 0.5 * np.sin(X[:, :1]))
-        >>> x = np.array([[1.0, 2.0, 3.0]])
-        >>> X = invert_motion(shift, x, 0.0)
-        >>> bool(np.allclose(X + shift(X, 0.0), x, atol=1e-9))
-        True
+    Examples
+    --------
+    >>> from harpx.imaging.synth import invert_motion
+    >>> shift = lambda X, t: np.full_like(X, 0.5 * np.sin(X[:, :1]))
+    >>> x = np.array([[1.0, 2.0, 3.0]])
+    >>> X = invert_motion(shift, x, 0.0)
+    >>> bool(np.allclose(X + shift(X, 0.0), x, atol=1e-9))
+    True
     """
     x = np.asarray(x, dtype=np.float64)
     X = x.copy() if start is None else np.array(start, dtype=np.float64)

@@ -1,7 +1,7 @@
 """Export tracked results as ParaView time series and read their meshes back.
 
-:func:`to_meshio` writes a ``tracked/1`` dataset (DESIGN §3) as a time series that ParaView
-opens directly:
+:func:`to_meshio` writes a ``tracked/1`` dataset (:mod:`harpx.schema`) as a time series
+that ParaView opens directly:
 
 ``series="xdmf"``
     One XDMF 3 file (:class:`meshio.xdmf.TimeSeriesWriter`): the reference mesh once, then one

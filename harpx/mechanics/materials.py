@@ -423,8 +423,8 @@ class Guccione(_Uncoupled):
     :func:`harpx.mechanics.kinematics.fiber_basis` (``Q`` does not depend on the choice of
     ``s, n`` about ``f``). The law is written *uncoupled* (in :math:`\bar E`, not
     :math:`E`) so that the mean-dilatation assembly can treat the volumetric part
-    separately. The incompressible closed forms (e.g. REFERENCES section 2.5) therefore
-    hold exactly at ``J = 1``, where :math:`\bar E = E`. Derivation of the tangent: module
+    separately. The incompressible closed forms (e.g. uniaxial stretch along the fibre)
+    therefore hold exactly at ``J = 1``, where :math:`\bar E = E`. Derivation of the tangent: module
     docstring.
 
     References

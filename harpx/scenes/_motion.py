@@ -3,7 +3,8 @@
 The motions here are written in closed form with their exact inverses, so synthetic images
 need no numerical inversion and the tracked result can be compared with the truth at any
 material point. They are *not* produced by the finite-element model that tracks them, which
-keeps the validation free of inverse crimes (DESIGN §5).
+keeps the validation free of inverse crimes (a tracker tested on images made by its own
+model and discretisation would look better than it is).
 """
 
 from __future__ import annotations

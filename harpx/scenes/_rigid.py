@@ -3,8 +3,8 @@
 Each motion is prescribed at the frame times by a cumulative profile (an angle, an offset or
 a stretch per frame, interpolated linearly in time between frames) and maps a reference
 point ``X`` (n, 3) mm to ``x = X + u(X, t)`` in closed form, with the exact inverse
-``X(x, t)``. None of them is produced by the finite-element model that tracks them
-(DESIGN §5).
+``X(x, t)``. None of them is produced by the finite-element model that tracks them,
+so the tracker is never tested on images made by its own model.
 
 :func:`frame_profile` builds the cumulative profiles used by the benchmark: a steady
 per-frame step, optionally reached through a linear ramp of smaller steps (so that frame 1

@@ -4,7 +4,7 @@ Ground truth
 ------------
 A systolic sequence is *simulated* on a finer hexahedral mesh of the same truncated
 ellipsoid (:func:`harpx.mechanics.ventricle.ventricle`) than the tracking model, so the
-tracker never shares the truth's discretisation (DESIGN §5):
+tracker never shares the truth's discretisation (no inverse crime):
 
 * passive myocardium: uncoupled transversely isotropic Guccione law with the canine values
   of Guccione et al. (1991, 1995): ``C = 0.88 kPa, bf = 18.5, bt = 3.58, bfs = 1.63`` and a
@@ -648,7 +648,7 @@ def prestretch_growth(
     GrowthField
         :math:`F_g` at the Gauss points of a hex8 body on ``spec``.
     info : dict
-        ``updates``, ``displacement`` (max |u| of each equilibrium, mm), ``prestretch``
+        ``updates``, ``displacement`` (max ``|u|`` of each equilibrium, mm), ``prestretch``
         (mean, endocardial and epicardial mean :math:`\lambda_p - 1`) and ``wall_time``.
 
     Raises

@@ -30,7 +30,7 @@ The integral uses its own quadrature (``intorder``), dense enough that sample po
 farther apart than a voxel, so the model sees every voxel of data; the phase images are
 prefiltered once per frame (:class:`harpx.imaging.sample.PhaseSampler`), not per Newton
 iteration. Phase gradients come from the complex harmonic image, never from differences of
-wrapped phase (DESIGN §4 "Wrap safety").
+wrapped phase (those jump by 2π across every tag line).
 
 The penalty is stated relative to the material: ``penalty = 1`` makes the data stiffness
 per unit volume, :math:`\lambda |k|^2`, equal to the material stiffness per unit volume at
@@ -132,7 +132,7 @@ class ConstraintState:
     tag_valid: np.ndarray
 
     def epsilon(self) -> float:
-        """Tracking residual ε: weighted mean of |W(φ − φ0)| over valid points and tags, rad."""
+        """Tracking residual ε: weighted mean of ``|W(φ − φ0)|`` over valid points and tags, rad."""
         return _epsilon(self.weight, self.tag_valid, self.residual)
 
 
@@ -390,7 +390,7 @@ class PhaseConstraint:
         return change
 
     def epsilon_cell(self, st: ConstraintState) -> FloatArray:
-        """Per-cell tracking residual: weighted mean |W(φ − φ0)| over the cell's points and
+        """Per-cell tracking residual: weighted mean ``|W(φ − φ0)|`` over the cell's points and
         their valid tags, rad (NaN for cells without data)."""
         ncell, npc = self.shape_values.shape[:2]
         w = (st.weight[:, None] * st.tag_valid).reshape(ncell, -1)

@@ -207,7 +207,7 @@ def tracking_error(
     xarray.Dataset
         Per frame (``time``) and overall (``*_all``, over every frame after the reference
         frame, which is exact by construction) mean, standard deviation, 95th percentile
-        and maximum of the error magnitude |u − u_true| in mm, plus
+        and maximum of the error magnitude ``|u − u_true|`` in mm, plus
         ``coverage``: the fraction of body voxels that the tracked result covers.
     """
     if "displacement_true" not in truth:
