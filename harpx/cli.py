@@ -42,7 +42,6 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from harpx._progress import show_progress
     from harpx.imaging.harp import extract_phase
     from harpx.imaging.harptrack import track_harp
     from harpx.io.netcdf import to_netcdf
@@ -76,13 +75,7 @@ def _demo(args: argparse.Namespace) -> int:
     for element in args.elements:
         body = scene.body(element)
         t = time.perf_counter()
-        fe = track(
-            phase,
-            body,
-            method=args.method,
-            epsilon=args.epsilon,
-            progress=show_progress(args.progress),
-        )
+        fe = track(phase, body, **_tracking(args))
         results[f"FE {element}"] = fe
         rows.append(
             {
@@ -128,7 +121,6 @@ def _phase(args: argparse.Namespace) -> int:
 
 
 def _track(args: argparse.Namespace) -> int:
-    from harpx._progress import show_progress
     from harpx.io.netcdf import open_dataset, to_netcdf
     from harpx.mechanics.body import Body
     from harpx.mechanics.materials import NeoHookean
@@ -139,17 +131,21 @@ def _track(args: argparse.Namespace) -> int:
     options: dict[str, Any] = {"dirichlet": [_fixed(item, body) for item in args.fix]}
     if args.penalty is not None:
         options["penalty"] = args.penalty
-    result = track(
-        ds,
-        body,
-        method=args.method,
-        epsilon=args.epsilon,
-        progress=show_progress(args.progress),
-        **options,
-    )
+    result = track(ds, body, **_tracking(args), **options)
     to_netcdf(result, args.output)
     print(f"wrote {args.output}")
     return 0
+
+
+def _tracking(args: argparse.Namespace) -> dict[str, Any]:
+    """Tracking options shared by ``demo`` and ``track``."""
+    from harpx._progress import show_progress
+
+    return {
+        "method": args.method,
+        "epsilon": args.epsilon,
+        "progress": show_progress(args.progress),
+    }
 
 
 def _fixed(item: str, body: Any) -> Any:
