@@ -36,6 +36,7 @@ _LAZY: dict[str, str] = {
     "solve": "harpx.mechanics.newton",
     "track": "harpx.tracking.track",
     "scenes": "harpx.scenes",
+    "datasets": "harpx.datasets",
 }
 
 __all__ = [

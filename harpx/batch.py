@@ -10,7 +10,8 @@ Nothing is lost when a cohort is interrupted or a subject fails:
 - archives are only ever complete (atomic writes), so a killed run leaves finished subjects
   finished and the others absent;
 - a re-run skips every subject whose archive opens cleanly and was made from the same input
-  (its SHA-256 is recorded in the archive), and redoes missing, corrupt or stale ones;
+  with the same settings (the SHA-256 of the input and a fingerprint of the body factory and
+  tracking settings are recorded in the archive), and redoes missing, corrupt or stale ones;
 - a failing subject does not stop the others: all are run, then one :class:`CohortError`
   lists the failures.
 
@@ -20,27 +21,40 @@ only when there is work to do.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import hashlib
 import inspect
+import json
 import pickle
 import uuid
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from tqdm.auto import tqdm
+import numpy as np
 
+from harpx._progress import progress_bar
 from harpx._typing import PathLike
 from harpx.errors import ArchiveError, HarpxError, SchemaError
 from harpx.io.netcdf import open_dataset, to_netcdf
 from harpx.schema import validate
 
-__all__ = ["CohortError", "local_cluster", "output_path", "track_many", "track_subject"]
+__all__ = [
+    "CohortError",
+    "local_cluster",
+    "output_path",
+    "settings_fingerprint",
+    "track_many",
+    "track_subject",
+]
 
 #: Suffix of each subject's archive: ``<input stem>_tracked.nc``.
 OUTPUT_SUFFIX = "_tracked.nc"
 _SOURCE_ATTR = "source_file"
 _DIGEST_ATTR = "source_sha256"
+_SETTINGS_ATTR = "settings_sha256"
+_SETTINGS_TEXT_ATTR = "settings_fingerprint"
 
 
 class CohortError(HarpxError):
@@ -98,7 +112,7 @@ def track_many(
     n_workers: int = 2,
     track_kwargs: Mapping[str, Any] | None = None,
     overwrite: bool = False,
-    progress: bool = True,
+    progress: bool | None = None,
 ) -> list[Path]:
     """Track every subject of a cohort on a dask cluster, one archive per subject.
 
@@ -128,10 +142,12 @@ def track_many(
         ``method``), the same for every subject.
     overwrite : bool, default False
         Redo every subject. By default a subject is skipped when its archive opens cleanly,
-        is a valid ``tracked/1`` dataset and records the SHA-256 of the current input; with
-        other ``body_factory`` or ``track_kwargs`` than the earlier run, pass True.
-    progress : bool, default True
-        Show a progress bar over subjects.
+        is a valid ``tracked/1`` dataset and records the SHA-256 of the current input and
+        the fingerprint of the current ``body_factory`` and ``track_kwargs``
+        (:func:`settings_fingerprint`): a subject tracked with other settings is redone.
+    progress : bool or None, default None
+        Progress bar over subjects; None: shown in terminals and notebooks once the call
+        has run a few seconds (:mod:`harpx._progress`).
 
     Returns
     -------
@@ -156,8 +172,9 @@ def track_many(
     Notes
     -----
     The skip decision is made here, before any cluster starts: a cohort that is already
-    complete needs no cluster. Each output archive records ``source_file`` (input name) and
-    ``source_sha256`` in its attributes. Workers read the inputs and write the outputs
+    complete needs no cluster. Each output archive records ``source_file`` (input name),
+    ``source_sha256``, ``settings_sha256`` and the text it hashes,
+    ``settings_fingerprint``, in its attributes. Workers read the inputs and write the outputs
     themselves, so on a remote cluster (``address=``) both paths must name the same files
     on the workers (a shared file system).
 
@@ -174,6 +191,7 @@ def track_many(
     out_dir = Path(output_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     outputs = [output_path(p, out_dir) for p in inputs]
+    settings = settings_fingerprint(body_factory, kwargs)
 
     failures: dict[int, BaseException] = {}
     todo: list[tuple[int, str]] = []  # (subject index, input digest)
@@ -183,12 +201,12 @@ def track_many(
         except OSError as exc:
             failures[i] = ArchiveError(f"cannot read input {str(source)!r}: {exc}")
             continue
-        if overwrite or not _is_complete(target, digest):
+        if overwrite or not _is_complete(target, digest, settings[0]):
             todo.append((i, digest))
 
     done = len(inputs) - len(todo) - len(failures)
-    with tqdm(
-        total=len(inputs), initial=done, disable=not progress, desc="subjects", unit="subject"
+    with progress_bar(
+        total=len(inputs), initial=done, progress=progress, desc="subjects", unit="subject"
     ) as bar:
         bar.update(len(failures))
         if todo:
@@ -203,6 +221,7 @@ def track_many(
                 n_workers,
                 failures,
                 bar,
+                settings,
             )
     if failures:
         raise _cohort_error(inputs, outputs, failures, out_dir)
@@ -218,6 +237,7 @@ def track_subject(
     body_factory: Callable[[Any], Any],
     track_kwargs: Mapping[str, Any] | None = None,
     digest: str | None = None,
+    settings: tuple[str, str] | None = None,
 ) -> Path:
     """Track one subject and write its archive (the task :func:`track_many` distributes).
 
@@ -233,6 +253,9 @@ def track_subject(
         Keyword arguments of :func:`harpx.tracking.track.track`.
     digest : str, optional
         SHA-256 of ``source`` recorded in the archive (computed if None).
+    settings : tuple of str, optional
+        :func:`settings_fingerprint` of ``body_factory`` and ``track_kwargs`` recorded in
+        the archive (computed if None).
 
     Returns
     -------
@@ -252,7 +275,104 @@ def track_subject(
     tracked = track(ds, body_factory(ds), **dict(track_kwargs or {}))
     tracked.attrs[_SOURCE_ATTR] = source.name
     tracked.attrs[_DIGEST_ATTR] = digest if digest is not None else _sha256(source)
+    sha, text = settings or settings_fingerprint(body_factory, dict(track_kwargs or {}))
+    tracked.attrs[_SETTINGS_ATTR] = sha
+    tracked.attrs[_SETTINGS_TEXT_ATTR] = text
     return to_netcdf(tracked, target)
+
+
+def settings_fingerprint(
+    body_factory: Callable[[Any], Any], track_kwargs: Mapping[str, Any] | None = None
+) -> tuple[str, str]:
+    """Fingerprint of how a cohort is tracked: the body factory and the tracking settings.
+
+    Parameters
+    ----------
+    body_factory : callable
+        ``body_factory(ds) -> Body``. A function is described by its module, name, source
+        code and default arguments; a :func:`functools.partial` by its function and
+        arguments; another callable by its type and fields (dataclasses) or ``repr``.
+    track_kwargs : mapping, optional
+        Keyword arguments of :func:`harpx.tracking.track.track`. Arrays are described by
+        their dtype, shape and a SHA-256 of their bytes, dataclasses (e.g. ``Fixed``) by
+        their fields.
+
+    Returns
+    -------
+    sha256 : str
+        Hex digest of ``text``.
+    text : str
+        The JSON description that is hashed (recorded in each archive, to see what
+        changed).
+
+    Examples
+    --------
+    >>> def body(ds):
+    ...     return None
+    >>> a, _ = settings_fingerprint(body, {"epsilon": 0.05})
+    >>> b, _ = settings_fingerprint(body, {"epsilon": 0.1})
+    >>> a == b
+    False
+    """
+    description = {
+        "body_factory": _describe_callable(body_factory),
+        "track_kwargs": {str(k): _describe(v) for k, v in sorted(dict(track_kwargs or {}).items())},
+    }
+    text = json.dumps(description, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest(), text
+
+
+def _describe_callable(fn: Any) -> Any:
+    if isinstance(fn, functools.partial):
+        return {
+            "partial": _describe_callable(fn.func),
+            "args": [_describe(a) for a in fn.args],
+            "keywords": {k: _describe(v) for k, v in sorted(fn.keywords.items())},
+        }
+    if inspect.isfunction(fn) or inspect.ismethod(fn):
+        try:
+            source = inspect.getsource(fn)
+        except (OSError, TypeError):  # defined interactively: hash the compiled code
+            code = fn.__code__
+            source = code.co_code.hex() + repr(code.co_consts)
+        return {
+            "function": f"{fn.__module__}.{fn.__qualname__}",
+            "source_sha256": hashlib.sha256(source.encode()).hexdigest(),
+            "defaults": _describe(fn.__defaults__),
+            "kwdefaults": _describe(getattr(fn, "__kwdefaults__", None)),
+        }
+    return {"callable": f"{type(fn).__module__}.{type(fn).__qualname__}", "value": _describe(fn)}
+
+
+def _describe(value: Any) -> Any:
+    """A JSON-able description that changes whenever the value does."""
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    if isinstance(value, np.ndarray | np.generic):
+        data = np.ascontiguousarray(value)
+        return {
+            "array": str(data.dtype),
+            "shape": list(data.shape),
+            "sha256": hashlib.sha256(data.tobytes()).hexdigest(),
+        }
+    if isinstance(value, list | tuple):
+        return [_describe(v) for v in value]
+    if isinstance(value, Mapping):
+        return {str(k): _describe(v) for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        fields = {f.name: _describe(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        return {"type": f"{type(value).__module__}.{type(value).__qualname__}", **fields}
+    if callable(value):
+        return _describe_callable(value)
+    text = repr(value)
+    if " at 0x" in text:  # a default repr names a memory address: describe the pickle instead
+        try:
+            import cloudpickle
+
+            return {"pickle_sha256": hashlib.sha256(cloudpickle.dumps(value)).hexdigest()}
+        except Exception:
+            pass
+    return {"repr": text}
 
 
 def local_cluster(n_workers: int = 2) -> Any:
@@ -360,8 +480,8 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def _is_complete(target: Path, digest: str) -> bool:
-    """Whether ``target`` is a readable, valid tracked/1 archive made from this input."""
+def _is_complete(target: Path, digest: str, settings: str) -> bool:
+    """Whether ``target`` is a valid tracked/1 archive made from this input, these settings."""
     if not target.is_file():
         return False
     try:
@@ -369,7 +489,7 @@ def _is_complete(target: Path, digest: str) -> bool:
         validate(ds, "tracked")
     except (ArchiveError, SchemaError):
         return False
-    return ds.attrs.get(_DIGEST_ATTR) == digest
+    return ds.attrs.get(_DIGEST_ATTR) == digest and ds.attrs.get(_SETTINGS_ATTR) == settings
 
 
 def _run(
@@ -383,6 +503,7 @@ def _run(
     n_workers: int,
     failures: dict[int, BaseException],
     bar: Any,
+    settings: tuple[str, str],
 ) -> None:
     Client, as_completed = _distributed("track_many", "Client", "as_completed")
     owned: list[Any] = []  # cluster/client opened here, closed in `finally`
@@ -403,6 +524,7 @@ def _run(
                 body_factory,
                 kwargs,
                 digest,
+                settings,
                 key=f"harpx-track-{inputs[i].stem}-{uuid.uuid4().hex}",
                 pure=False,
             ): i

@@ -1,10 +1,13 @@
 """The ``harpx`` command line.
 
-Subcommands: ``demo`` (the phantom scene end to end), ``phase`` (tagged archive → phase
-archive), ``track`` (phase archive + mesh → tracked archive), ``dicom`` (tagged cine DICOM
-series → tagged archive), ``report`` (summary of a tracked archive, optionally against
-ground truth). Errors print as one line (``--debug`` for the
-traceback); exit codes: 0 success, 1 harpx or input error, 2 usage error.
+Subcommands: ``demo`` (the phantom scene end to end), ``scene`` (a synthetic scene's input
+archive and tracking mesh, to try the other subcommands on), ``phase`` (tagged archive →
+phase archive), ``track`` (phase archive + mesh → tracked archive), ``dicom`` (tagged cine
+DICOM series → tagged archive), ``report`` (summary of a tracked archive, optionally
+against ground truth). Errors print as one line (``--debug`` for the traceback); exit
+codes: 0 success, 1 harpx or input error, 2 usage error. Progress bars follow
+:mod:`harpx._progress`: shown in a terminal for calls longer than a few seconds, never in
+logs or pipes, unless ``--progress`` or ``--no-progress`` says otherwise.
 """
 
 from __future__ import annotations
@@ -16,7 +19,26 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from harpx.errors import HarpxError
+from harpx.errors import HarpxError, SchemaError
+
+_DESCRIPTION = "Motion estimation from tagged cine MRI with hyperelastic finite-element models."
+_EPILOG = (
+    "Try it on a synthetic scene: harpx scene phantom-small --output try/ writes try/tagged.nc "
+    "and try/mesh.vtu and prints the phase, track and report commands to run on them. "
+    "Exit codes: 0 success, 1 harpx or input error (one line; --debug for the traceback), "
+    "2 usage error."
+)
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows ``(default: ...)`` only where there is a default worth stating."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if action.default in (None, False, [], argparse.SUPPRESS) or "default" in text:
+            return text
+        return super()._get_help_string(action)
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -32,9 +54,8 @@ def _demo(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()
     scene = phantom(args.size)
-    print(
-        f"phantom ({args.size}): images {dict(scene.tagged.sizes)} built in {time.perf_counter() - t:.1f} s"
-    )
+    seconds = time.perf_counter() - t
+    print(f"phantom ({args.size}): images {dict(scene.tagged.sizes)} built in {seconds:.1f} s")
     t = time.perf_counter()
     phase = extract_phase(scene.tagged, upsample=args.upsample)
     phase_time = time.perf_counter() - t
@@ -54,7 +75,7 @@ def _demo(args: argparse.Namespace) -> int:
     for element in args.elements:
         body = scene.body(element)
         t = time.perf_counter()
-        fe = track(phase, body, method=args.method, epsilon=args.epsilon, progress=args.progress)
+        fe = track(phase, body, **_tracking(args))
         results[f"FE {element}"] = fe
         rows.append(
             {
@@ -77,7 +98,8 @@ def _demo(args: argparse.Namespace) -> int:
             max=float(err.max_all),
         )
         print(
-            f"| {row['method']} | {row['mean']:.3f} ± {row['sd']:.3f} | {row['p95']:.3f} | {row['max']:.2f} | {row['seconds']:.1f} |"
+            f"| {row['method']} | {row['mean']:.3f} ± {row['sd']:.3f} | {row['p95']:.3f} "
+            f"| {row['max']:.2f} | {row['seconds']:.1f} |"
         )
     frame_time = 54.0 if args.size == "paper" else float(scene.tagged.time[-2])
     import matplotlib.pyplot as plt
@@ -110,9 +132,70 @@ def _track(args: argparse.Namespace) -> int:
 
     ds = open_dataset(args.input)
     body = Body(args.mesh, NeoHookean(c1=args.c1, kappa=args.kappa), element=args.element)
-    result = track(ds, body, method=args.method, epsilon=args.epsilon, progress=args.progress)
+    options: dict[str, Any] = {"dirichlet": [_fixed(item, body) for item in args.fix]}
+    if args.penalty is not None:
+        options["penalty"] = args.penalty
+    result = track(ds, body, **_tracking(args), **options)
     to_netcdf(result, args.output)
     print(f"wrote {args.output}")
+    return 0
+
+
+def _tracking(args: argparse.Namespace) -> dict[str, Any]:
+    """Tracking options shared by ``demo`` and ``track``."""
+    from harpx._progress import show_progress
+
+    return {
+        "method": args.method,
+        "epsilon": args.epsilon,
+        "progress": show_progress(args.progress),
+    }
+
+
+def _fixed(item: str, body: Any) -> Any:
+    """``--fix NAME[:AXES]`` → :class:`~harpx.mechanics.loads.Fixed` on a named boundary."""
+    from harpx.mechanics.loads import Fixed
+
+    name, _, axes = item.partition(":")
+    if name not in body.boundaries:
+        raise ValueError(
+            f"--fix {item!r}: the mesh has no boundary {name!r}; its boundaries are "
+            f"{sorted(body.boundaries)!r}"
+        )
+    axes = axes or "xyz"
+    if any(a not in _AXES for a in axes) or len(set(axes)) != len(axes):
+        raise ValueError(
+            f"--fix {item!r}: axes {axes!r} must be distinct letters of 'xyz', e.g. "
+            f"'{name}:z' to hold only the z displacement"
+        )
+    return Fixed(name, tuple(_AXES[a] for a in axes))
+
+
+def _scene(args: argparse.Namespace) -> int:
+    from harpx.datasets import DATASETS, export_scene
+
+    out = Path(args.output)
+    files = export_scene(args.name, out)
+    recipe = DATASETS[args.name]
+    print(f"wrote {files['tagged']} and {files['mesh']} ({recipe.description})")
+    phase_opts = " ".join(f"--{k} {v}" for k, v in recipe.phase.items())
+    fix = {"tongue": " --fix mandible --fix base", "lv": " --fix base:z"}.get(recipe.scene, "")
+    track_opts = " ".join(
+        f"--{k} {v}" for k, v in recipe.track.items() if k in ("epsilon", "penalty")
+    )
+    element = f" --element {recipe.element}" if recipe.element != "hex8" else ""
+    print("try next:")
+    print(f"  harpx phase {out / 'tagged.nc'} {out / 'phase.nc'} {phase_opts}".rstrip())
+    print(
+        f"  harpx track {out / 'phase.nc'} {out / 'tracked.nc'} --mesh {files['mesh']}"
+        f"{element}{fix} {track_opts}".rstrip()
+    )
+    print(f"  harpx report {out / 'tracked.nc'} --truth {out / 'tagged.nc'}")
+    if recipe.scene == "lv":
+        print(
+            "(the command line tracks with a neo-Hookean model; the scene's Guccione "
+            "myocardium and in-plane base pins are in Python: harpx.scenes.lv)"
+        )
     return 0
 
 
@@ -122,7 +205,16 @@ def _report(args: argparse.Namespace) -> int:
     from harpx.tracking.results import tracking_error
 
     ds = open_dataset(args.archive)
-    print(f"{args.archive}: {ds.attrs.get('harpx_schema')}, method {ds.attrs.get('method')}")
+    kind = ds.attrs.get("harpx_schema")
+    if kind != "tracked/1":
+        hint = {
+            "tagged/1": "run `harpx phase` and `harpx track` on it first",
+            "phase/1": "run `harpx track` on it first",
+        }.get(str(kind), "pass an archive written by `harpx track` or `harpx demo`")
+        raise SchemaError(
+            f"{args.archive!r} is a {kind!r} archive; report needs a 'tracked/1' archive: {hint}"
+        )
+    print(f"{args.archive}: {kind}, method {ds.attrs.get('method')}")
     cols = [c for c in ("epsilon", "penalty", "iterations", "wall_time") if c in ds]
     print("| time (ms) | " + " | ".join(cols) + " |")
     print("|---" * (len(cols) + 1) + "|")
@@ -138,7 +230,8 @@ def _report(args: argparse.Namespace) -> int:
     if args.truth:
         err = tracking_error(ds, open_dataset(args.truth))
         print(
-            f"error against truth: mean {float(err.mean_all):.3f} ± {float(err.sd_all):.3f} mm, p95 {float(err.p95_all):.3f} mm, max {float(err.max_all):.3f} mm"
+            f"error against truth: mean {float(err.mean_all):.3f} ± {float(err.sd_all):.3f} "
+            f"mm, p95 {float(err.p95_all):.3f} mm, max {float(err.max_all):.3f} mm"
         )
     return 0
 
@@ -169,44 +262,100 @@ def _dicom(args: argparse.Namespace) -> int:
     return 0
 
 
+def _progress_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--progress",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="progress bar over frames (default: shown when stderr is a terminal, after a "
+        "few seconds)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``harpx`` command."""
-    parser = argparse.ArgumentParser(prog="harpx", description=__doc__.splitlines()[0])
-    parser.add_argument("--debug", action="store_true", help="print full tracebacks on errors")
-    sub = parser.add_subparsers(dest="command", required=True)
+    from harpx import __version__
+    from harpx.datasets import DATASETS
 
-    demo = sub.add_parser("demo", help="track the synthetic brain phantom end to end")
-    demo.add_argument("--output", default="harpx-demo", help="output folder (default harpx-demo)")
-    demo.add_argument("--size", choices=["paper", "small"], default="paper")
-    demo.add_argument("--upsample", type=int, default=2)
-    demo.add_argument("--method", choices=["penalty", "augmented-lagrangian"], default="penalty")
-    demo.add_argument("--epsilon", type=float, default=0.05, help="target tracking residual, rad")
-    demo.add_argument("--elements", nargs="+", choices=["hex8", "hex20"], default=["hex8"])
-    demo.add_argument(
-        "--no-progress", dest="progress", action="store_false", help="no progress bar"
+    fmt = _HelpFormatter
+    parser = argparse.ArgumentParser(
+        prog="harpx", description=_DESCRIPTION, epilog=_EPILOG, formatter_class=fmt
     )
+    parser.add_argument("--version", action="version", version=f"harpx {__version__}")
+    parser.add_argument("--debug", action="store_true", help="print full tracebacks on errors")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    methods = ["penalty", "augmented-lagrangian"]
+
+    demo = sub.add_parser(
+        "demo", help="track the synthetic brain phantom end to end", formatter_class=fmt
+    )
+    demo.add_argument("--output", default="harpx-demo", help="output folder")
+    demo.add_argument("--size", choices=["paper", "small"], default="paper", help="scene size")
+    demo.add_argument("--upsample", type=int, default=2, help="in-plane phase upsampling")
+    demo.add_argument("--method", choices=methods, default="penalty", help="constraint method")
+    demo.add_argument("--epsilon", type=float, default=0.05, help="target tracking residual, rad")
+    demo.add_argument(
+        "--elements",
+        nargs="+",
+        choices=["hex8", "hex20"],
+        default=["hex8"],
+        help="element orders of the FE models",
+    )
+    _progress_option(demo)
     demo.set_defaults(func=_demo)
 
-    phase = sub.add_parser("phase", help="harmonic phase of a tagged archive")
-    phase.add_argument("input")
-    phase.add_argument("output")
-    phase.add_argument("--upsample", type=int, default=2)
-    phase.add_argument("--radius", type=float, default=0.5)
+    scn = sub.add_parser(
+        "scene",
+        help="write a synthetic scene's tagged archive and tracking mesh",
+        description="Write a synthetic scene's tagged/1 archive (tagged.nc, with ground "
+        "truth) and its tracking mesh (mesh.vtu, with named boundaries) into a folder, and "
+        "print the phase, track and report commands to run on them.",
+        formatter_class=fmt,
+    )
+    scn.add_argument("name", choices=sorted(DATASETS), help="scene and size")
+    scn.add_argument("--output", default="harpx-scene", help="output folder")
+    scn.set_defaults(func=_scene)
+
+    phase = sub.add_parser("phase", help="harmonic phase of a tagged archive", formatter_class=fmt)
+    phase.add_argument("input", help="tagged/1 archive")
+    phase.add_argument("output", help="phase/1 archive to write")
+    phase.add_argument("--upsample", type=int, default=2, help="in-plane upsampling factor")
+    phase.add_argument(
+        "--radius", type=float, default=0.5, help="band-pass radius, fraction of tag frequency"
+    )
     phase.set_defaults(func=_phase)
 
-    trk = sub.add_parser("track", help="track a mesh through a phase or tagged archive")
-    trk.add_argument("input")
-    trk.add_argument("output")
+    trk = sub.add_parser(
+        "track", help="track a mesh through a phase or tagged archive", formatter_class=fmt
+    )
+    trk.add_argument("input", help="phase/1 (or tagged/1) archive")
+    trk.add_argument("output", help="tracked/1 archive to write")
     trk.add_argument("--mesh", required=True, help="hexahedral mesh readable by meshio (mm)")
-    trk.add_argument("--element", choices=["hex8", "hex20"], default="hex8")
+    trk.add_argument("--element", choices=["hex8", "hex20"], default="hex8", help="element")
     trk.add_argument("--c1", type=float, default=1.0, help="neo-Hookean C1, kPa")
     trk.add_argument("--kappa", type=float, default=120.0, help="bulk modulus, kPa")
-    trk.add_argument("--method", choices=["penalty", "augmented-lagrangian"], default="penalty")
+    trk.add_argument("--method", choices=methods, default="penalty", help="constraint method")
     trk.add_argument("--epsilon", type=float, default=0.05, help="target tracking residual, rad")
-    trk.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+    trk.add_argument(
+        "--penalty",
+        type=float,
+        help="starting penalty relative to stiffness and tag wavenumber, raised "
+        "automatically until epsilon is met (default: that of harpx.tracking.track, 1)",
+    )
+    trk.add_argument(
+        "--fix",
+        action="append",
+        default=[],
+        metavar="NAME[:AXES]",
+        help="hold a named boundary of the mesh fixed, e.g. 'bottom' (all axes) or 'base:z'; "
+        "repeat for several",
+    )
+    _progress_option(trk)
     trk.set_defaults(func=_track)
 
-    dcm = sub.add_parser("dicom", help="tagged cine DICOM series -> tagged archive")
+    dcm = sub.add_parser(
+        "dicom", help="tagged cine DICOM series -> tagged archive", formatter_class=fmt
+    )
     dcm.add_argument("input", nargs="+", help="DICOM files or folders")
     dcm.add_argument("output", help="tagged/1 NetCDF archive to write")
     dcm.add_argument(
@@ -218,12 +367,16 @@ def build_parser() -> argparse.ArgumentParser:
         "direction 'row', 'column' or 'x,y,z'; repeat for each tag",
     )
     dcm.add_argument("--tag-period", type=float, required=True, help="tag spacing, mm")
-    dcm.add_argument("--sequence", choices=["SPAMM", "CSPAMM"])
-    dcm.add_argument("--spacing", type=float, help="isotropic output voxel size, mm")
+    dcm.add_argument(
+        "--sequence", choices=["SPAMM", "CSPAMM"], help="tagging sequence (default: from headers)"
+    )
+    dcm.add_argument(
+        "--spacing", type=float, help="isotropic output voxel size, mm (default: in-plane)"
+    )
     dcm.set_defaults(func=_dicom)
 
-    rep = sub.add_parser("report", help="summarise a tracked archive")
-    rep.add_argument("archive")
+    rep = sub.add_parser("report", help="summarise a tracked archive", formatter_class=fmt)
+    rep.add_argument("archive", help="tracked/1 archive")
     rep.add_argument("--truth", help="tagged archive with displacement_true")
     rep.add_argument("--figure", help="write a displacement map of the last frame (PNG)")
     rep.set_defaults(func=_report)

@@ -42,6 +42,7 @@ from harpx.errors import SchemaError
 
 __all__ = [
     "AXES",
+    "CF_AXES",
     "ELEMENT_VERTICES",
     "GRID_DIMS",
     "IMAGE_DIMS",
@@ -49,6 +50,7 @@ __all__ = [
     "LONG_NAMES",
     "SCHEMAS",
     "SEQUENCES",
+    "STANDARD_NAMES",
     "UNITS",
     "VarSpec",
     "fill_standard_attrs",
@@ -148,6 +150,14 @@ LONG_NAMES: dict[str, str] = {
     "wall_time": "wall-clock time",
 }
 
+#: CF ``standard_name`` of the standard variables that have one in the CF standard-name
+#: table. Only ``time`` does: the image frame is a scanner frame, not a map projection, and
+#: tissue displacement, harmonic phase and strain have no CF names.
+STANDARD_NAMES: dict[str, str] = {"time": "time"}
+
+#: CF ``axis`` attribute of the coordinate variables (Cartesian image axes and time).
+CF_AXES: dict[str, str] = {"x": "X", "y": "Y", "z": "Z", "time": "T"}
+
 # Accepted spellings of units for quantities whose unit matters for the numerics.
 _UNIT_ALIASES: dict[str, frozenset[str]] = {
     "mm": frozenset({"mm", "millimeter", "millimetre", "millimeters", "millimetres"}),
@@ -158,7 +168,7 @@ _UNIT_ALIASES: dict[str, frozenset[str]] = {
 
 
 def standard_attrs(name: str) -> dict[str, str]:
-    """``units`` and ``long_name`` attributes harpx uses for a standard variable.
+    """``units``, ``long_name`` (and CF ``standard_name``, ``axis``) of a standard variable.
 
     Parameters
     ----------
@@ -169,7 +179,9 @@ def standard_attrs(name: str) -> dict[str, str]:
     Returns
     -------
     dict of str to str
-        A fresh ``{"units": ..., "long_name": ...}`` dict (safe to modify).
+        A fresh ``{"units": ..., "long_name": ...}`` dict (safe to modify), with
+        ``standard_name`` (:data:`STANDARD_NAMES`) and ``axis`` (:data:`CF_AXES`) where the
+        variable has them.
 
     Raises
     ------
@@ -180,10 +192,17 @@ def standard_attrs(name: str) -> dict[str, str]:
     --------
     >>> standard_attrs("tag_frequency")
     {'units': '1/mm', 'long_name': 'tag spatial frequency (cycles per mm)'}
+    >>> standard_attrs("time")
+    {'units': 'ms', 'long_name': 'time after tagging', 'standard_name': 'time', 'axis': 'T'}
     """
     if name not in UNITS:
         raise KeyError(f"{name!r} is not a standard harpx variable; known: {sorted(UNITS)}")
-    return {"units": UNITS[name], "long_name": LONG_NAMES[name]}
+    attrs = {"units": UNITS[name], "long_name": LONG_NAMES[name]}
+    if name in STANDARD_NAMES:
+        attrs["standard_name"] = STANDARD_NAMES[name]
+    if name in CF_AXES:
+        attrs["axis"] = CF_AXES[name]
+    return attrs
 
 
 def fill_standard_attrs(ds: xr.Dataset) -> xr.Dataset:
@@ -205,7 +224,7 @@ def fill_standard_attrs(ds: xr.Dataset) -> xr.Dataset:
     --------
     >>> ds = fill_standard_attrs(xr.Dataset(coords={"x": [0.5, 1.5]}))
     >>> ds.x.attrs
-    {'units': 'mm', 'long_name': 'x position of voxel centre'}
+    {'units': 'mm', 'long_name': 'x position of voxel centre', 'axis': 'X'}
     """
     out = ds.copy(deep=False)
     for name, var in out.variables.items():

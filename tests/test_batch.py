@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 import sys
 from collections.abc import Iterator
@@ -11,10 +12,19 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from harpx.batch import CohortError, local_cluster, output_path, track_many, track_subject
+from harpx.batch import (
+    CohortError,
+    local_cluster,
+    output_path,
+    settings_fingerprint,
+    track_many,
+    track_subject,
+)
 from harpx.errors import HarpxError
 from harpx.io.netcdf import open_dataset, to_netcdf
 from harpx.mechanics.body import Body
+from harpx.mechanics.cut import NodeFixed
+from harpx.mechanics.loads import Fixed
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import cylinder
 from harpx.scenes._motion import RotationalImpact
@@ -149,7 +159,10 @@ def test_complete_cohort_needs_no_cluster(
         raise AssertionError("a complete cohort must not start a cluster")
 
     monkeypatch.setattr(distributed, "LocalCluster", no_cluster)
-    assert track_many(cohort, body_factory, output_dir=tmp_path, progress=False) == outputs
+    again = track_many(
+        cohort, body_factory, output_dir=tmp_path, track_kwargs=TRACK_KWARGS, progress=False
+    )
+    assert again == outputs
     assert _mtimes(outputs) == stamps
 
 
@@ -189,6 +202,51 @@ def test_changed_input_or_overwrite_recomputes(
         progress=False,
     )
     assert all(a > b for a, b in zip(_mtimes(outputs), after, strict=True))
+    # other tracking settings: every subject is stale, without overwrite=True
+    after = _mtimes(outputs)
+    changed = {**TRACK_KWARGS, "epsilon": 0.04}
+    track_many(
+        inputs,
+        body_factory,
+        output_dir=tmp_path / "out",
+        client=client,
+        track_kwargs=changed,
+        progress=False,
+    )
+    assert all(a > b for a, b in zip(_mtimes(outputs), after, strict=True))
+    ds = open_dataset(outputs[0])
+    assert ds.attrs["settings_sha256"] == settings_fingerprint(body_factory, changed)[0]
+    assert '"epsilon": 0.04' in ds.attrs["settings_fingerprint"]
+
+
+def _other_body_factory(ds: xr.Dataset, c1: float = 1.0) -> Body:
+    return Body(cylinder(RADIUS, HEIGHT, n_radial=1, n_axial=1), NeoHookean(c1=c1, kappa=120.0))
+
+
+@pytest.mark.parametrize(
+    ("a", "b"),
+    [
+        pytest.param((body_factory, {}), (_other_body_factory, {}), id="other-function"),
+        pytest.param(
+            (functools.partial(_other_body_factory, c1=1.0), {}),
+            (functools.partial(_other_body_factory, c1=2.0), {}),
+            id="partial-arguments",
+        ),
+        pytest.param(
+            (body_factory, {"dirichlet": [Fixed("bottom")]}),
+            (body_factory, {"dirichlet": [Fixed("bottom", (2,))]}),
+            id="fixed-components",
+        ),
+        pytest.param(
+            (body_factory, {"dirichlet": [NodeFixed(np.zeros((2000, 3)), (0,) * 2000)]}),
+            (body_factory, {"dirichlet": [NodeFixed(np.eye(2000, 3), (0,) * 2000)]}),
+            id="large-arrays",  # their repr would be elided and equal
+        ),
+    ],
+)
+def test_settings_fingerprint_changes_with_the_settings(a, b) -> None:
+    assert settings_fingerprint(*a) == settings_fingerprint(*a)  # deterministic
+    assert settings_fingerprint(*a)[0] != settings_fingerprint(*b)[0]
 
 
 def test_failing_subjects_are_reported_after_the_others_are_written(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from harpx.cli import main
@@ -83,3 +84,109 @@ def test_dicom_subcommand_bad_tag_is_one_line(tmp_path, capsys):
     )
     err = capsys.readouterr().err.strip()
     assert code == 1 and "SERIES:LABEL:DIRECTION" in err and len(err.splitlines()) == 1
+
+
+# --- version, help, report refusals, track options, scene export ---------------------------
+
+
+def test_version(capsys):
+    import harpx
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"harpx {harpx.__version__}"
+
+
+@pytest.mark.parametrize("command", [[], ["track"], ["phase"], ["demo"], ["scene"]])
+def test_help_is_plain_text_with_defaults(command, capsys):
+    with pytest.raises(SystemExit):
+        main([*command, "--help"])
+    text = capsys.readouterr().out
+    assert "``" not in text and ":mod:" not in text and ":func:" not in text
+    assert "(default: None)" not in text and "(default: [])" not in text
+    expected = {
+        "track": "(default: 0.05)",
+        "phase": "(default: 2)",
+        "demo": "(default: harpx-demo)",
+        "scene": "(default: harpx-scene)",
+    }
+    if command:
+        assert expected[command[0]] in " ".join(text.split())
+    else:
+        assert "Exit codes: 0 success" in " ".join(text.split())
+
+
+@pytest.mark.parametrize(
+    ("kind", "hint"),
+    [
+        pytest.param("tagged", "run `harpx phase` and `harpx track` on it first", id="tagged"),
+        pytest.param("phase", "run `harpx track` on it first", id="phase"),
+    ],
+)
+def test_report_refuses_an_archive_that_is_not_tracked(tmp_path, capsys, kind, hint):
+    from harpx.io.netcdf import to_netcdf
+    from tests.test_schema import make_phase, make_tagged
+
+    path = to_netcdf({"tagged": make_tagged, "phase": make_phase}[kind](), tmp_path / "a.nc")
+    code = main(["report", str(path)])
+    captured = capsys.readouterr()
+    assert code == 1 and captured.out == ""  # no empty table
+    assert f"is a '{kind}/1' archive; report needs a 'tracked/1' archive: {hint}" in captured.err
+
+
+def _cylinder_inputs(tmp_path):
+    """Ideal phase of a turning cylinder and its coarse mesh (so the test is fast)."""
+    import meshio
+
+    from harpx.io.netcdf import to_netcdf
+    from tests.test_batch import _subject, body_factory
+
+    phase = to_netcdf(_subject(3.0), tmp_path / "phase.nc")
+    mesh = tmp_path / "mesh.vtu"
+    meshio.write(mesh, body_factory(None).to_meshio())
+    return phase, mesh
+
+
+def test_track_fixes_named_faces_and_takes_the_penalty(tmp_path, capsys):
+    from harpx.io.netcdf import open_dataset
+
+    phase, mesh = _cylinder_inputs(tmp_path)
+    out = tmp_path / "tracked.nc"
+    args = ["track", str(phase), str(out), "--mesh", str(mesh), "--no-progress"]
+    code = main([*args, "--fix", "bottom", "--fix", "top:z", "--penalty", "2"])
+    assert code == 0, capsys.readouterr().err
+    ds = open_dataset(out)
+    z = ds.points.values[:, 2]
+    u = ds.displacement.values  # (time, node, axis)
+    bottom, top = np.isclose(z, z.min()), np.isclose(z, z.max())
+    assert np.all(u[:, bottom] == 0.0)  # held exactly
+    assert np.all(u[:, top, 2] == 0.0) and np.abs(u[-1, top, :2]).max() > 1.0  # top turns
+    assert float(ds.attrs["penalty_start"]) == 2.0
+
+
+def test_track_names_the_boundaries_for_an_unknown_face(tmp_path, capsys):
+    phase, mesh = _cylinder_inputs(tmp_path)
+    code = main(["track", str(phase), str(tmp_path / "t.nc"), "--mesh", str(mesh), "--fix", "lid"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "no boundary 'lid'; its boundaries are ['bottom', 'outer', 'top']" in err
+    code = main(
+        ["track", str(phase), str(tmp_path / "t.nc"), "--mesh", str(mesh), "--fix", "top:w"]
+    )
+    assert code == 1 and "must be distinct letters of 'xyz'" in capsys.readouterr().err
+
+
+def test_scene_exports_an_input_archive_and_mesh(tmp_path, capsys):
+    from harpx.io.netcdf import open_dataset
+    from harpx.mechanics.body import Body
+    from harpx.mechanics.materials import NeoHookean
+
+    assert main(["scene", "phantom-small", "--output", str(tmp_path / "try")]) == 0
+    text = capsys.readouterr().out
+    tagged = open_dataset(tmp_path / "try" / "tagged.nc")
+    assert tagged.attrs["harpx_schema"] == "tagged/1" and "displacement_true" in tagged
+    # what `harpx track --mesh` reads: cells and the named faces that --fix takes
+    body = Body(tmp_path / "try" / "mesh.vtu", NeoHookean(c1=1.0, kappa=120.0))
+    assert body.ncell == 432 and sorted(body.boundaries) == ["bottom", "outer", "top"]
+    assert f"harpx track {tmp_path / 'try' / 'phase.nc'}" in text and "--mesh" in text

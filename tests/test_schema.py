@@ -101,7 +101,12 @@ def test_valid_datasets_pass() -> None:
 
 def test_standard_attrs_cover_every_unit() -> None:
     for name in UNITS:
-        assert set(standard_attrs(name)) == {"units", "long_name"}
+        cf = {"standard_name", "axis"} if name == "time" else set()
+        cf |= {"axis"} if name in ("x", "y", "z") else set()
+        assert set(standard_attrs(name)) == {"units", "long_name"} | cf
+    # CF names only where the CF table has one; axes are the Cartesian X, Y, Z and T
+    assert standard_attrs("time")["standard_name"] == "time"
+    assert [standard_attrs(a)["axis"] for a in ("x", "y", "z", "time")] == ["X", "Y", "Z", "T"]
     with pytest.raises(KeyError, match="'velocity' is not a standard harpx variable"):
         standard_attrs("velocity")
 

@@ -14,6 +14,29 @@ identical to ``ds`` (values, dims, coordinates and attributes):
 - attribute values netCDF cannot store as such (``bool``, lists and tuples, which netCDF
   returns as scalars or arrays) are encoded and their Python type is recorded in the
   ``harpx_attr_types`` attribute (JSON) of the variable or dataset, then restored on reading.
+
+Archives are also readable by tools that know the CF and UGRID conventions but not harpx.
+:func:`to_netcdf` adds, in the file only:
+
+- the global ``Conventions`` attribute (:data:`CONVENTIONS`, plus ``UGRID-1.0`` for meshes),
+  unless the dataset has its own;
+- for a ``tracked/1`` dataset with a volume mesh (``hex8``, ``hex20``, ``hex27``, ``tet4``,
+  ``tet10``, ``wedge6``), a UGRID 1.0 three-dimensional mesh: the ``mesh`` topology variable
+  (``cf_role = "mesh_topology"``, ``topology_dimension = 3``), node coordinates
+  ``mesh_node_x``, ``mesh_node_y``, ``mesh_node_z`` (node; mm, copied from ``points``), the
+  corner connectivity ``mesh_volume_nodes`` (cell, mesh_volume_corner; zero-based, the VTK
+  corner order of ``cells``: bottom face then top face) and the shape of each cell
+  ``mesh_volume_types`` (``flag_meanings = "tetrahedron wedge hexahedron"``); every data
+  variable on ``node`` or ``cell`` gets ``mesh = "mesh"`` and ``location = "node"`` or
+  ``"volume"``. Higher-order cells (``hex20``, ``tet10``) are described by their corners:
+  the full connectivity stays in ``cells``.
+
+:func:`open_dataset` drops exactly what was added (the global ``harpx_archive_added``
+attribute lists it), so round trips stay exact.
+
+Every numeric data variable is compressed (zlib, :data:`COMPRESSION_LEVEL`) and stored in
+chunks of one frame (``time: 1``, every other dimension whole), so opening an archive with
+``chunks={"time": 1}`` reads one frame per task and matches the stored chunks.
 """
 
 from __future__ import annotations
@@ -40,7 +63,25 @@ __all__ = ["open_dataset", "to_netcdf"]
 
 #: zlib compression level used for every numeric data variable.
 COMPRESSION_LEVEL = 4
+#: Global ``Conventions`` attribute written when a dataset has none (UGRID is appended for
+#: archives that carry a mesh topology).
+CONVENTIONS = "CF-1.10"
+UGRID_CONVENTIONS = "UGRID-1.0"
+#: Name of the UGRID mesh topology variable in tracked archives.
+MESH = "mesh"
 _TYPES_ATTR = "harpx_attr_types"
+_ADDED_ATTR = "harpx_archive_added"
+# UGRID 1.0 volume shapes (flag value = index) and the harpx elements each describes by its
+# leading (corner) vertices, which are in VTK order for every harpx element.
+_VOLUME_SHAPES = ("tetrahedron", "wedge", "hexahedron")
+_ELEMENT_SHAPES: dict[str, tuple[int, int]] = {
+    "tet4": (0, 4),
+    "tet10": (0, 4),
+    "wedge6": (1, 6),
+    "hex8": (2, 8),
+    "hex20": (2, 8),
+    "hex27": (2, 8),
+}
 _ENGINE = "netcdf4"
 
 
@@ -75,10 +116,13 @@ def to_netcdf(ds: xr.Dataset, path: PathLike) -> Path:
     Notes
     -----
     Numeric and boolean data variables are compressed with zlib at level
-    ``COMPRESSION_LEVEL`` (4). Only a process killed mid-write (e.g. SIGKILL) can leave a
-    stray temporary file ``.<name>.harpx-<host>-<pid>-*.tmp`` beside the target; the target
-    itself is never partial, and the next write of the same target removes such leftovers
-    once their process is gone (:func:`remove_stale_temporaries`).
+    ``COMPRESSION_LEVEL`` (4) and chunked one frame at a time along ``time``. The file
+    also carries the CF ``Conventions`` attribute and, for tracked meshes, a UGRID 1.0 mesh
+    topology (see the module docstring); :func:`open_dataset` removes both again. Only a
+    process killed mid-write (e.g. SIGKILL) can leave a stray temporary file
+    ``.<name>.harpx-<host>-<pid>-*.tmp`` beside the target; the target itself is never
+    partial, and the next write of the same target removes such leftovers once their
+    process is gone (:func:`remove_stale_temporaries`).
 
     Examples
     --------
@@ -95,7 +139,7 @@ def to_netcdf(ds: xr.Dataset, path: PathLike) -> Path:
 
         validate(ds)
     path = Path(path)
-    encoded = _encode_attrs(ds)
+    encoded = _add_conventions(_encode_attrs(ds))
     directory = check_writable_target(path)
     encoding = _compression(encoded)
     mode = _target_mode(path)
@@ -366,8 +410,9 @@ def _encode_attrs(ds: xr.Dataset) -> xr.Dataset:
 def _encode_mapping(attrs: Mapping[Hashable, Any], owner: str) -> dict[Hashable, Any]:
     out: dict[Hashable, Any] = {}
     types: dict[str, str] = {}
-    if _TYPES_ATTR in attrs:
-        raise ArchiveError(f"attribute {_TYPES_ATTR!r} of {owner} is reserved by harpx; rename it")
+    for reserved in (_TYPES_ATTR, _ADDED_ATTR):
+        if reserved in attrs:
+            raise ArchiveError(f"attribute {reserved!r} of {owner} is reserved by harpx; rename it")
     for key, value in attrs.items():
         if not isinstance(key, str):
             raise ArchiveError(f"attribute name {key!r} of {owner} is not a string")
@@ -423,11 +468,130 @@ def _check_attr_items(items: list[Any], key: str, owner: str) -> None:
 
 
 def _compression(ds: xr.Dataset) -> dict[Hashable, dict[str, Any]]:
+    """zlib and one-frame chunks (``time: 1``, other dims whole) for each numeric variable."""
     encoding: dict[Hashable, dict[str, Any]] = {}
     for name, var in ds.data_vars.items():
         if var.dtype.kind in "fiub" and var.size > 0:
+            chunks = tuple(1 if dim == "time" else size for dim, size in var.sizes.items())
             encoding[name] = {"zlib": True, "complevel": COMPRESSION_LEVEL}
+            if chunks:
+                encoding[name]["chunksizes"] = chunks
     return encoding
+
+
+# --- CF and UGRID for readers other than harpx ---------------------------------------------
+
+
+def _add_conventions(ds: xr.Dataset) -> xr.Dataset:
+    """Add the CF ``Conventions`` attribute and a UGRID mesh; record what was added."""
+    added: dict[str, Any] = {"attrs": [], "variables": [], "variable_attrs": {}}
+    mesh = _ugrid_mesh(ds)
+    if mesh:
+        ds = ds.assign(mesh)
+        added["variables"] = sorted(mesh)
+        for name in ds.data_vars:
+            var = ds.variables[name]
+            if name in mesh or name in ("points", "cells"):
+                continue
+            location = "node" if "node" in var.dims else "volume" if "cell" in var.dims else None
+            if location is None or "mesh" in var.attrs or "location" in var.attrs:
+                continue
+            var.attrs = {**var.attrs, "mesh": MESH, "location": location}
+            added["variable_attrs"][str(name)] = ["mesh", "location"]
+    if "Conventions" not in ds.attrs:
+        ds.attrs["Conventions"] = CONVENTIONS + (f" {UGRID_CONVENTIONS}" if mesh else "")
+        added["attrs"].append("Conventions")
+    if any(added.values()):
+        ds.attrs[_ADDED_ATTR] = json.dumps(added, sort_keys=True)
+    return ds
+
+
+def _ugrid_mesh(ds: xr.Dataset) -> dict[str, xr.Variable]:
+    """UGRID 1.0 volume-mesh variables of a tracked dataset ({} if it has no volume mesh)."""
+    if ds.attrs.get("harpx_schema") != "tracked/1" or "points" not in ds or "cells" not in ds:
+        return {}
+    shape = _ELEMENT_SHAPES.get(str(ds["cells"].attrs.get("element")))
+    points, cells = ds["points"], ds["cells"]
+    if (
+        shape is None
+        or points.dims != ("node", "axis")
+        or cells.dims != ("cell", "vertex")
+        or cells.shape[0] == 0
+        or cells.shape[1] < shape[1]
+        or any(name in ds.variables or name in ds.dims for name in _mesh_names())
+    ):
+        return {}
+    code, corners = shape
+    xyz = np.asarray(points.values, dtype=np.float64)
+    columns = [str(a) for a in ds["axis"].values] if "axis" in ds.coords else ["x", "y", "z"]
+    variables: dict[str, xr.Variable] = {}
+    for axis in ("x", "y", "z"):
+        variables[f"mesh_node_{axis}"] = xr.Variable(
+            "node",
+            xyz[:, columns.index(axis)],
+            {"units": "mm", "long_name": f"{axis} reference position of mesh node"},
+        )
+    variables["mesh_volume_nodes"] = xr.Variable(
+        ("cell", "mesh_volume_corner"),
+        np.asarray(cells.values[:, :corners], dtype=np.int64),
+        {
+            "cf_role": "volume_node_connectivity",
+            "long_name": "corner nodes of each cell (bottom face, then top face)",
+            "start_index": np.int64(0),
+        },
+    )
+    variables["mesh_volume_types"] = xr.Variable(
+        "cell",
+        np.full(cells.shape[0], code, dtype=np.int8),
+        {
+            "cf_role": "volume_shape_type",
+            "long_name": "shape of each cell",
+            "flag_range": np.array([0, len(_VOLUME_SHAPES) - 1], dtype=np.int8),
+            "flag_values": np.arange(len(_VOLUME_SHAPES), dtype=np.int8),
+            "flag_meanings": " ".join(_VOLUME_SHAPES),
+        },
+    )
+    variables[MESH] = xr.Variable(
+        (),
+        np.int32(0),
+        {
+            "cf_role": "mesh_topology",
+            "long_name": "topology of the three-dimensional tracking mesh",
+            "topology_dimension": np.int32(3),
+            "node_coordinates": "mesh_node_x mesh_node_y mesh_node_z",
+            "volume_node_connectivity": "mesh_volume_nodes",
+            "volume_shape_type": "mesh_volume_types",
+            "volume_dimension": "cell",
+        },
+    )
+    return variables
+
+
+def _mesh_names() -> tuple[str, ...]:
+    return (
+        MESH,
+        "mesh_node_x",
+        "mesh_node_y",
+        "mesh_node_z",
+        "mesh_volume_nodes",
+        "mesh_volume_types",
+        "mesh_volume_corner",
+    )
+
+
+def _drop_added(ds: xr.Dataset) -> xr.Dataset:
+    """Remove what :func:`_add_conventions` put into the file."""
+    raw = ds.attrs.pop(_ADDED_ATTR, None)
+    if raw is None:
+        return ds
+    added = json.loads(str(raw))
+    for key in added.get("attrs", []):
+        ds.attrs.pop(key, None)
+    for name, keys in added.get("variable_attrs", {}).items():
+        if name in ds.variables:
+            var = ds.variables[name]
+            var.attrs = {k: v for k, v in var.attrs.items() if k not in keys}
+    return ds.drop_vars([n for n in added.get("variables", []) if n in ds.variables])
 
 
 def _target_mode(path: Path) -> int:
@@ -465,6 +629,7 @@ def _fsync_directory(directory: Path) -> None:
 
 
 def _decode(ds: xr.Dataset) -> xr.Dataset:
+    ds = _drop_added(ds)
     ds.attrs = _decode_mapping(ds.attrs)
     for var in ds.variables.values():
         var.attrs = _decode_mapping(var.attrs)

@@ -153,8 +153,11 @@ def tracked_dataset(
         label = np.full(body.ncell, -1, dtype=np.int64)
         for code, name in enumerate(names):  # loop over the few named regions
             label[np.asarray(body.regions[name], dtype=np.int64)] = code
+        flags = {"flag_values": np.arange(len(names), dtype=np.int64)}  # CF flags: -1 = none
         ds["region"] = xr.DataArray(
-            label, dims="cell", attrs=standard_attrs("region") | {"flag_meanings": " ".join(names)}
+            label,
+            dims="cell",
+            attrs=standard_attrs("region") | flags | {"flag_meanings": " ".join(names)},
         )
     ds["displacement"] = xr.DataArray(
         nodal, dims=("time", "node", "axis"), attrs=standard_attrs("displacement")

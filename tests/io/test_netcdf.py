@@ -250,3 +250,109 @@ def test_public_names_forward(tmp_path: Path, rng: np.random.Generator) -> None:
     expected = tracked_like(rng)
     path = expected.harp.to_netcdf(tmp_path / "a.nc")
     xr.testing.assert_identical(harpx.open_dataset(path), expected)  # exact
+
+
+# --- CF, UGRID and chunking: what readers other than harpx see -----------------------------
+
+
+def _raw(path: Path, **kwargs: object) -> xr.Dataset:
+    """The file as plain xarray reads it (no harpx decoding)."""
+    return xr.open_dataset(path, engine="netcdf4", decode_times=False, **kwargs)
+
+
+def _ugrid_reader(raw: xr.Dataset) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """A minimal UGRID 1.0 reader: nodes, corner cells and shapes from the attributes alone."""
+    (mesh,) = [n for n, v in raw.variables.items() if v.attrs.get("cf_role") == "mesh_topology"]
+    topology = raw[mesh].attrs
+    assert int(topology["topology_dimension"]) == 3
+    nodes = np.stack([raw[n].values for n in topology["node_coordinates"].split()], axis=1)
+    conn = raw[topology["volume_node_connectivity"]]
+    cells = conn.values - int(conn.attrs.get("start_index", 0))
+    kinds = raw[topology["volume_shape_type"]]
+    values, names = kinds.attrs["flag_values"].tolist(), kinds.attrs["flag_meanings"].split()
+    meanings = dict(zip(values, names, strict=True))
+    return nodes, cells, [meanings[int(k)] for k in kinds.values]
+
+
+def test_tracked_archive_carries_a_ugrid_volume_mesh(tmp_path: Path, rng: np.random.Generator):
+    expected = tracked_like(rng)
+    expected["region"].attrs.update(flag_values=np.array([2], np.int32), flag_meanings="wall")
+    path = to_netcdf(expected, tmp_path / "t.nc")
+    raw = _raw(path)
+    assert raw.attrs["Conventions"] == "CF-1.10 UGRID-1.0"
+    nodes, cells, shapes = _ugrid_reader(raw)
+    np.testing.assert_array_equal(nodes, expected.points.values)  # exact copies
+    np.testing.assert_array_equal(cells, expected.cells.values)
+    assert shapes == ["hexahedron"]
+    assert raw.displacement.attrs["mesh"] == "mesh" and raw.displacement.attrs["location"] == "node"
+    assert raw.green_strain.attrs["location"] == "volume"
+    assert np.atleast_1d(raw.region.attrs["flag_values"]).tolist() == [2]  # CF flags
+    assert raw.time.attrs["standard_name"] == "time" and raw.time.attrs["axis"] == "T"
+    raw.close()
+    # harpx drops exactly what it added: the round trip stays exact
+    xr.testing.assert_identical(open_dataset(path), expected)
+
+
+def test_cf_xarray_finds_the_mesh(tmp_path: Path, rng: np.random.Generator) -> None:
+    pytest.importorskip("cf_xarray")
+    path = to_netcdf(tracked_like(rng), tmp_path / "t.nc")
+    with _raw(path) as raw:
+        assert raw.cf.cf_roles["mesh_topology"] == ["mesh"]
+        # a node variable comes with the mesh's node coordinates
+        coords = set(raw.cf["displacement"].coords)
+        assert {"mesh_node_x", "mesh_node_y", "mesh_node_z"} <= coords
+
+
+def test_higher_order_cells_are_described_by_their_corners(tmp_path: Path) -> None:
+    ds = make_tracked()
+    points = np.vstack([ds.points.values, np.arange(36.0).reshape(12, 3) / 36 + 0.01])
+    cells = xr.Variable(("cell", "vertex"), np.arange(20)[None, :], dict(ds.cells.attrs))
+    cells.attrs["element"] = "hex20"
+    ds = ds.drop_vars(["points", "cells", "displacement"]).assign(
+        points=(("node", "axis"), points, dict(make_tracked().points.attrs)),
+        cells=cells,
+        displacement=(
+            ("time", "node", "axis"),
+            np.zeros((2, 20, 3)),
+            standard_attrs("displacement"),
+        ),
+    )
+    path = to_netcdf(ds, tmp_path / "t.nc")
+    with _raw(path) as raw:
+        nodes, corners, shapes = _ugrid_reader(raw)
+    assert corners.tolist() == [list(range(8))] and shapes == ["hexahedron"]
+    assert nodes.shape == (20, 3)
+    xr.testing.assert_identical(open_dataset(path), ds)
+
+
+def test_conventions_attribute(tmp_path: Path, rng: np.random.Generator) -> None:
+    expected = tagged_like(rng)
+    path = to_netcdf(expected, tmp_path / "a.nc")
+    with _raw(path) as raw:
+        assert raw.attrs["Conventions"] == "CF-1.10" and "mesh" not in raw.variables
+    xr.testing.assert_identical(open_dataset(path), expected)
+    # a dataset's own Conventions are kept as they are
+    own = expected.assign_attrs(Conventions="CF-1.11")
+    xr.testing.assert_identical(open_dataset(to_netcdf(own, tmp_path / "b.nc")), own)
+
+
+def test_frames_are_stored_one_chunk_each(tmp_path: Path, rng: np.random.Generator) -> None:
+    expected = tagged_like(rng)
+    path = to_netcdf(expected, tmp_path / "a.nc")
+    with _raw(path) as raw:
+        shape = raw.image.shape
+        assert raw.image.encoding["chunksizes"] == (shape[0], 1, *shape[2:])
+        assert raw.displacement_true.encoding["chunksizes"][:2] == (1, 3)
+        assert raw.mask.encoding["chunksizes"] == raw.mask.shape  # no time: one chunk
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # "The specified chunks separate the stored chunks"
+        lazy = open_dataset(path, chunks={"time": 1})
+        with _raw(path, chunks={"time": 1}) as raw:
+            assert raw.image.data.chunks[1] == (1,) * expected.sizes["time"]
+    try:
+        assert lazy.image.data.chunks[1] == (1,) * expected.sizes["time"]
+        xr.testing.assert_identical(lazy.compute(), expected)  # exact
+    finally:
+        lazy.close()
