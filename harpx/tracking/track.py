@@ -158,6 +158,7 @@ def track(
     method: Method = "penalty",
     epsilon: float | None = None,
     epsilon_factor: float = 1.15,
+    epsilon_min: float = 0.05,
     penalty: float = 1.0,
     penalty_limit: float = 1e4,
     ramp: int = 2,
@@ -166,7 +167,7 @@ def track(
     predictor: Predictor = "linear",
     regularization: Regularization = "increment",
     tolerance: float = 0.01,
-    max_iterations: int = 10,
+    max_iterations: int = 20,
     dirichlet: Sequence[Any] = (),
     terms: Sequence[Any] = (),
     intorder: int | None = None,
@@ -182,9 +183,9 @@ def track(
         ``phase/1`` dataset, or ``tagged/1`` (its phase is extracted with defaults first).
     body : Body
         Finite-element model in the reference configuration of frame 0 (mm).
-    method, epsilon, epsilon_factor, penalty, penalty_limit, ramp, multiplier_tolerance, \
-max_updates, predictor, regularization, tolerance, max_iterations, intorder, linear_solver, \
-progress
+    method, epsilon, epsilon_factor, epsilon_min, penalty, penalty_limit, ramp, \
+multiplier_tolerance, max_updates, predictor, regularization, tolerance, max_iterations, \
+intorder, linear_solver, progress
         The tracking settings, documented (with units and defaults) on
         :class:`harpx.tracking.settings.TrackingSettings`. By default the target ε is 1.15
         times the noise floor the images allow in each frame, and the model regularises the
@@ -232,9 +233,10 @@ progress
     :mod:`harpx.tracking.constraint` for the wrap-safe form used here.
     """
     chosen = TrackingSettings(
-        method=method, epsilon=epsilon, epsilon_factor=epsilon_factor, penalty=penalty,
-        penalty_limit=penalty_limit, ramp=ramp, multiplier_tolerance=multiplier_tolerance,
-        max_updates=max_updates, predictor=predictor, regularization=regularization,
+        method=method, epsilon=epsilon, epsilon_factor=epsilon_factor, epsilon_min=epsilon_min,
+        penalty=penalty, penalty_limit=penalty_limit, ramp=ramp,
+        multiplier_tolerance=multiplier_tolerance, max_updates=max_updates, predictor=predictor,
+        regularization=regularization,
         tolerance=tolerance, max_iterations=max_iterations, intorder=intorder,
         linear_solver=linear_solver, progress=progress,
     )  # fmt: skip
