@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from harpx.cli import main
+from harpx.errors import HarpxWarning
 
 
 @pytest.mark.parametrize("command", ["demo", "phase", "track", "report"])
@@ -154,7 +155,10 @@ def test_track_fixes_named_faces_and_takes_the_penalty(tmp_path, capsys):
     phase, mesh = _cylinder_inputs(tmp_path)
     out = tmp_path / "tracked.nc"
     args = ["track", str(phase), str(out), "--mesh", str(mesh), "--no-progress"]
-    code = main([*args, "--fix", "bottom", "--fix", "top:z", "--penalty", "2"])
+    # the images turn the whole cylinder rigidly, so holding its bottom contradicts them: the
+    # last frame cannot reach ε (0.139 rad against 0.05) and the tracker says so
+    with pytest.warns(HarpxWarning, match="missed the tracking target"):
+        code = main([*args, "--fix", "bottom", "--fix", "top:z", "--penalty", "2"])
     assert code == 0, capsys.readouterr().err
     ds = open_dataset(out)
     z = ds.points.values[:, 2]
