@@ -103,7 +103,9 @@ class PhaseSampler:
     magnitude_floor : float, default 0.05
         A point is valid only where every tag's harmonic magnitude is at least this fraction
         of that tag's robust maximum (99th percentile over the frame, inside the mask if
-        there is one). Dimensionless.
+        there is one). Dimensionless. At the reference frame (``time_index`` 0) a dataset
+        with ``body`` also requires the point to be tissue there (``body >= 0.5`` at its
+        nearest voxel): partial-volume edge voxels carry a background-contaminated phase.
     chunk_size : int, default 4096
         Points evaluated per vectorised batch (memory ~ 2 kB per point).
 
@@ -235,6 +237,13 @@ class PhaseSampler:
             mask = np.asarray(phase_ds["mask"].transpose("tag", *GRID_DIMS).values, bool)
             mask = mask.squeeze(axis=squeeze) if squeeze else mask
         self._mask = mask
+        # at the reference frame the tissue's support is known: `body` (voxel-averaged
+        # density at time index 0); a point there is tissue only where body >= 0.5
+        support = None
+        if self.time_index == 0 and "body" in phase_ds.variables:
+            support = np.asarray(phase_ds["body"].transpose(*GRID_DIMS).values) >= 0.5
+            support = support.squeeze(axis=tuple(a - 1 for a in squeeze)) if squeeze else support
+        self._support = support
         self._floor = np.zeros(ntag)
         for t in range(ntag):
             mag = magnitude[t].squeeze(axis=tuple(a - 1 for a in squeeze))
@@ -264,8 +273,9 @@ class PhaseSampler:
             Spatial phase gradient in rad/mm, columns (x, y, z).
         valid : numpy.ndarray of bool, shape (n,) or (n, ntag)
             Inside the field of view, inside every tag's mask (if any) and above the
-            magnitude floor for every tag (``per_tag``: inside that tag's mask, and above
-            the floor for every tag whose mask holds the point). Invalid points (or
+            magnitude floor for every tag, and at the reference frame inside ``body``
+            (``per_tag``: inside that tag's mask, and above the floor for every tag whose
+            mask holds the point). Invalid points (or
             point–tag pairs) get ``phi = 0`` and ``grad = 0``.
         """
         pts = _as_points(points)
@@ -357,6 +367,10 @@ class PhaseSampler:
         # (near an edge one tag's magnitude can pass while another's fails: such a point
         # is background-contaminated for all of them)
         signal = np.all(((size >= self._floor) & (size > 0)) | ~tag_ok, axis=1)
+        if self._support is not None and needed.any():
+            inside = np.zeros(n, dtype=bool)
+            inside[needed] = self._support[tuple(np.rint(u[needed]).astype(np.int64).T)]
+            signal &= inside
         valid_tags = tag_ok & signal[:, None]
         return demod, deriv, valid_tags
 
