@@ -67,6 +67,8 @@ __all__ = [
 ]
 
 TWO_PI = 2.0 * np.pi
+#: The largest float32 below π (float32(π) itself is 8.7e-8 above π).
+_PI32_INSIDE = np.nextafter(np.float32(np.pi), np.float32(0.0))
 
 
 # --------------------------------------------------------------------------------------------
@@ -572,6 +574,12 @@ def _phase_magnitude(
     np.copyto(re, h.real)
     np.arctan2(im, re, out=phase)
     np.negative(phase, out=phase)
+    if phase.dtype == np.float32:
+        # float32(π) exceeds π: angles within rounding of ±π come out as ±float32(π), outside
+        # [-π, π) in exact arithmetic; wrap +float32(π) and clamp -float32(π) to the float32
+        # just inside -π (an error of at most 2e-7 rad)
+        np.copyto(phase, -_PI32_INSIDE, where=phase > _PI32_INSIDE)
+        np.maximum(phase, -_PI32_INSIDE, out=phase)
     np.abs(h, out=magnitude)
 
 
