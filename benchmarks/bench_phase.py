@@ -6,14 +6,16 @@ Cases (isotropic voxels, ``upsample=2``, radius 0.5, three tags x, y, z with sli
 * **cardiac**: 3 tags × 25 frames × 12 slices × 256² (1.25 mm voxels, paper §4.2 size).
 
 ``phase()`` is :func:`harpx.imaging.harp.extract_phase` on an in-memory ``tagged/1`` dataset,
-output included (phase and magnitude on the common refined grid, 8× the input voxels).
+output included (phase and magnitude on the common refined grid, 8× the input voxels), in
+float32 (the default, ``phase()``) and float64 (``phase64``).
 The FFT baselines transform exactly the arrays a straightforward implementation of the same
 method transforms: for every tag, its acquisition slices *upsampled in-plane* (x and y tags:
 frames × nz slices of 2ny × 2nx; z tag: frames × ny slices of 2nz × 2nx), complex128, one
 forward and one inverse 2D FFT:
 
 * **pyfftw**: ``pyfftw.FFTW`` plans (FFTW_MEASURE, all cores) executed on preallocated aligned
-  buffers — the bare transform cost, nothing else;
+  buffers — the bare transform cost, nothing else; complex128 (``pyfftw``) and complex64
+  (``pyfftw32``, the precision of the float32 ``phase()``);
 * **numpy.fft** and **scipy.fft** (``workers`` = all cores) ``fft2`` + ``ifft2``.
 
 Every repeat runs all methods back to back (the machine may be shared) and the table shows
@@ -22,6 +24,12 @@ are less sensitive to other processes: user time is the computation, system time
 kernel providing fresh zeroed pages for new output arrays. The first ``phase()`` call, which
 plans the FFTs, is reported apart.
 Run ``python benchmarks/bench_phase.py`` (``--quick`` for the phantom case only, ``--repeats``).
+
+``--rss CASE`` measures peak memory instead: a child process synthesises the case and saves
+it (``/tmp``), then a fresh child per precision loads it and runs ``phase()`` once, and its
+peak resident set size (``ru_maxrss``: input + output + temporaries + interpreter) is
+reported, with the same for a per-frame lazy pass (``ds.chunk(time=1)``, each frame's
+phase computed and dropped, as the tracker consumes it).
 """
 
 from __future__ import annotations
@@ -83,9 +91,9 @@ def fft_stacks(shape: tuple[int, int, int], frames: int) -> list[tuple[int, int,
 class PyfftwRoundTrip:
     """Forward + inverse 2D FFT plans on two preallocated aligned buffers."""
 
-    def __init__(self, shape: tuple[int, int, int], threads: int, rng) -> None:
-        self.a = pyfftw.empty_aligned(shape, dtype=np.complex128)
-        self.b = pyfftw.empty_aligned(shape, dtype=np.complex128)
+    def __init__(self, shape: tuple[int, int, int], threads: int, rng, dtype=np.complex128) -> None:
+        self.a = pyfftw.empty_aligned(shape, dtype=dtype)
+        self.b = pyfftw.empty_aligned(shape, dtype=dtype)
         flags = ("FFTW_MEASURE",)
         self.fwd = pyfftw.FFTW(self.a, self.b, axes=(-2, -1), flags=flags, threads=threads)
         self.inv = pyfftw.FFTW(
@@ -130,11 +138,19 @@ def run_case(name: str, repeats: int, threads: int) -> dict:
     fft_elems = sum(int(np.prod(s)) for s in stacks)
 
     first = timed(lambda: extract_phase(ds, upsample=UPSAMPLE))  # plans the FFTs
+    extract_phase(ds, upsample=UPSAMPLE, dtype="float64")
     out = extract_phase(ds, upsample=UPSAMPLE)
     out_elems = int(out.phase.size)
     del out
 
-    times: dict[str, list[float]] = {"phase": [], "pyfftw": [], "numpy": [], "scipy": []}
+    times: dict[str, list[float]] = {
+        "phase": [],
+        "phase64": [],
+        "pyfftw": [],
+        "pyfftw32": [],
+        "numpy": [],
+        "scipy": [],
+    }
     cpu: dict[str, list[float]] = {k: [] for k in times}
     system: dict[str, list[float]] = {k: [] for k in times}
 
@@ -145,14 +161,19 @@ def run_case(name: str, repeats: int, threads: int) -> dict:
 
     for _ in range(repeats):
         record("phase", [timed_both(lambda: extract_phase(ds, upsample=UPSAMPLE))])
+        record(
+            "phase64",
+            [timed_both(lambda: extract_phase(ds, upsample=UPSAMPLE, dtype="float64"))],
+        )
         # pyfftw: plans are built per stack outside the timed region
-        pairs = []
-        for shape in stacks:
-            rt = PyfftwRoundTrip(shape, threads, rng)
-            rt()  # warm the buffers
-            pairs.append(timed_both(rt))
-            del rt
-        record("pyfftw", pairs)
+        for label, dtype in (("pyfftw", np.complex128), ("pyfftw32", np.complex64)):
+            pairs = []
+            for shape in stacks:
+                rt = PyfftwRoundTrip(shape, threads, rng, dtype)
+                rt()  # warm the buffers
+                pairs.append(timed_both(rt))
+                del rt
+            record(label, pairs)
         for label, mod, kw in (
             ("numpy", np.fft, {}),
             ("scipy", scipy.fft, {"workers": threads}),
@@ -191,7 +212,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--quick", action="store_true", help="phantom case only")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--threads", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--rss", choices=sorted(CASES), help="peak memory of one case")
+    parser.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.child:
+        _child(*args.child)
+        return
+    if args.rss:
+        peak_memory(args.rss)
+        return
     names = ["phantom"] if args.quick else ["phantom", "cardiac"]
     print(
         f"# bench_phase: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
@@ -202,19 +231,21 @@ def main(argv: list[str] | None = None) -> None:
     results = [run_case(name, args.repeats, args.threads) for name in names]
     print()
     print(
-        "| case | FFT'd stacks (upsampled) | phase() s | pyfftw fwd+inv s | numpy.fft s | "
-        "scipy.fft s | phase / pyfftw | phase / numpy | user CPU s phase / pyfftw | "
-        "system CPU s phase / pyfftw | first phase() s |"
+        "| case | FFT'd stacks (upsampled) | phase() f32 s | phase() f64 s | pyfftw c128 "
+        "fwd+inv s | pyfftw c64 s | numpy.fft s | scipy.fft s | f32 / pyfftw c128 | "
+        "f32 / pyfftw c64 | f64 / pyfftw c128 | f32 / f64 | user CPU s f32 / c128 | "
+        "system CPU s f32 / c128 | first phase() s |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in results:
         m, c, y = r["median"], r["median_cpu"], r["median_sys"]
         stacks = " + ".join("x".join(str(n) for n in s) for s in r["stacks"])
         print(
-            f"| {r['name']} {r['input']} | {stacks} | {m['phase']:.3f} | {m['pyfftw']:.3f} | "
-            f"{m['numpy']:.3f} | {m['scipy']:.3f} | {m['phase'] / m['pyfftw']:.2f} | "
-            f"{m['phase'] / m['numpy']:.2f} | {c['phase']:.2f} / {c['pyfftw']:.2f} = "
-            f"{c['phase'] / c['pyfftw']:.2f} | {y['phase']:.2f} / {y['pyfftw']:.2f} | "
+            f"| {r['name']} {r['input']} | {stacks} | {m['phase']:.3f} | {m['phase64']:.3f} | "
+            f"{m['pyfftw']:.3f} | {m['pyfftw32']:.3f} | {m['numpy']:.3f} | {m['scipy']:.3f} | "
+            f"{m['phase'] / m['pyfftw']:.2f} | {m['phase'] / m['pyfftw32']:.2f} | "
+            f"{m['phase64'] / m['pyfftw']:.2f} | {m['phase'] / m['phase64']:.2f} | "
+            f"{c['phase']:.2f} / {c['pyfftw']:.2f} | {y['phase']:.2f} / {y['pyfftw']:.2f} | "
             f"{r['first']:.2f} |"
         )
     print()
@@ -230,6 +261,50 @@ def main(argv: list[str] | None = None) -> None:
             "per-repeat seconds: "
             + "; ".join(f"{k} {', '.join(f'{v:.3f}' for v in vs)}" for k, vs in r["all"].items())
         )
+
+
+def _child(action: str, name: str, path: str) -> None:
+    """One measured process: ``make`` the case file, or run ``float32``/``float64``/``lazy``."""
+    if action == "make":
+        spec = CASES[name]
+        ds, _ = tagged_dataset(spec["frames"], spec["shape"], spec["spacing"], spec["period"])
+        ds.to_netcdf(path)
+        return
+    ds = xr.open_dataset(path).load()
+    start = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+    wall = time.perf_counter()
+    if action == "lazy":
+        phase = extract_phase(ds.chunk(time=1), upsample=UPSAMPLE)
+        for k in range(ds.sizes["time"]):
+            phase.isel(time=k).compute()
+    else:
+        phase = extract_phase(ds, upsample=UPSAMPLE, dtype=action)  # type: ignore[arg-type]
+    wall = time.perf_counter() - wall
+    nbytes = sum(phase[v].nbytes for v in ("phase", "magnitude")) / 2**30
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+    print(f"{action} {start:.2f} {peak:.2f} {nbytes:.2f} {wall:.1f}")
+
+
+def peak_memory(name: str) -> None:
+    """Peak RSS (GiB) of ``phase()`` on one case, each precision in its own process."""
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, f"{name}.nc")
+        run = [sys.executable, __file__, "--child"]
+        subprocess.run([*run, "make", name, path], check=True)
+        print(
+            f"| case {name} | run | RSS after loading the input (GiB) | peak RSS (GiB) | "
+            "phase + magnitude (GiB) | wall s |\n|---|---|---|---|---|---|"
+        )
+        for action in ("float32", "float64", "lazy"):
+            out = subprocess.run(
+                [*run, action, name, path], check=True, capture_output=True, text=True
+            ).stdout.split()
+            label = {"lazy": "lazy float32, one frame at a time"}.get(action, action)
+            print(f"| {name} | {label} | {out[1]} | {out[2]} | {out[3]} | {out[4]} |")
 
 
 if __name__ == "__main__":

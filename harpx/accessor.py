@@ -88,7 +88,12 @@ class HarpAccessor:
         return validate(self._ds, kind=kind)
 
     def phase(
-        self, *, upsample: int = 2, radius: float = 0.5, threads: int | None = None
+        self,
+        *,
+        upsample: int = 2,
+        radius: float = 0.5,
+        threads: int | None = None,
+        dtype: Literal["float32", "float64"] = "float32",
     ) -> xr.Dataset:
         """Harmonic phase of a ``tagged/1`` dataset.
 
@@ -98,7 +103,9 @@ class HarpAccessor:
         """
         from harpx.imaging.harp import extract_phase
 
-        return extract_phase(self._ds, upsample=upsample, radius=radius, threads=threads)
+        return extract_phase(
+            self._ds, upsample=upsample, radius=radius, threads=threads, dtype=dtype
+        )
 
     def to_netcdf(self, path: PathLike) -> Path:
         """Write the dataset atomically to a NetCDF archive.

@@ -67,6 +67,8 @@ __all__ = [
 ]
 
 TWO_PI = 2.0 * np.pi
+#: The largest float32 below π (float32(π) itself is 8.7e-8 above π).
+_PI32_INSIDE = np.nextafter(np.float32(np.pi), np.float32(0.0))
 
 
 # --------------------------------------------------------------------------------------------
@@ -380,12 +382,24 @@ class _Bandpass:
     slices commutes with the in-plane inverse FFT), so the last FFT pass directly yields the
     refined slices. One instance per worker thread and call: it zeroes the inverse-FFT input
     buffers once, then every batch writes the same sparse positions, so the zeros stay valid.
+    ``real`` is the precision of the transforms (float64, or float32 with complex64 spectra:
+    half the memory traffic and about twice the FFT speed).
     """
 
     def __init__(
-        self, band: _Band, batch: int, threads: int, slice_axis: int = 0, slice_factor: int = 1
+        self,
+        band: _Band,
+        batch: int,
+        threads: int,
+        slice_axis: int = 0,
+        slice_factor: int = 1,
+        real: np.dtype | type = np.float64,
     ) -> None:
         self.band = band
+        real = np.dtype(real)
+        cplx = np.result_type(real, np.complex64)
+        self.sign = band.sign.astype(real)
+        self.weight = band.weight.astype(cplx)
         self.s = slice_axis
         self.m = slice_factor
         a, b = (k for k in range(3) if k != slice_axis)
@@ -396,15 +410,15 @@ class _Bandpass:
             out[a], out[b] = first, second
             return tuple(out)
 
-        self.fwd = get_plan(shape(n1, n2), np.float64, (a, b), direction="forward", threads=threads)
+        self.fwd = get_plan(shape(n1, n2), real, (a, b), direction="forward", threads=threads)
         # first inverse pass along the in-plane axis a over the few columns of the disk,
         # then the full pass along b (the contiguous axis unless slices are along x)
         self.p1 = get_plan(
-            shape(b1, len(band.cols)), np.complex128, (a,), direction="backward", threads=threads
+            shape(b1, len(band.cols)), cplx, (a,), direction="backward", threads=threads
         )
         self.p2 = get_plan(
             shape(b1, b2, batch * slice_factor),
-            np.complex128,
+            cplx,
             (b,),
             direction="backward",
             threads=threads,
@@ -412,7 +426,7 @@ class _Bandpass:
         self.p1.input_array[...] = 0.0
         self.p2.input_array[...] = 0.0
         self.diff = [
-            np.empty((max(batch - 1, 0), b1, src.stop - src.start), dtype=np.complex128)
+            np.empty((max(batch - 1, 0), b1, src.stop - src.start), dtype=cplx)
             for _, src in band.col_runs
         ]
 
@@ -425,8 +439,8 @@ class _Bandpass:
         np.copyto(self.fwd.input_array, volume)
         self.fwd.execute()
         g = self._view(self.fwd.output_array)[:, band.gather1, band.gather2]
-        g.imag *= band.sign
-        g *= band.weight
+        g.imag *= self.sign
+        g *= self.weight
         p1_in = self._view(self.p1.input_array)
         for dst, src in band.row_runs:  # contiguous runs: slice copies, no fancy indexing
             p1_in[:, dst, :] = g[:, src, :]
@@ -438,7 +452,7 @@ class _Bandpass:
             low, high = p1_out[:, :, src], p2_in[:, :, dst]
             if low.strides[-1] == high.strides[-1] == low.itemsize:
                 # float views: complex-by-real products as real products
-                low, high, diff = (a.view(np.float64) for a in (low, high, diff))
+                low, high, diff = (a.view(self.sign.dtype) for a in (low, high, diff))
             _interp_rows(low, high, diff, self.m)
         self.p2.execute()
         return self.p2.output_array
@@ -560,6 +574,12 @@ def _phase_magnitude(
     np.copyto(re, h.real)
     np.arctan2(im, re, out=phase)
     np.negative(phase, out=phase)
+    if phase.dtype == np.float32:
+        # float32(π) exceeds π: angles within rounding of ±π come out as ±float32(π), outside
+        # [-π, π) in exact arithmetic; wrap +float32(π) and clamp -float32(π) to the float32
+        # just inside -π (an error of at most 2e-7 rad)
+        np.copyto(phase, -_PI32_INSIDE, where=phase > _PI32_INSIDE)
+        np.maximum(phase, -_PI32_INSIDE, out=phase)
     np.abs(h, out=magnitude)
 
 
@@ -695,9 +715,9 @@ def refine_linear(
 
 def _volume_worker(
     frames: Sequence[int],
-    volume: NDArray[np.float64],
-    phase: NDArray[np.float64],
-    magnitude: NDArray[np.float64],
+    volume: NDArray[np.floating],
+    phase: NDArray[np.floating],
+    magnitude: NDArray[np.floating],
     band: _Band,
     slice_axis: int,
     slice_factor: int,
@@ -705,13 +725,17 @@ def _volume_worker(
 ) -> None:
     """Fill ``phase[f]`` and ``magnitude[f]`` (refined z, y, x) for the given frames.
 
+    The transforms run in the precision of ``phase`` (float32 or float64).
+
     The harmonic image keeps the volume's memory layout and is already refined along the
     slices (:class:`_Bandpass`), so its axis 0 is the output's z: output is written plane
     by plane, every write contiguous.
     """
-    run = _Bandpass(band, volume.shape[1 + slice_axis], threads, slice_axis, slice_factor)
+    run = _Bandpass(
+        band, volume.shape[1 + slice_axis], threads, slice_axis, slice_factor, phase.dtype
+    )
     plane = phase.shape[2:]
-    re, im = np.empty(plane), np.empty(plane)
+    re, im = np.empty(plane, phase.dtype), np.empty(plane, phase.dtype)
     for f in frames:
         h = run(volume[f])
         for r in range(h.shape[0]):
@@ -727,8 +751,9 @@ def harmonic_phase(
     radius: float = 0.5,
     upsample: Sequence[int] = (1, 1, 1),
     threads: int | None = None,
-    out: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    out: tuple[NDArray[np.floating], NDArray[np.floating]] | None = None,
+    dtype: np.dtype | type = np.float64,
+) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
     r"""Harmonic phase and magnitude of one tag's 3D volumes on a refined grid.
 
     Each 2D slice normal to ``slice_axis`` is cubic-spline upsampled in-plane, band-passed
@@ -755,16 +780,26 @@ def harmonic_phase(
         running FFTW with ``threads // workers`` threads. None means ``os.cpu_count()``;
         pass 1 when an outer scheduler (dask) already parallelises.
     out : (ndarray, ndarray), optional
-        C-contiguous float64 arrays of the output shape to write phase and magnitude into.
+        C-contiguous arrays of ``dtype`` and the output shape to write phase and magnitude
+        into.
+    dtype : {numpy.float64, numpy.float32}, default float64
+        Precision of the transforms and of the outputs. float32 (complex64 spectra) halves
+        memory and roughly doubles FFT speed; its phase differs from float64 by ~1e-6 rad
+        (rounding of 7-digit arithmetic through two FFTs), far below image noise.
 
     Returns
     -------
-    phase : ndarray of float64, shape (..., mz nz, my ny, mx nx)
+    phase : ndarray of ``dtype``, shape (..., mz nz, my ny, mx nx)
         Harmonic phase ``angle(H)`` in rad, in ``[-π, π)``.
-    magnitude : ndarray of float64, same shape
+    magnitude : ndarray of ``dtype``, same shape
         ``|H|`` (image intensity units).
     """
-    v = np.asarray(volume, dtype=np.float64)
+    dtype = np.dtype(dtype)
+    if dtype not in (np.dtype(np.float32), np.dtype(np.float64)):
+        raise ValueError(f"'dtype' must be float32 or float64, got {dtype!r}")
+    v = np.asarray(volume)
+    if v.dtype.kind != "f":
+        v = v.astype(np.float64)
     if v.ndim < 3:
         raise ValueError(f"'volume' needs at least 3 dimensions, got shape {v.shape!r}")
     if slice_axis not in (0, 1, 2):
@@ -785,11 +820,11 @@ def harmonic_phase(
     out_shape = tuple(n * m for n, m in zip(v.shape[-3:], factors, strict=True))
     full_shape = (*lead, *out_shape)
     if out is None:
-        out = (np.empty(full_shape), np.empty(full_shape))
+        out = (np.empty(full_shape, dtype), np.empty(full_shape, dtype))
     for array in out:
-        if array.shape != full_shape or array.dtype != np.float64 or not array.flags.c_contiguous:
+        if array.shape != full_shape or array.dtype != dtype or not array.flags.c_contiguous:
             raise ValueError(
-                f"'out' arrays must be C-contiguous float64 of shape {full_shape!r}, got "
+                f"'out' arrays must be C-contiguous {dtype} of shape {full_shape!r}, got "
                 f"{array.shape!r} {array.dtype}"
             )
     phase = out[0].reshape(nframes, *out_shape)

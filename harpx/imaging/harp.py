@@ -11,6 +11,7 @@ labels the result.
 from __future__ import annotations
 
 from collections.abc import Hashable
+from typing import Literal
 
 import numpy as np
 import xarray as xr
@@ -116,10 +117,11 @@ def _phase_block(
     factors: tuple[int, int, int],
     radius: float,
     threads: int,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    dtype: np.dtype,
+) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
     """Phase and magnitude of a block (tag, time, z, y, x); loops over its (<= 3) tags."""
     shape = (*image.shape[:-3], *(n * m for n, m in zip(image.shape[-3:], factors, strict=True)))
-    phase, magnitude = np.empty(shape), np.empty(shape)
+    phase, magnitude = np.empty(shape, dtype), np.empty(shape, dtype)
     for t in range(image.shape[0]):
         harmonic_phase(
             image[t],
@@ -130,6 +132,7 @@ def _phase_block(
             upsample=factors,
             threads=threads,
             out=(phase[t], magnitude[t]),
+            dtype=dtype,
         )
     return phase, magnitude
 
@@ -168,7 +171,12 @@ def _refine_linear(var: xr.Variable, factors: tuple[int, int, int], threads: int
 
 
 def extract_phase(
-    ds: xr.Dataset, *, upsample: int = 2, radius: float = 0.5, threads: int | None = None
+    ds: xr.Dataset,
+    *,
+    upsample: int = 2,
+    radius: float = 0.5,
+    threads: int | None = None,
+    dtype: Literal["float32", "float64"] = "float32",
 ) -> xr.Dataset:
     r"""Harmonic phase and magnitude of a ``tagged/1`` dataset (``phase/1``).
 
@@ -199,15 +207,20 @@ def extract_phase(
     threads : int or None, default None
         Threads for the FFTs and the per-frame work. None means ``os.cpu_count()`` for
         in-memory data and 1 for dask-backed data (dask already parallelises over chunks).
+    dtype : {"float32", "float64"}, default "float32"
+        Precision of the transforms and of ``phase`` and ``magnitude``. float32 halves the
+        memory of the refined grid (8x the input voxels at ``upsample=2``) and runs about
+        twice as fast; its phase differs from float64 by about 1e-6 rad, which leaves
+        tracking errors unchanged (``benchmarks/bench_phase.py`` measures both).
 
     Returns
     -------
     xarray.Dataset
-        ``phase/1``: ``phase`` (rad, in [-π, π)) and ``magnitude`` (image units) with dims
-        (tag, time, z, y, x) on the refined grid; the tag coords and ``time``; ``mask``
-        (nearest native voxel), ``body`` and ``displacement_true`` (linear interpolation,
-        NaN where a neighbour is NaN) when present. Attributes: ``harpx_schema="phase/1"``,
-        ``sequence``, ``upsample``, ``radius`` and ``upsample_factors`` (z, y, x).
+        ``phase/1``: ``phase`` (rad, in [-π, π)) and ``magnitude`` (image units), of ``dtype``, with
+        dims (tag, time, z, y, x) on the refined grid; the tag coords and ``time``; ``mask``
+        (nearest native voxel), ``body`` and ``displacement_true`` (linear interpolation, NaN where
+        a neighbour is NaN) when present. Attributes: ``harpx_schema="phase/1"``, ``sequence``,
+        ``upsample``, ``radius`` and ``upsample_factors`` (z, y, x).
 
     Raises
     ------
@@ -215,7 +228,7 @@ def extract_phase(
         If ``ds`` is not a valid ``tagged/1`` dataset, or ``image`` is chunked along
         ``z``, ``y`` or ``x`` (the message says how to rechunk).
     ValueError
-        If ``upsample``, ``radius`` or ``threads`` is out of range.
+        If ``upsample``, ``radius``, ``threads`` or ``dtype`` is out of range.
 
     Notes
     -----
@@ -238,6 +251,9 @@ def extract_phase(
     """
     validate(ds, "tagged")
     _check_options(upsample, radius)
+    if str(dtype) not in ("float32", "float64"):
+        raise ValueError(f"'dtype' must be 'float32' or 'float64', got {dtype!r}")
+    real = np.dtype(str(dtype))
     image = ds["image"]
     carried = [n for n in ("mask", "body", "displacement_true") if n in ds.variables]
     lazy = _check_chunks(ds, ["image", *carried])
@@ -265,13 +281,14 @@ def extract_phase(
         output_core_dims=[list(GRID_DIMS), list(GRID_DIMS)],
         exclude_dims=set(GRID_DIMS),
         dask="parallelized",
-        output_dtypes=[np.float64, np.float64],
+        output_dtypes=[real, real],
         dask_gufunc_kwargs={"output_sizes": sizes},
         kwargs={
             "spacing": spacing,
             "factors": factors,
             "radius": float(radius),
             "threads": nthreads,
+            "dtype": real,
         },
     )
     dims = ("tag", "time", *GRID_DIMS)

@@ -268,3 +268,28 @@ def test_wrap_range_and_periodicity(a: float, turns: int) -> None:
     assert -np.pi <= w < np.pi
     # float rounding of a + 2πk grows with |a + 2πk| (~1e-9 here); W is 2π-periodic
     assert abs(wrap(wrap(a + 2 * np.pi * turns) - w)) < 1e-8
+
+
+def test_float32_phase_samples_like_float64():
+    # extract_phase returns float32 by default; the sampler must give the float64 answer to
+    # float32 resolution: the demodulation argument φ − W(k·x) stays within a few π, so
+    # its float32 rounding is ~1e-6 rad (k·x alone reaches ~60 rad on this grid)
+    from harpx.imaging.harp import extract_phase
+    from harpx.imaging.synth import synthesize_tagged
+
+    def motion(X, t):
+        return 0.5 * t / 100 * np.sin(X[:, [1, 2, 0]] / 5)
+
+    tagged = synthesize_tagged(motion, shape=(8, 24, 20), spacing=(1.5,) * 3,
+                               times=[0.0, 100.0], tag_period=6.0, snr=20.0, oversample=1,
+                               rng=0)  # fmt: skip
+    single = extract_phase(tagged)
+    double = extract_phase(tagged, dtype="float64")
+    assert single.phase.dtype == np.float32
+    pts = np.random.default_rng(0).uniform([-14, -17, -5], [14, 17, 5], (500, 3))
+    for order in (3, 1):
+        a = PhaseSampler(single, 1, order=order).sample(pts)
+        b = PhaseSampler(double, 1, order=order).sample(pts)
+        assert a[2].mean() > 0.9 and np.array_equal(a[2], b[2])
+        assert np.abs(wrap(a[0] - b[0])).max() < 2e-5
+        assert np.abs(a[1] - b[1]).max() < 2e-4 * np.abs(b[1]).max()
