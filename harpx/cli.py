@@ -4,13 +4,17 @@ Subcommands: ``demo`` (the phantom scene end to end), ``phase`` (tagged archive 
 archive), ``track`` (phase archive + mesh → tracked archive), ``dicom`` (tagged cine DICOM
 series → tagged archive), ``report`` (summary of a tracked archive, optionally against
 ground truth). Errors print as one line (``--debug`` for the
-traceback); exit codes: 0 success, 1 harpx or input error, 2 usage error.
+traceback); exit codes: 0 success, 1 harpx or input error, 2 usage error, 130 interrupted
+(Ctrl-C) and 143 terminated (SIGTERM): an interrupted write removes its temporary file and
+leaves an existing output untouched.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -92,6 +96,7 @@ def _phase(args: argparse.Namespace) -> int:
     from harpx.imaging.harp import extract_phase
     from harpx.io.netcdf import open_dataset, to_netcdf
 
+    _refuse_overwriting_input(args.output, [args.input])
     ds = open_dataset(args.input)
     to_netcdf(extract_phase(ds, upsample=args.upsample, radius=args.radius), args.output)
     print(f"wrote {args.output}")
@@ -104,6 +109,7 @@ def _track(args: argparse.Namespace) -> int:
     from harpx.mechanics.materials import NeoHookean
     from harpx.tracking.track import track
 
+    _refuse_overwriting_input(args.output, [args.input, args.mesh])
     ds = open_dataset(args.input)
     body = Body(args.mesh, NeoHookean(c1=args.c1, kappa=args.kappa), element=args.element)
     result = track(ds, body, method=args.method, epsilon=args.epsilon, progress=args.progress)
@@ -118,6 +124,11 @@ def _report(args: argparse.Namespace) -> int:
     from harpx.tracking.results import tracking_error
 
     ds = open_dataset(args.archive)
+    if ds.attrs.get("harpx_schema") != "tracked/1":
+        raise HarpxError(
+            f"{args.archive!r} is a {ds.attrs.get('harpx_schema')!r} archive, not 'tracked/1'; "
+            "report summarises tracking results (harpx track ... first)"
+        )
     print(f"{args.archive}: {ds.attrs.get('harpx_schema')}, method {ds.attrs.get('method')}")
     cols = [c for c in ("epsilon", "penalty", "iterations", "wall_time") if c in ds]
     print("| time (ms) | " + " | ".join(cols) + " |")
@@ -143,6 +154,7 @@ def _dicom(args: argparse.Namespace) -> int:
     from harpx.io.dicom import read_tagged
     from harpx.io.netcdf import to_netcdf
 
+    _refuse_overwriting_input(args.output, args.input)
     directions: dict[str, list[tuple[str, Any]]] = {}
     for item in args.tag:
         try:
@@ -163,6 +175,18 @@ def _dicom(args: argparse.Namespace) -> int:
     to_netcdf(ds, args.output)
     print(f"wrote {args.output}: {dict(ds.sizes)}")
     return 0
+
+
+def _refuse_overwriting_input(output: str, inputs: Sequence[str]) -> None:
+    """Raise before any work if ``output`` is one of the input files."""
+    target = Path(output).resolve()
+    for item in inputs:
+        source = Path(item).resolve()
+        if target == source:
+            raise HarpxError(
+                f"output {output!r} is the input {item!r}; writing it would replace the data "
+                "being read: choose another output file"
+            )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -230,14 +254,42 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``harpx`` command; returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _terminate)  # unwind, so cleanups run
     try:
         return int(args.func(args))
-    except (HarpxError, ValueError, OSError) as exc:
+    except (KeyboardInterrupt, _Terminated) as exc:
         if args.debug:
             raise
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        print(f"harpx {args.command}: error: {first}", file=sys.stderr)
+        what = "terminated" if isinstance(exc, _Terminated) else "interrupted"
+        print(f"harpx {args.command}: {what}; no partial output was written", file=sys.stderr)
+        return 143 if isinstance(exc, _Terminated) else 130
+    except Exception as exc:  # every failure is one line; --debug shows the traceback
+        if args.debug:
+            raise
+        print(f"harpx {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 1
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+class _Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that ``finally`` blocks remove temp files."""
+
+
+def _terminate(signum: int, frame: Any) -> None:
+    raise _Terminated()
+
+
+def _one_line(exc: BaseException) -> str:
+    """First line of an error, prefixed by its type unless it is a harpx or input error."""
+    lines = str(exc).strip().splitlines()
+    first = lines[0] if lines else ""
+    if isinstance(exc, HarpxError | ValueError | OSError) and first:
+        return first
+    return f"{type(exc).__name__}: {first}" if first else type(exc).__name__
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -785,9 +785,13 @@ def _check_tracked(ds: xr.Dataset, problems: list[str]) -> None:
                         f"'cells' refers to node ids in [{data.min()}, {data.max()}] but there "
                         f"are {nnode} nodes"
                     )
-    for name in ("points", "displacement"):
-        if name in ds.variables:
-            _check_finite(ds, name, problems)
+    if "points" in ds.variables:
+        _check_finite(ds, "points", problems)
+    # a point cloud (conventional HARP) marks points without valid phase by NaN; a mesh
+    # result must be finite everywhere (NaN there means the solver failed)
+    mesh = "cells" in ds.variables and ds.variables["cells"].attrs.get("element") != "points"
+    if mesh and "displacement" in ds.variables:
+        _check_finite(ds, "displacement", problems)
     if "displacement_grid" in ds.variables:
         for dim in GRID_DIMS:
             if dim not in ds.coords:
