@@ -207,6 +207,9 @@ class PhaseSampler:
             self._padded = _demodulated_taps(phase, magnitude, carrier, squeeze)
         else:
             demod = magnitude * np.exp(1j * (phase - carrier))
+            # a NaN voxel would spread over the whole slice through the spline prefilter;
+            # as 0 it falls below the magnitude floor and stays invalid where it is
+            demod = np.where(np.isfinite(demod), demod, 0.0)
             demod = demod.squeeze(axis=squeeze) if squeeze else demod
         # Extend D by odd reflection (2 D[0] - D[k]), which keeps value and slope continuous
         # at the border, before prefiltering: the spline's own mirror boundary (a slope
@@ -238,6 +241,7 @@ class PhaseSampler:
         for t in range(ntag):
             mag = magnitude[t].squeeze(axis=tuple(a - 1 for a in squeeze))
             values = mag[mask[t]] if mask is not None and mask[t].any() else mag.ravel()
+            values = values[np.isfinite(values)]  # one NaN block must not make the floor NaN
             self._floor[t] = magnitude_floor * np.percentile(values, 99) if values.size else 0.0
 
     # ------------------------------------------------------------------------------------
