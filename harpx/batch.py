@@ -26,6 +26,7 @@ import functools
 import hashlib
 import inspect
 import json
+import os
 import pickle
 import uuid
 from collections.abc import Callable, Iterable, Mapping
@@ -185,6 +186,11 @@ def track_many(
     >>> track_many(sorted(Path("cohort").glob("*.nc")), body_factory,
     ...            output_dir="tracked", track_kwargs={"epsilon": 0.05})  # doctest: +SKIP
     """
+    if isinstance(paths, str | bytes | os.PathLike):
+        raise TypeError(
+            f"paths must be an iterable of input files, got the single path {paths!r} (which "
+            f"would be read character by character); pass a list: [{paths!r}]"
+        )
     inputs = [Path(p) for p in paths]
     kwargs = dict(track_kwargs or {})
     _check_arguments(inputs, body_factory, client, address, n_workers, kwargs)
@@ -386,8 +392,9 @@ def local_cluster(n_workers: int = 2) -> Any:
     Returns
     -------
     distributed.LocalCluster
-        Its dashboard (if bokeh is installed) is on a free port. Close it (or use it as a
-        context manager) when done.
+        Scheduler, workers and dashboard (if bokeh is installed) listen on the loopback
+        interface only (127.0.0.1, a free port), never on the network. Close it (or use it
+        as a context manager) when done.
 
     Notes
     -----
@@ -406,7 +413,11 @@ def local_cluster(n_workers: int = 2) -> Any:
     environ = {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1}
     with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
         return LocalCluster(
-            n_workers=int(n_workers), threads_per_worker=1, processes=True, dashboard_address=":0"
+            n_workers=int(n_workers),
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address="127.0.0.1:0",
         )
 
 
@@ -481,15 +492,27 @@ def _sha256(path: Path) -> str:
 
 
 def _is_complete(target: Path, digest: str, settings: str) -> bool:
-    """Whether ``target`` is a valid tracked/1 archive made from this input, these settings."""
+    """Whether ``target`` is a readable, valid tracked/1 archive made from this input and
+    these settings.
+
+    The archive is opened lazily and its variables are streamed chunk by chunk (a
+    truncated file fails while reading), so the check never holds more than one chunk in
+    memory, whatever sizes the file declares.
+    """
     if not target.is_file():
         return False
     try:
-        ds = open_dataset(target)  # loads everything: a truncated file fails here
-        validate(ds, "tracked")
-    except (ArchiveError, SchemaError):
+        with open_dataset(target, chunks={}) as ds:
+            if ds.attrs.get(_DIGEST_ATTR) != digest or ds.attrs.get(_SETTINGS_ATTR) != settings:
+                return False
+            validate(ds, "tracked")
+            for var in ds.variables.values():
+                if var.chunks is not None:  # read every block, one at a time
+                    for block in var.data.to_delayed().ravel():
+                        block.compute(scheduler="synchronous")
+    except Exception:  # unreadable, invalid or truncated (a block fails to read): redo it
         return False
-    return ds.attrs.get(_DIGEST_ATTR) == digest and ds.attrs.get(_SETTINGS_ATTR) == settings
+    return True
 
 
 def _run(

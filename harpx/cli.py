@@ -7,13 +7,17 @@ DICOM series → tagged archive), ``report`` (summary of a tracked archive, opti
 against ground truth). Errors print as one line (``--debug`` for the traceback); exit
 codes: 0 success, 1 harpx or input error, 2 usage error. Progress bars follow
 :mod:`harpx._progress`: shown in a terminal for calls longer than a few seconds, never in
-logs or pipes, unless ``--progress`` or ``--no-progress`` says otherwise.
+logs or pipes, unless ``--progress`` or ``--no-progress`` says otherwise. Exit code 130
+means interrupted (Ctrl-C) and 143 terminated (SIGTERM): an interrupted write removes its
+temporary file and leaves an existing output untouched.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -118,6 +122,7 @@ def _phase(args: argparse.Namespace) -> int:
     from harpx.imaging.harp import extract_phase
     from harpx.io.netcdf import open_dataset, to_netcdf
 
+    _refuse_overwriting_input(args.output, [args.input])
     ds = open_dataset(args.input)
     to_netcdf(extract_phase(ds, upsample=args.upsample, radius=args.radius), args.output)
     print(f"wrote {args.output}")
@@ -130,6 +135,7 @@ def _track(args: argparse.Namespace) -> int:
     from harpx.mechanics.materials import NeoHookean
     from harpx.tracking.track import track
 
+    _refuse_overwriting_input(args.output, [args.input, args.mesh])
     ds = open_dataset(args.input)
     body = Body(args.mesh, NeoHookean(c1=args.c1, kappa=args.kappa), element=args.element)
     options: dict[str, Any] = {"dirichlet": [_fixed(item, body) for item in args.fix]}
@@ -240,6 +246,7 @@ def _dicom(args: argparse.Namespace) -> int:
     from harpx.io.dicom import read_tagged
     from harpx.io.netcdf import to_netcdf
 
+    _refuse_overwriting_input(args.output, args.input)
     directions: dict[str, list[tuple[str, Any]]] = {}
     for item in args.tag:
         try:
@@ -270,6 +277,16 @@ def _progress_option(parser: argparse.ArgumentParser) -> None:
         help="progress bar over frames (default: shown when stderr is a terminal, after a "
         "few seconds)",
     )
+def _refuse_overwriting_input(output: str, inputs: Sequence[str]) -> None:
+    """Raise before any work if ``output`` is one of the input files."""
+    target = Path(output).resolve()
+    for item in inputs:
+        source = Path(item).resolve()
+        if target == source:
+            raise HarpxError(
+                f"output {output!r} is the input {item!r}; writing it would replace the data "
+                "being read: choose another output file"
+            )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -387,14 +404,42 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``harpx`` command; returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _terminate)  # unwind, so cleanups run
     try:
         return int(args.func(args))
-    except (HarpxError, ValueError, OSError) as exc:
+    except (KeyboardInterrupt, _Terminated) as exc:
         if args.debug:
             raise
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        print(f"harpx {args.command}: error: {first}", file=sys.stderr)
+        what = "terminated" if isinstance(exc, _Terminated) else "interrupted"
+        print(f"harpx {args.command}: {what}; no partial output was written", file=sys.stderr)
+        return 143 if isinstance(exc, _Terminated) else 130
+    except Exception as exc:  # every failure is one line; --debug shows the traceback
+        if args.debug:
+            raise
+        print(f"harpx {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 1
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+class _Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that ``finally`` blocks remove temp files."""
+
+
+def _terminate(signum: int, frame: Any) -> None:
+    raise _Terminated()
+
+
+def _one_line(exc: BaseException) -> str:
+    """First line of an error, prefixed by its type unless it is a harpx or input error."""
+    lines = str(exc).strip().splitlines()
+    first = lines[0] if lines else ""
+    if isinstance(exc, HarpxError | ValueError | OSError) and first:
+        return first
+    return f"{type(exc).__name__}: {first}" if first else type(exc).__name__
 
 
 if __name__ == "__main__":  # pragma: no cover

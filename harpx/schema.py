@@ -812,12 +812,13 @@ def _check_tracked(ds: xr.Dataset, problems: list[str]) -> None:
                         f"'cells' refers to node ids in [{data.min()}, {data.max()}] but there "
                         f"are {nnode} nodes"
                     )
-    # conventional HARP's point "meshes" mark the points it lost (outside the acquired field
-    # of view) with NaN displacement and report how many; an FE mesh has no such points
-    points_only = "cells" in ds.variables and ds["cells"].attrs.get("element") == "points"
-    for name in ("points",) if points_only else ("points", "displacement"):
-        if name in ds.variables:
-            _check_finite(ds, name, problems)
+    if "points" in ds.variables:
+        _check_finite(ds, "points", problems)
+    # a point cloud (conventional HARP) marks points without valid phase by NaN; a mesh
+    # result must be finite everywhere (NaN there means the solver failed)
+    mesh = "cells" in ds.variables and ds.variables["cells"].attrs.get("element") != "points"
+    if mesh and "displacement" in ds.variables:
+        _check_finite(ds, "displacement", problems)
     if "displacement_grid" in ds.variables:
         for dim in GRID_DIMS:
             if dim not in ds.coords:

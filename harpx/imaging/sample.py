@@ -311,6 +311,7 @@ class PhaseSampler:
         for t in range(ntag):
             mag = magnitude[t].squeeze(axis=tuple(a - 1 for a in squeeze))
             values = mag[mask[t]] if mask is not None and mask[t].any() else mag.ravel()
+            values = values[np.isfinite(values)]  # one NaN block must not make the floor NaN
             self._floor[t] = magnitude_floor * np.percentile(values, 99) if values.size else 0.0
 
     # ------------------------------------------------------------------------------------

@@ -51,7 +51,7 @@ import math
 import os
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
@@ -114,20 +114,29 @@ class _Image:
     slope: float
     intercept: float
     time_name: str = "TriggerTime"
+    sop_uid: str = ""
+    #: raw header values that are present but not numbers (name -> value)
+    unreadable: dict[str, Any] = field(default_factory=dict)
 
     def where(self) -> str:
         return str(self.path) if self.frame is None else f"{self.path} (frame {self.frame + 1})"
 
     def require(self, name: str) -> Any:
         value = getattr(self, name)
+        keyword = {
+            "position": "ImagePositionPatient",
+            "orientation": "ImageOrientationPatient",
+            "pixel_spacing": "PixelSpacing",
+            "thickness": "SliceThickness",
+            "time": self.time_name,
+        }[name]
+        if value is None and name in self.unreadable:
+            raise HarpxError(
+                f"DICOM attribute {keyword!r} of {self.where()} is "
+                f"{self.unreadable[name]!r}, which is not a finite number (or not the right "
+                "count of them); fix the export or drop the file"
+            )
         if value is None:
-            keyword = {
-                "position": "ImagePositionPatient",
-                "orientation": "ImageOrientationPatient",
-                "pixel_spacing": "PixelSpacing",
-                "thickness": "SliceThickness",
-                "time": self.time_name,
-            }[name]
             raise HarpxError(
                 f"DICOM attribute {keyword!r} is missing in {self.where()}; harpx needs it to "
                 "place the image in patient coordinates and time (fix the export or drop the "
@@ -180,21 +189,30 @@ def _images_of(header: Any, path: Path) -> list[_Image]:
         "rows": int(header.get("Rows", 0)),
         "columns": int(header.get("Columns", 0)),
     }
+    common["sop_uid"] = str(header.get("SOPInstanceUID", ""))
     per_frame = header.get("PerFrameFunctionalGroupsSequence")
     if not per_frame:
-        return [
-            _Image(
-                frame=None,
-                position=_floats(header.get("ImagePositionPatient"), 3),
-                orientation=_floats(header.get("ImageOrientationPatient"), 6),
-                pixel_spacing=_floats(header.get("PixelSpacing"), 2),
-                thickness=_float(header.get("SliceThickness")),
-                time=_float(header.get("TriggerTime")),
-                slope=_float(header.get("RescaleSlope")) or 1.0,
-                intercept=_float(header.get("RescaleIntercept")) or 0.0,
-                **common,
-            )
-        ]
+        image = _Image(
+            frame=None,
+            position=_floats(header.get("ImagePositionPatient"), 3),
+            orientation=_floats(header.get("ImageOrientationPatient"), 6),
+            pixel_spacing=_floats(header.get("PixelSpacing"), 2),
+            thickness=_float(header.get("SliceThickness")),
+            time=_float(header.get("TriggerTime")),
+            slope=_float(header.get("RescaleSlope")) or 1.0,
+            intercept=_float(header.get("RescaleIntercept")) or 0.0,
+            **common,
+        )
+        for name, keyword in (
+            ("position", "ImagePositionPatient"),
+            ("orientation", "ImageOrientationPatient"),
+            ("pixel_spacing", "PixelSpacing"),
+            ("time", "TriggerTime"),
+        ):
+            raw = header.get(keyword)
+            if getattr(image, name) is None and raw is not None and raw != "":
+                image.unreadable[name] = str(raw)
+        return [image]
     images = []
     stamps: list[datetime | None] = []
     for index, item in enumerate(per_frame):
@@ -388,6 +406,7 @@ def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
                 f"{im.rows}x{im.columns} at {im.pixel_spacing.tolist()} mm, {first.where()} "
                 f"{first.rows}x{first.columns} at {spacing.tolist()} mm"
             )
+    _check_geometry(first, orientation, spacing, label)
     along_row, along_column = orientation[:3], orientation[3:]
     normal = np.cross(along_row, along_column)
     normal /= np.linalg.norm(normal)
@@ -413,6 +432,12 @@ def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
         gaps = np.diff([im.time for im in ims])
         if gaps.size and gaps.min() < _TIME_DUPLICATE:
             k = int(np.argmin(gaps))
+            a, b = ims[k], ims[k + 1]
+            if a.sop_uid and a.sop_uid == b.sop_uid and a.frame == b.frame:
+                raise HarpxError(
+                    f"{a.where()} and {b.where()} are the same image twice (SOPInstanceUID "
+                    f"{a.sop_uid!r}): one is a copy of the other; remove the copy"
+                )
             raise HarpxError(
                 f"{label} has two images at the same slice position and TriggerTime "
                 f"{ims[k].time} ms: {ims[k].where()} and {ims[k + 1].where()}; put repeated "
@@ -434,6 +459,7 @@ def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
             "time_tolerance if the frames really correspond"
         )
     offsets = local[[s[0] for s in slices], 2] - local[base, 2]
+    _check_gaps(offsets, [images[s[0]] for s in slices], label)
     origin = positions[base]
     thickness = first.thickness if first.thickness is not None and first.thickness > 0 else None
     if thickness is not None:
@@ -463,6 +489,62 @@ def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
     )
 
 
+#: Largest deviation of an ImageOrientationPatient triplet from unit length, and of the
+#: two triplets from orthogonality (|r . c|).
+UNIT_TOL = 1e-3
+#: A gap between neighbouring slices larger than this many regular gaps is an error (a slice
+#: far off the stack); a smaller but irregular gap (missing slices) warns.
+GAP_ERROR = 4.0
+_GAP_WARN = 1.5
+
+
+def _check_geometry(
+    first: _Image, orientation: FloatArray, spacing: FloatArray, label: str
+) -> None:
+    """Unit, orthogonal direction cosines and positive pixel spacing, else HarpxError."""
+    r, c = orientation[:3], orientation[3:]
+    norms = [float(np.linalg.norm(r)), float(np.linalg.norm(c))]
+    if max(abs(n - 1.0) for n in norms) > UNIT_TOL or abs(float(r @ c)) > UNIT_TOL:
+        raise HarpxError(
+            f"ImageOrientationPatient of {first.where()} ({label}) is "
+            f"{np.round(orientation, 6).tolist()}: the two direction cosines must be unit "
+            f"vectors at right angles (norms {np.round(norms, 6).tolist()}, dot product "
+            f"{float(r @ c):.3g}); fix the export (harpx would scale or shear the geometry)"
+        )
+    if not np.all(spacing > 0):
+        raise HarpxError(
+            f"PixelSpacing of {first.where()} ({label}) is {spacing.tolist()} mm; both "
+            "values must be positive (fix the export)"
+        )
+
+
+def _check_gaps(offsets: FloatArray, firsts: list[_Image], label: str) -> None:
+    """A slice far off the stack is an error; missing slices (an irregular gap) warn."""
+    if offsets.size < 3:
+        return
+    gaps = np.diff(offsets)
+    regular = float(np.median(gaps))
+    worst = int(np.argmax(gaps))
+    if gaps[worst] > GAP_ERROR * regular:
+        raise HarpxError(
+            f"slice {firsts[worst + 1].where()} of {label} is {gaps[worst]:.4g} mm from its "
+            f"neighbour {firsts[worst].where()}, {gaps[worst] / regular:.3g} times the "
+            f"stack's {regular:.4g} mm slice gap; it does not belong to this stack (drop it "
+            "or give it its own series)"
+        )
+    irregular = np.flatnonzero(gaps > _GAP_WARN * regular)
+    if irregular.size:
+        k = int(irregular[0])
+        warnings.warn(
+            f"{label} has a gap of {gaps[k]:.4g} mm between {firsts[k].where()} and "
+            f"{firsts[k + 1].where()} ({gaps[k] / regular:.3g} times its {regular:.4g} mm "
+            "slice gap): slices seem to be missing; the images are interpolated across the "
+            "gap (its mask marks it as having data)",
+            HarpxWarning,
+            stacklevel=4,
+        )
+
+
 # ---------------------------------------------------------------------------------------------
 # file discovery and pixel data
 
@@ -474,6 +556,7 @@ def _discover(paths_or_folder: PathLike | Sequence[PathLike]) -> list[_Image]:
     else:
         entries = [Path(p) for p in paths_or_folder]
     images: list[_Image] = []
+    no_series: list[Path] = []
     seen: set[Path] = set()
     for entry in entries:
         if entry.is_dir():
@@ -498,9 +581,21 @@ def _discover(paths_or_folder: PathLike | Sequence[PathLike]) -> list[_Image]:
                     f"cannot read DICOM file {str(path)!r} ({type(err).__name__}: {err}); the "
                     "file is truncated or corrupt: re-export it or remove it"
                 ) from err
-            if "Rows" not in header or "SeriesInstanceUID" not in header:
+            if "Rows" not in header:
                 continue  # DICOMDIR, presentation states, reports: not images
+            if "SeriesInstanceUID" not in header:
+                no_series.append(path)
+                continue
             images.extend(_images_of(header, path))
+    if no_series:
+        message = (
+            f"{len(no_series)} DICOM images have no SeriesInstanceUID, e.g. "
+            f"{str(no_series[0])!r}; harpx groups images into stacks by it (add it, e.g. "
+            "with pydicom: ds.SeriesInstanceUID = pydicom.uid.generate_uid())"
+        )
+        if not images:
+            raise HarpxError(message)
+        warnings.warn(message + "; those images are skipped", HarpxWarning, stacklevel=3)
     if not images:
         where = ", ".join(repr(str(e)) for e in entries)
         raise HarpxError(

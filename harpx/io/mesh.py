@@ -464,7 +464,8 @@ def read_meshio(path: PathLike) -> meshio.Mesh:
 def _read(path: Path) -> meshio.Mesh:
     """``meshio.read`` with its failures (including its ``sys.exit``) as ArchiveError."""
     try:
-        with contextlib.redirect_stdout(io.StringIO()):  # meshio prints before it exits
+        sink = io.StringIO()  # meshio prints before it exits
+        with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
             return meshio.read(path)
     except SystemExit:  # meshio 5 exits the interpreter when no reader can parse the file
         reason = "meshio cannot parse it"

@@ -212,6 +212,13 @@ def tracking_error(
         frame, which is exact by construction) mean, standard deviation, 95th percentile
         and maximum of the error magnitude ``|u − u_true|`` in mm, plus
         ``coverage``: the fraction of body voxels that the tracked result covers.
+        Frames are matched by their time (to 1e-6 relative); frames only one side has
+        are left out.
+
+    Raises
+    ------
+    ValueError
+        If either variable is missing, or no frame time is common to both datasets.
     """
     if "displacement_true" not in truth:
         raise ValueError("truth has no 'displacement_true'; pass the synthetic tagged dataset")
@@ -232,6 +239,21 @@ def tracking_error(
         linear = est.interp(z=true.z, y=true.y, x=true.x)
         nearest = est.interp(z=true.z, y=true.y, x=true.x, method="nearest")
         est = linear.fillna(nearest)
+    # compare frames by their time (ms), never by position: frames of either side that
+    # the other lacks are left out, and no common frame at all is an error
+    t_est = np.asarray(est.time.values, dtype=np.float64)
+    t_true = np.asarray(true.time.values, dtype=np.float64)
+    tol = 1e-6 * max(1.0, float(np.abs(np.concatenate([t_est, t_true])).max(initial=0.0)))
+    nearest_true = np.abs(t_est[:, None] - t_true[None, :]).argmin(axis=1)
+    match = np.abs(t_true[nearest_true] - t_est) <= tol
+    if not match.any():
+        raise ValueError(
+            f"tracked and truth share no frame time: tracked has time {t_est.tolist()} ms, "
+            f"truth {t_true.tolist()} ms; pass the truth of the same acquisition (or select "
+            "matching frames with .sel(time=...))"
+        )
+    est = est.isel(time=np.flatnonzero(match))
+    true = true.isel(time=nearest_true[match])
     est = est.assign_coords(time=true.time.values)
     err = np.sqrt(((est - true) ** 2).sum("axis", skipna=False))
     body = np.isfinite(true).all("axis")

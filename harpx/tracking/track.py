@@ -21,6 +21,7 @@ import xarray as xr
 from tqdm.auto import tqdm
 
 from harpx.errors import HarpxWarning, SchemaError
+from harpx.imaging.coverage import explain_missing_data, phase_direction_mismatch
 from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.schema import validate
@@ -77,8 +78,8 @@ def _mechanical_force(body: Any, u: np.ndarray, terms: Sequence[Any]) -> np.ndar
 def _check_data(phase: xr.Dataset, constraint: PhaseConstraint) -> None:
     if not constraint.reference_valid.any():
         raise SchemaError(
-            "no constraint point of the body lies inside the image data in frame 0; "
-            "check that the mesh (mm) and the image grid (coords x, y, z) overlap"
+            "no constraint point of the body lies inside the image data in frame 0: "
+            + explain_missing_data(phase, constraint.points)
         )
     blind = [str(t) for t, seen in zip(phase["tag"].values, constraint.reference_valid.any(axis=0),
                                        strict=True) if not seen]  # fmt: skip
@@ -267,6 +268,9 @@ def track_with(
     ntime = phase.sizes["time"]
     setup_start = _time.perf_counter()
     timings.phase = setup_start - clock
+    swapped = phase_direction_mismatch(phase)
+    if swapped:
+        raise SchemaError(swapped)
     constraint = PhaseConstraint(body, phase, intorder=settings.intorder)
     _check_data(phase, constraint)
     fixed, _ = split_dirichlet(body, dirichlet)
@@ -314,8 +318,7 @@ def track_with(
         if not np.isfinite(outcome.epsilon) or outcome.state is None:
             raise SchemaError(
                 f"frame {n} (time={float(phase['time'][n])!r} ms) has no valid phase at any "
-                "constraint point of the body (all-zero, fully masked or out-of-view images); "
-                f"drop the frame (ds.drop_isel(time={n})) or fix its images"
+                f"constraint point of the body: {explain_missing_data(phase, constraint.points, n)}"
             )
         U[n] = outcome.u
         eps[n] = outcome.epsilon

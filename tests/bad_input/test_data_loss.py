@@ -143,3 +143,14 @@ def test_eager_load_of_a_huge_declared_archive_is_refused_before_allocation(
     lazy = open_dataset(path, chunks={})  # lazily it opens, and one value can be read
     assert float(lazy.a[0]) == 1.0
     lazy.close()
+
+
+def test_local_cluster_listens_on_loopback_only(monkeypatch: pytest.MonkeyPatch) -> None:
+    distributed = pytest.importorskip("distributed")
+    from harpx.batch import local_cluster
+
+    seen: dict[str, object] = {}
+    monkeypatch.setattr(distributed, "LocalCluster", lambda **kwargs: seen.update(kwargs))
+    local_cluster(1)  # the arguments it starts the cluster with, without starting one
+    assert seen["host"] == "127.0.0.1"
+    assert seen["dashboard_address"] == "127.0.0.1:0"  # was ":0": every interface

@@ -26,3 +26,50 @@ def test_grid_in_metres_labelled_mm_is_named_not_a_radius_hint() -> None:
 def test_directory_passed_to_open_dataset_is_named(tmp_path: Path) -> None:
     with pytest.raises(ArchiveError, match=r"cannot open '.*': it is a directory; pass one \.nc"):
         open_dataset(tmp_path)
+
+
+def _track(ds) -> None:
+    from harpx.mechanics.body import Body
+    from harpx.mechanics.materials import NeoHookean
+    from harpx.mechanics.mesh import box
+    from harpx.tracking.track import track
+
+    body = Body(box((4.0, 4.0, 2.0), (1, 1, 1), origin=(4.0, 4.0, 1.0)), NeoHookean(1, 120))
+    track(ds, body, progress=False)
+
+
+def test_swapped_tag_directions_are_named() -> None:
+    from tests.test_schema import make_phase
+
+    ds = make_phase()
+    swapped = ds.tag_direction.values[::-1]
+    ds = ds.assign_coords(tag_direction=(("tag", "axis"), swapped, ds.tag_direction.attrs))
+    with pytest.raises(SchemaError, match=r"tag 'x' has tag_direction \[0.0, 1.0, 0.0\] but its "):
+        _track(ds)  # before: tracked without a word
+
+
+def test_all_false_mask_is_named_not_an_overlap_hint() -> None:
+    from tests.test_schema import make_phase
+
+    ds = make_phase()
+    ds["mask"] = ds["mask"] & False
+    with pytest.raises(SchemaError, match=r"'mask' of tag 'x' is all False"):
+        _track(ds)
+
+
+def test_all_zero_frame_0_is_named_not_an_overlap_hint() -> None:
+    from tests.test_schema import make_phase
+
+    ds = make_phase()
+    ds["magnitude"] = ds["magnitude"] * 0.0
+    with pytest.raises(SchemaError, match=r"frame 0 of tag 'x' is all zero \(magnitude max 0\)"):
+        _track(ds)
+
+
+def test_points_outside_the_field_of_view_are_named_with_both_extents() -> None:
+    from harpx.imaging.coverage import explain_missing_data
+    from tests.test_schema import make_phase
+
+    text = explain_missing_data(make_phase(), [[500.0, 5.0, 2.0]])
+    assert text.startswith("no point lies inside the field of view (x, y, z from [0.0, 0.0,")
+    assert "the points span [500.0, 5.0, 2.0]" in text

@@ -44,3 +44,22 @@ def test_nan_tag_frequency_is_named_as_a_number() -> None:
     ds = ds.assign_coords(tag_frequency=("tag", [np.nan, 0.125], ds.tag_frequency.attrs))
     with pytest.raises(SchemaError, match=r"tag_frequency of tag 'x' is nan; expected a positive"):
         validate(ds)
+
+
+@pytest.mark.parametrize("order", [1, 3], ids=["linear", "cubic"])
+def test_one_nan_block_of_a_lazy_phase_leaves_the_rest_valid(order: int) -> None:
+    # before: the 99th-percentile magnitude floor became NaN and every point was invalid
+    from harpx.imaging.sample import PhaseSampler
+    from tests.test_schema import make_phase
+
+    ds = make_phase()
+    for name in ("phase", "magnitude"):
+        values = ds[name].values.copy()
+        values[:, :, :, :2, :2] = np.nan  # a 2 x 2 voxel corner of every slice (6 % of it)
+        ds[name] = ds[name].copy(data=values)
+    ds = ds.chunk({"time": 1})  # lazily loaded, as open_dataset(path, chunks={}) gives it
+    sampler = PhaseSampler(ds, 0, order=order)
+    far = np.array([[9.0, 9.0, 2.0], [13.0, 5.0, 2.0]])  # x, y, z mm, away from the block
+    near = np.array([[1.0, 1.0, 2.0]])  # inside the NaN block
+    _, _, valid = sampler.sample(np.vstack([far, near]))
+    assert valid.tolist() == [True, True, False]

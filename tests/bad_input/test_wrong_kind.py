@@ -88,3 +88,11 @@ def test_object_tag_labels_are_named_and_earlier_problems_kept() -> None:
         validate(ds)
     assert info.value.problems[0].startswith("dataset attribute 'sequence' is 'GRE'")
     assert len(info.value.problems) >= 2, info.value.problems
+
+
+def test_track_many_with_one_path_string_is_named_not_iterated(tmp_path) -> None:
+    from harpx.batch import track_many
+
+    with pytest.raises(TypeError, match=r"got the single path 's0.nc'.*pass a list: \['s0.nc'\]"):
+        track_many("s0.nc", lambda ds: None, output_dir=tmp_path)  # type: ignore[arg-type]
+    assert list(tmp_path.iterdir()) == []
