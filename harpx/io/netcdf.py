@@ -51,7 +51,7 @@ import stat
 import tempfile
 from collections.abc import Hashable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import xarray as xr
@@ -82,7 +82,7 @@ _ELEMENT_SHAPES: dict[str, tuple[int, int]] = {
     "hex20": (2, 8),
     "hex27": (2, 8),
 }
-_ENGINE = "netcdf4"
+_ENGINE: Literal["netcdf4"] = "netcdf4"
 
 
 def to_netcdf(ds: xr.Dataset, path: PathLike) -> Path:
