@@ -241,7 +241,7 @@ def test_a_contracting_ring_made_the_synth_way_loses_no_points() -> None:
         warnings.simplefilter("error", HarpxWarning)
         out = track_harp(ds, points=ds)
     assert out.attrs["points_lost"] == 0
-    # the tissue voxels, less a few edge voxels whose nearest refined-grid body voxel is < 0.5
+    # the tissue voxels, less a few edge voxels where the (linearly) refined body is < 0.5
     # (measured 490 of 504)
     assert out.sizes["node"] > 0.95 * int((ds["body"].values >= 0.5).sum()), out.sizes["node"]
     assert np.isfinite(out["displacement"].values).all()
