@@ -90,33 +90,6 @@ def split_dirichlet(body: Any, dirichlet: Sequence[Any]) -> tuple[np.ndarray, Fl
     return dofs, values
 
 
-#: The line search acts when the energy slope at the full step is above this fraction of
-#: the (negative) slope at its start: the step has overshot the minimum along it.
-OVERSHOOT = 0.2
-#: Increments that do not shrink below this fraction of the last one are damped.
-CONTRACTION = 0.8
-#: Smallest fraction of a step the line search keeps.
-MIN_SHRINK = 0.1
-
-
-def _residual(
-    body: Any,
-    constraint: PhaseConstraint,
-    u: FloatArray,
-    internal_r: FloatArray,
-    state: ConstraintState,
-    offset: FloatArray | None,
-    terms: Sequence[Any],
-) -> FloatArray:
-    """Total residual at ``u`` from its internal force and constraint state (no tangent)."""
-    R = internal_r + constraint.force(state)
-    if offset is not None:
-        R = R + offset
-    for term in terms:
-        R = R + term.residual_tangent(body, u, 1.0)[0]
-    return R
-
-
 def _admissible_step(
     body: Any,
     constraint: PhaseConstraint,
@@ -223,8 +196,6 @@ def equilibrate(
     if max_step is None:
         max_step = 0.5 * np.pi / constraint.max_wavenumber
     free = np.setdiff1d(np.arange(body.ndof), held) if held.size else None
-    movable = free if free is not None else slice(None)
-    damping = 1.0
     tic = time.perf_counter()
     result = EquilibriumResult(u, constraint.state(u), 0)
     clock.sampling += time.perf_counter() - tic
@@ -261,12 +232,6 @@ def equilibrate(
         tic = time.perf_counter()
         largest = float(np.abs(du).max())
         alpha = min(1.0, max_step / largest) if largest > 0 else 1.0
-        history = result.step_norms
-        if len(history) >= 2 and history[-1] > CONTRACTION * history[-2]:
-            # the increments stopped shrinking: the iteration bounces between the facets of
-            # the piecewise-linear phase interpolant; damp it so that it contracts
-            damping *= 0.5
-        alpha *= damping
         trial, internal_trial, alpha = _admissible_step(
             body, constraint, u, du, alpha, seen, max_halvings, iteration, result.step_norms
         )
@@ -274,27 +239,6 @@ def equilibrate(
         tic = time.perf_counter()
         state_trial = constraint.state(trial)
         clock.sampling += time.perf_counter() - tic
-        # energy-slope line search: Gauss-Newton on the wrapped, piecewise-smooth phase
-        # overshoots and can cycle; where the slope along du has changed sign, take the
-        # secant estimate of its zero instead (one more evaluation, only then)
-        tic = time.perf_counter()
-        slope0 = float(du[movable] @ R[movable])
-        r_trial = _residual(body, constraint, trial, internal_trial.r, state_trial, offset, terms)
-        slope1 = float(du[movable] @ r_trial[movable])
-        clock.assembly += time.perf_counter() - tic
-        if slope0 < 0.0 < slope1 and slope1 > OVERSHOOT * -slope0:
-            shrink = max(MIN_SHRINK, slope0 / (slope0 - slope1))
-            tic = time.perf_counter()
-            retry = u + alpha * shrink * du
-            if seen is not None:
-                retry = seen.remove_unseen(retry)
-            internal_retry = internal_forces(body, retry, pressure_stiffness=False)
-            clock.assembly += time.perf_counter() - tic
-            if internal_retry.r is not None:
-                tic = time.perf_counter()
-                trial, internal_trial, alpha = retry, internal_retry, alpha * shrink
-                state_trial = constraint.state(trial)
-                clock.sampling += time.perf_counter() - tic
         u = trial
         internal = internal_trial
         step = float(np.abs(alpha * du).max())
