@@ -90,6 +90,12 @@ def split_dirichlet(body: Any, dirichlet: Sequence[Any]) -> tuple[np.ndarray, Fl
     return dofs, values
 
 
+#: Iterations after which a cycling Gauss-Newton iteration is damped.
+DAMP_AFTER = 10
+#: Increments that do not shrink below this fraction of the last one count as cycling.
+CONTRACTION = 0.8
+
+
 def _admissible_step(
     body: Any,
     constraint: PhaseConstraint,
@@ -196,6 +202,7 @@ def equilibrate(
     if max_step is None:
         max_step = 0.5 * np.pi / constraint.max_wavenumber
     free = np.setdiff1d(np.arange(body.ndof), held) if held.size else None
+    damping = 1.0
     tic = time.perf_counter()
     result = EquilibriumResult(u, constraint.state(u), 0)
     clock.sampling += time.perf_counter() - tic
@@ -232,6 +239,14 @@ def equilibrate(
         tic = time.perf_counter()
         largest = float(np.abs(du).max())
         alpha = min(1.0, max_step / largest) if largest > 0 else 1.0
+        history = result.step_norms
+        if iteration > DAMP_AFTER and history[-1] > CONTRACTION * history[-2]:
+            # still not converged and the increments stopped shrinking: the iteration cycles
+            # between the facets of the piecewise-linear phase interpolant; damp it so that it
+            # contracts (only late: early large undamped steps are what carry a point past a
+            # wrap into the right tag basin)
+            damping *= 0.5
+        alpha *= damping
         trial, internal_trial, alpha = _admissible_step(
             body, constraint, u, du, alpha, seen, max_halvings, iteration, result.step_norms
         )
