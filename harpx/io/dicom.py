@@ -178,7 +178,7 @@ def _group_value(header: Any, per_frame: Any, sequence: str, keyword: str) -> An
 
 def _images_of(header: Any, path: Path) -> list[_Image]:
     """Split a DICOM header into per-image records (one per frame of a multi-frame file)."""
-    common = {
+    common: dict[str, Any] = {
         "path": path,
         "series_uid": str(header.get("SeriesInstanceUID", "")),
         "description": str(header.get("SeriesDescription", "")),

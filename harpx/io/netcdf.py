@@ -258,7 +258,7 @@ def remove_stale_temporaries(directory: Path, name: str) -> list[Path]:
     """
     pattern = re.compile(rf"^\.{re.escape(name)}\.harpx-(?P<host>.+)-(?P<pid>\d+)-[^/]*\.tmp$")
     host = socket.gethostname()
-    removed = []
+    removed: list[Path] = []
     try:
         entries = list(directory.iterdir())
     except OSError:
