@@ -129,6 +129,9 @@ def _cubic_taps(
     core = (slice(None), *(slice(int(e), int(e) + n) for n, e in zip(shape, edge, strict=True)))
     # with float32 phase and carrier, cos/sin run in float32 (SIMD, about 3x faster)
     _write_demodulated(phase, magnitude, carrier, squeeze, lambda c: work[core][c])
+    # a NaN voxel would spread over the whole slice through the spline prefilter; as 0 it
+    # falls below the magnitude floor and stays invalid where it is
+    np.nan_to_num(work, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
     for a in range(d):  # odd reflection, one axis after the other (as np.pad does)
         e, n = int(edge[a]), shape[a]
         if e == 0:

@@ -23,6 +23,7 @@ from tqdm.auto import tqdm
 from harpx.errors import HarpxWarning, SchemaError
 from harpx.imaging.coverage import explain_missing_data, phase_direction_mismatch
 from harpx.mechanics.assembly import internal_forces
+from harpx.mechanics.body import check_fits_image
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.schema import validate
 from harpx.tracking.augmented import track_frame_augmented
@@ -271,6 +272,7 @@ def track_with(
     swapped = phase_direction_mismatch(phase)
     if swapped:
         raise SchemaError(swapped)
+    check_fits_image(body, phase)  # units and size, before anything large is allocated
     constraint = PhaseConstraint(body, phase, intorder=settings.intorder)
     _check_data(phase, constraint)
     fixed, _ = split_dirichlet(body, dirichlet)

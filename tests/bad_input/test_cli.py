@@ -42,7 +42,7 @@ def test_report_of_a_tagged_archive_is_an_error(
 ) -> None:
     source = to_netcdf(make_tagged(), tmp_path / "a.nc")
     assert main(["report", str(source)]) == 1
-    _one_error_line(capsys, "report", "is a 'tagged/1' archive, not 'tracked/1'")
+    _one_error_line(capsys, "report", "is a 'tagged/1' archive; report needs a 'tracked/1' archive")
 
 
 @pytest.mark.parametrize(

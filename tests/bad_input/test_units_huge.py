@@ -76,4 +76,4 @@ def test_cohort_completeness_check_streams_a_huge_archive(tmp_path) -> None:
         nc.createVariable("a", "f8", ("n",), zlib=True, chunksizes=(1 << 20,))
         nc.harpx_schema = "tracked/1"
         nc.source_sha256 = "other"
-    assert _is_complete(path, "abc") is False  # digest differs: decided from attributes
+    assert _is_complete(path, "abc", "settings") is False  # digest differs: decided from attributes
