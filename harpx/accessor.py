@@ -132,7 +132,7 @@ class HarpAccessor:
         multiplier_tolerance: float = 0.1,
         max_updates: int = 10,
         predictor: Predictor = "linear",
-        regularization: Regularization = "increment",
+        regularization: Regularization = "total",
         tolerance: float = 0.01,
         max_iterations: int = 20,
         dirichlet: Sequence[Any] = (),

@@ -167,7 +167,7 @@ def track(
     multiplier_tolerance: float = 0.1,
     max_updates: int = 10,
     predictor: Predictor = "linear",
-    regularization: Regularization = "increment",
+    regularization: Regularization = "total",
     tolerance: float = 0.01,
     max_iterations: int = 20,
     dirichlet: Sequence[Any] = (),
@@ -190,8 +190,7 @@ multiplier_tolerance, max_updates, predictor, regularization, tolerance, max_ite
 intorder, linear_solver, progress
         The tracking settings, documented (with units and defaults) on
         :class:`harpx.tracking.settings.TrackingSettings`. By default the target ε is 1.15
-        times the noise floor the images allow in each frame, and the model regularises the
-        frame-to-frame increment.
+        times the noise floor the images allow in each frame (never below 0.05 rad).
     dirichlet : sequence, optional
         Prescribed displacements (:class:`harpx.mechanics.loads.Fixed`, ``Prescribed``).
     terms : sequence, optional
