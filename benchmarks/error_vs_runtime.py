@@ -272,8 +272,8 @@ def write(results: list[dict], size: str, scene: str = "phantom") -> None:
         writer = csv.DictWriter(fh, fieldnames=keys)
         writer.writeheader()
         writer.writerows(results)
-    header = ["method", "mean ± sd (mm)", "p95 (mm)", "max (mm)", "wall time (s)",
-              "Gauss–Newton it.", "λ max"]  # fmt: skip
+    header = ["method", "mean ± sd (mm)", "p95 (mm)", "max (mm)", "coverage",
+              "wall time (s)", "Gauss–Newton it.", "λ max"]  # fmt: skip
     sa = any("inplane_mean" in r for r in results)
     if sa:
         header += ["in-plane mean / p95 (mm)", "max drift of mean u_z (mm)"]
@@ -281,7 +281,7 @@ def write(results: list[dict], size: str, scene: str = "phantom") -> None:
     for r in results:
         cells = [
             r["method"], f"{r['mean']:.3f} ± {r['sd']:.3f}", f"{r['p95']:.3f}",
-            f"{r['max']:.2f}", f"{r['seconds']:.1f}", str(r.get("iterations", "")),
+            f"{r['max']:.2f}", f"{r['coverage']:.3f}", f"{r['seconds']:.1f}", str(r.get("iterations", "")),
             str(r.get("penalty_max", "")),
         ]  # fmt: skip
         if sa:
