@@ -267,7 +267,7 @@ def test_failing_subjects_are_reported_after_the_others_are_written(
     err = info.value
     assert isinstance(err, HarpxError)
     message = str(err)
-    assert "far.nc': SchemaError: no constraint point" in message
+    assert "far.nc': SchemaError: mesh nodes" in message
     assert "missing.nc': ArchiveError: cannot read input" in message
     assert set(err.failures) == {far, missing}
     assert err.outputs == [output_path(p, tmp_path / "out") for p in inputs]

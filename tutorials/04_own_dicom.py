@@ -33,9 +33,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
@@ -155,7 +152,7 @@ bullseye(strain, ax=axes[0], label="peak Ecc (tracked)")
 bullseye(ecc_error, ax=axes[1], cmap="viridis", vmin=0, label="|error| vs truth")
 fig.tight_layout()
 fig.savefig("own_dicom_bullseye.png")
-plt.close(fig)
+plt.show()
 
 fig, ax = plt.subplots(figsize=(5, 3.5))
 curves = strain.segment_strain.sel(component="circumferential")
@@ -167,4 +164,4 @@ ax.set(xlabel="time (ms)", ylabel="Ecc (Green–Lagrange)")
 ax.legend(fontsize=7)
 fig.tight_layout()
 fig.savefig("own_dicom_ecc_curves.png")
-plt.close(fig)
+plt.show()

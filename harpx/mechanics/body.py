@@ -27,7 +27,7 @@ from scipy import sparse
 from skfem.io.meshio import HEX_MAPPING
 
 from harpx._typing import FloatArray, IntArray
-from harpx.errors import CoincidentNodesWarning
+from harpx.errors import CoincidentNodesWarning, SchemaError
 from harpx.mechanics import kinematics
 from harpx.mechanics.mesh import MeshSpec, check_nodes, check_unused_nodes, coincident_nodes
 
@@ -141,10 +141,10 @@ def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> 
     low, high, step = [], [], []
     for axis in ("x", "y", "z"):
         if axis not in grid.coords:
-            raise ValueError(f"grid has no coordinate {axis!r} (voxel centres in mm)")
+            raise SchemaError(f"grid has no coordinate {axis!r} (voxel centres in mm)")
         values = np.asarray(grid[axis].values, dtype=np.float64)
         if values.size == 0 or not np.all(np.isfinite(values)):
-            raise ValueError(f"grid coordinate {axis!r} is empty or not finite")
+            raise SchemaError(f"grid coordinate {axis!r} is empty or not finite")
         d = float((values[-1] - values[0]) / (values.size - 1)) if values.size > 1 else 0.0
         low.append(values[0] - d / 2)
         high.append(values[-1] + d / 2)
@@ -171,14 +171,14 @@ def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> 
     far = np.flatnonzero(outside > fov)
     if far.size:
         shown = ", ".join(str(int(i)) for i in far[:10]) + (", ..." if far.size > 10 else "")
-        raise ValueError(
+        raise SchemaError(
             f"mesh nodes [{shown}] lie up to {outside.max():.4g} mm outside the image field "
             f"of view ({lo.round(3).tolist()} to {hi.round(3).tolist()} mm, x/y/z); the mesh "
             f"spans {size:.4g} mm, the field of view {fov:.4g} mm"
             f"{hint if 2 * far.size > len(nodes) else '; move or fix those nodes'}"
         )
     if size < voxel:
-        raise ValueError(
+        raise SchemaError(
             f"the mesh spans {size:.4g} mm but one acquired voxel is {voxel:.4g} mm{hint}"
         )
     corners = nodes[body.cells[:, :8]]  # (ncell, 8, 3)
@@ -189,7 +189,7 @@ def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> 
     points = count * body.ncell
     if points > max_points:
         gib = points * (_BYTES_PER_POINT + _BYTES_PER_POINT_BASIS * body.nbasis) / 2**30
-        raise ValueError(
+        raise SchemaError(
             f"tracking this mesh would place {points:.3g} constraint points (~{gib:.3g} GiB; "
             f"limit max_points={max_points:.3g}): its longest cells are "
             f"{count ** (1 / 3):.3g} voxels ({voxel:.4g} mm) across{hint or ''}; refine the "
