@@ -320,6 +320,12 @@ def shorten_mantissa(values: np.ndarray, bits: int) -> np.ndarray:
     """
     if not 1 <= bits <= 52:
         raise ValueError(f"bits={bits!r} must be between 1 and 52")
+    if np.asarray(values).dtype == np.float32:  # float32 (phase() output) has 23 bits
+        data32 = np.ascontiguousarray(values, dtype=np.float32)
+        keep = min(bits, 23)
+        mask32 = np.uint32(~((1 << (23 - keep)) - 1) & 0xFFFFFFFF)
+        out32 = (data32.view(np.uint32) & mask32).view(np.float32)
+        return np.where(np.isfinite(data32), out32, data32)
     data = np.ascontiguousarray(values, dtype=np.float64)
     mask = np.uint64(~((1 << (52 - bits)) - 1) & 0xFFFFFFFFFFFFFFFF)
     out = (data.view(np.uint64) & mask).view(np.float64)
@@ -341,7 +347,7 @@ def shorten(ds: xr.Dataset) -> xr.Dataset:
     """
     out = ds.copy()
     for name, bits in MANTISSA_BITS.items():
-        if name in out.data_vars and out[name].dtype == np.float64:
+        if name in out.data_vars and out[name].dtype in (np.float64, np.float32):
             out[name] = out[name].copy(data=shorten_mantissa(out[name].values, bits))
     return out
 
