@@ -104,7 +104,7 @@ def _warn_unseen(constraint: PhaseConstraint) -> None:
     if seen.body_rank == 3:
         return
     tags = ", ".join(
-        f"{label} {_vector(d)}"
+        f"{label} ({d[0]:.2g}, {d[1]:.2g}, {d[2]:.2g})"
         for label, d in zip(constraint.phase["tag"].values, constraint.directions, strict=True)
     )
     unseen = " and ".join(_vector(a) for a in seen.unseen_axes)
