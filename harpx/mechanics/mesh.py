@@ -517,8 +517,10 @@ def tetrahedralize(spec: MeshSpec) -> MeshSpec:
 
     Each hexahedron becomes six tetrahedra (Kuhn split around one main diagonal) when that
     is conforming across all shared faces (structured, consistently oriented grids such as
-    the builders' boxes, cylinders and tubes); otherwise 24 tetrahedra around a new point
-    at the centre of every cell and face (always conforming). Regions, fibres (per cell)
+    the builders' boxes and tubes); otherwise twelve: every face is split along the
+    diagonal through its lowest-numbered vertex (the same choice from both sides, so always
+    conforming) and each triangle is joined to a new point at the cell centre (e.g. the
+    O-grid core of :func:`cylinder` or the ventricle's apex). Regions, fibres (per cell)
     and named boundaries carry over.
 
     Parameters
@@ -554,21 +556,18 @@ def tetrahedralize(spec: MeshSpec) -> MeshSpec:
                             tets[:, [0, 1, 2]]])  # fmt: skip
     _, counts = np.unique(_keys(faces, nv), return_counts=True)
     n_boundary_quads = len(mesh.boundary_facets())
-    centre_of: dict[int, int] = {}
-    if np.count_nonzero(counts == 1) != 2 * n_boundary_quads or np.any(counts > 2):
-        quads = cells[:, _HEX_FACES]  # (nhex, 6, 4)
-        qkeys = np.sort(quads, axis=-1)
-        uq, qinv = np.unique(qkeys.reshape(-1, 4), axis=0, return_inverse=True)
-        face_centre = nv + n_hex + qinv.reshape(n_hex, 6)  # point ids
-        points = np.concatenate(
-            [points, points[cells].mean(axis=1), points[uq].mean(axis=1)], axis=0
-        )
-        cc = np.broadcast_to((nv + np.arange(n_hex))[:, None, None], (n_hex, 6, 4))
-        fc = np.broadcast_to(face_centre[:, :, None], (n_hex, 6, 4))
-        tets = np.stack([cc, fc, quads, np.roll(quads, -1, axis=2)], axis=-1).reshape(-1, 4)
-        parent = np.repeat(np.arange(n_hex), 24)
-        qk = (uq[:, 0] * nv + uq[:, 1]) * nv * nv + uq[:, 2] * nv + uq[:, 3]
-        centre_of = dict(zip(qk.tolist(), (nv + n_hex + np.arange(len(uq))).tolist(), strict=True))
+    centred = np.count_nonzero(counts == 1) != 2 * n_boundary_quads or np.any(counts > 2)
+    if centred:
+        # every face split along the diagonal through its lowest-numbered vertex (the same
+        # choice from both sides), each triangle joined to a new point at the cell centre
+        quads = cells[:, _HEX_FACES]  # (nhex, 6, 4), cyclic
+        first = np.argmin(quads, axis=2)
+        q = np.take_along_axis(quads, (first[..., None] + np.arange(4)) % 4, axis=2)
+        tri = np.stack([q[..., [0, 1, 2]], q[..., [0, 2, 3]]], axis=2)  # (nhex, 6, 2, 3)
+        cc = np.broadcast_to((nv + np.arange(n_hex))[:, None, None, None], (n_hex, 6, 2, 1))
+        tets = np.concatenate([cc, tri], axis=-1).reshape(-1, 4)
+        points = np.concatenate([points, points[cells].mean(axis=1)], axis=0)
+        parent = np.repeat(np.arange(n_hex), 12)
     tmesh = skfem.MeshTet1(np.ascontiguousarray(points.T), np.ascontiguousarray(tets.T))
     from harpx.mechanics.body import _orient_tets  # local: body imports this module
 
@@ -579,16 +578,8 @@ def tetrahedralize(spec: MeshSpec) -> MeshSpec:
     boundaries = {}
     for name, ids in spec.boundaries.items():
         quad = np.sort(mesh.facets[:, ids].T.astype(np.int64), axis=1)  # (nq, 4)
-        if centre_of:
-            qk = (quad[:, 0] * nv + quad[:, 1]) * nv * nv + quad[:, 2] * nv + quad[:, 3]
-            c = np.array([centre_of[k] for k in qk.tolist()], dtype=np.int64)
-            tri = np.concatenate(
-                [np.stack([np.full(len(c), 0), quad[:, i], quad[:, j]], 1) for i, j in
-                 ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))]
-            )  # fmt: skip
-            tri[:, 0] = np.tile(c, 6)
-        else:
-            tri = np.concatenate([np.delete(quad, i, axis=1) for i in range(4)])
+        # the triangles of a boundary quad are the facets with three of its vertices
+        tri = np.concatenate([np.delete(quad, i, axis=1) for i in range(4)])
         boundaries[name] = np.sort(bfacets[np.isin(bkeys, _keys(tri, npt))]).astype(np.int64)
     npc = len(tets) // n_hex
     regions = {k: (npc * np.asarray(v)[:, None] + np.arange(npc)).ravel() for k, v in

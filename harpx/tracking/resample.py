@@ -1,10 +1,11 @@
 """Evaluate a finite-element displacement at arbitrary reference points (e.g. voxel centres).
 
-Points are located in the hexahedral mesh without Python loops over cells: the ``k`` cells
-with the nearest centroids are candidates, the trilinear geometry map of each candidate is
-inverted by Newton's method for all (point, candidate) pairs at once, and the first candidate
-whose reference coordinates fall in the unit cube wins. Points in no cell are reported as
-outside (NaN displacement), never extrapolated.
+Points are located in the hexahedral or tetrahedral mesh without Python loops over cells: the
+``k`` cells with the nearest centroids are candidates, the geometry map of each candidate
+(trilinear, linear or, for curved ``MeshTet2`` cells, quadratic) is inverted by Newton's
+method for all (point, candidate) pairs at once, and the first candidate whose reference
+coordinates fall in the reference cell (unit cube or unit tetrahedron) wins. Points in no
+cell are reported as outside (NaN displacement), never extrapolated.
 """
 
 from __future__ import annotations
@@ -18,6 +19,15 @@ from scipy.spatial import cKDTree
 from harpx._typing import FloatArray, IntArray
 
 _GEOMETRY = skfem.ElementHex1()
+
+
+def _geometry(mesh: Any) -> tuple[Any, FloatArray, bool]:
+    """Geometry element, its nodes per cell (ncell, nb, 3) and whether cells are simplices."""
+    if isinstance(mesh, skfem.MeshTet2):
+        return skfem.ElementTetP2(), mesh.doflocs.T[mesh.dofs.element_dofs.T], True
+    if isinstance(mesh, skfem.MeshTet1):
+        return skfem.ElementTetP1(), mesh.p.T[mesh.t.T], True
+    return _GEOMETRY, mesh.p.T[mesh.t.T], False
 
 
 def _shape_values(element: Any, xi: FloatArray, nbasis: int) -> tuple[FloatArray, FloatArray]:
@@ -38,21 +48,23 @@ def locate(
 
     Parameters
     ----------
-    mesh : skfem.MeshHex1
-        Hexahedral mesh (trilinear geometry), mm.
+    mesh : skfem.MeshHex1, skfem.MeshTet1 or skfem.MeshTet2
+        Hexahedral (trilinear) or tetrahedral (linear or quadratic) mesh, mm.
     points : ndarray, shape (n, 3)
         Physical points, mm.
     candidates : int, default 8
-        Nearest cells (by centroid) tried per point.
+        Nearest cells (by centroid) tried per point; four times as many for tetrahedra
+        (about 24 tetrahedra share a vertex where 8 hexahedra do).
     tol : float, default 1e-7
-        Tolerance on the reference coordinates' unit-cube bounds (dimensionless).
+        Tolerance on the reference cell's bounds (dimensionless).
 
     Returns
     -------
     cells : ndarray of int, shape (n,)
         Containing cell, or -1 where the point lies in no cell.
     xi : ndarray, shape (n, 3)
-        Reference coordinates in [0, 1]³ (meaningless where ``cells == -1``).
+        Reference coordinates in [0, 1]³ or the unit tetrahedron (meaningless where
+        ``cells == -1``).
     """
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     n = points.shape[0]
@@ -60,10 +72,10 @@ def locate(
     xi_out = np.zeros((n, 3))
     if n == 0:
         return cells_out, xi_out
-    vertices = mesh.p.T[mesh.t.T]  # (ncell, 8, 3)
+    element, vertices, simplex = _geometry(mesh)  # (ncell, nb, 3) geometry nodes
     centroids = vertices.mean(axis=1)
     radius = np.linalg.norm(vertices - centroids[:, None], axis=-1).max()
-    k = min(candidates, centroids.shape[0])
+    k = min(candidates * (4 if simplex else 1), centroids.shape[0])
     dist, cand = cKDTree(centroids).query(points, k=k)
     dist = dist.reshape(n, k)
     cand = cand.reshape(n, k)
@@ -72,20 +84,30 @@ def locate(
         if unresolved.size == 0:
             break
         cell = cand[unresolved, rank]
-        xi = _invert_trilinear(vertices[cell], points[unresolved])
-        inside = np.all((xi >= -tol) & (xi <= 1 + tol), axis=1)
+        xi = _invert_map(element, vertices[cell], points[unresolved], simplex)
+        if simplex:
+            inside = np.all(xi >= -tol, axis=1) & (xi.sum(axis=1) <= 1 + tol)
+        else:
+            inside = np.all((xi >= -tol) & (xi <= 1 + tol), axis=1)
         cells_out[unresolved[inside]] = cell[inside]
         xi_out[unresolved[inside]] = xi[inside]
         unresolved = unresolved[~inside]
-    return cells_out, np.clip(xi_out, 0.0, 1.0)
+    xi_out = np.clip(xi_out, 0.0, 1.0)
+    if simplex:  # onto the unit tetrahedron
+        xi_out /= np.maximum(1.0, xi_out.sum(axis=1))[:, None]
+    return cells_out, xi_out
 
 
-def _invert_trilinear(verts: FloatArray, pts: FloatArray, iterations: int = 25) -> FloatArray:
-    """Reference coordinates of ``pts`` (m, 3) in the trilinear cells ``verts`` (m, 8, 3)."""
-    xi = np.full((pts.shape[0], 3), 0.5)
+def _invert_map(
+    element: Any, verts: FloatArray, pts: FloatArray, simplex: bool, iterations: int = 25
+) -> FloatArray:
+    """Reference coordinates of ``pts`` (m, 3) in the cells with geometry nodes ``verts``
+    (m, nb, 3) of ``element``."""
+    xi = np.full((pts.shape[0], 3), 0.25 if simplex else 0.5)
+    nb = verts.shape[1]
     active = np.arange(pts.shape[0])
     for _ in range(iterations):  # Newton, only on the pairs that have not converged
-        vals, grads = _shape_values(_GEOMETRY, xi[active].T, 8)
+        vals, grads = _shape_values(element, xi[active].T, nb)
         x = np.einsum("ma,mai->mi", vals, verts[active])
         jac = np.einsum("mai,maj->mij", verts[active], grads)  # dx_i/dxi_j
         step = np.linalg.solve(jac, (pts[active] - x)[..., None])[..., 0]
