@@ -657,6 +657,15 @@ class Body:
         """``J = det F`` at every quadrature point, shape (ncell, nqp)."""
         return np.linalg.det(self.deformation_gradient(u))
 
+    def displacement_at(self, u: ArrayLike, points: ArrayLike) -> FloatArray:
+        """Displacement (mm) at arbitrary reference points (mm), NaN outside the mesh.
+
+        See :func:`harpx.mechanics.locate.displacement_at`.
+        """
+        from harpx.mechanics.locate import displacement_at
+
+        return displacement_at(self, u, points)
+
     def _cell_average(self, q: FloatArray) -> FloatArray:
         w = self.dV / self.cell_volume[:, None]
         return np.einsum("eq,eq...->e...", w, q)

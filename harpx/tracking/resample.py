@@ -1,11 +1,6 @@
 """Evaluate a finite-element displacement at arbitrary reference points (e.g. voxel centres).
 
-Points are located in the hexahedral or tetrahedral mesh without Python loops over cells: the
-``k`` cells with the nearest centroids are candidates, the geometry map of each candidate
-(trilinear, linear or, for curved ``MeshTet2`` cells, quadratic) is inverted by Newton's
-method for all (point, candidate) pairs at once, and the first candidate whose reference
-coordinates fall in the reference cell (unit cube or unit tetrahedron) wins. Points in no
-cell are reported as outside (NaN displacement), never extrapolated.
+Point location lives in :mod:`harpx.mechanics.locate` (hexahedra and tetrahedra).
 """
 
 from __future__ import annotations
@@ -13,109 +8,11 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import skfem
-from scipy.spatial import cKDTree
 
-from harpx._typing import FloatArray, IntArray
+from harpx._typing import FloatArray
+from harpx.mechanics.locate import displacement_at, locate
 
-_GEOMETRY = skfem.ElementHex1()
-
-
-def _geometry(mesh: Any) -> tuple[Any, FloatArray, bool]:
-    """Geometry element, its nodes per cell (ncell, nb, 3) and whether cells are simplices."""
-    if isinstance(mesh, skfem.MeshTet2):
-        return skfem.ElementTetP2(), mesh.doflocs.T[mesh.dofs.element_dofs.T], True
-    if isinstance(mesh, skfem.MeshTet1):
-        return skfem.ElementTetP1(), mesh.p.T[mesh.t.T], True
-    return _GEOMETRY, mesh.p.T[mesh.t.T], False
-
-
-def _shape_values(element: Any, xi: FloatArray, nbasis: int) -> tuple[FloatArray, FloatArray]:
-    """Values (n, nb) and reference gradients (n, nb, 3) of an element's basis at ``xi`` (3, n)."""
-    vals = np.empty((xi.shape[1], nbasis))
-    grads = np.empty((xi.shape[1], nbasis, 3))
-    for a in range(nbasis):  # loop over the ≤ 20 basis functions, vectorised over points
-        phi, dphi = element.lbasis(xi, a)
-        vals[:, a] = phi
-        grads[:, a, :] = dphi.T
-    return vals, grads
-
-
-def locate(
-    mesh: skfem.MeshHex1, points: FloatArray, *, candidates: int = 8, tol: float = 1e-7
-) -> tuple[IntArray, FloatArray]:
-    """Find the cell and reference coordinates of each point.
-
-    Parameters
-    ----------
-    mesh : skfem.MeshHex1, skfem.MeshTet1 or skfem.MeshTet2
-        Hexahedral (trilinear) or tetrahedral (linear or quadratic) mesh, mm.
-    points : ndarray, shape (n, 3)
-        Physical points, mm.
-    candidates : int, default 8
-        Nearest cells (by centroid) tried per point; four times as many for tetrahedra
-        (about 24 tetrahedra share a vertex where 8 hexahedra do).
-    tol : float, default 1e-7
-        Tolerance on the reference cell's bounds (dimensionless).
-
-    Returns
-    -------
-    cells : ndarray of int, shape (n,)
-        Containing cell, or -1 where the point lies in no cell.
-    xi : ndarray, shape (n, 3)
-        Reference coordinates in [0, 1]³ or the unit tetrahedron (meaningless where
-        ``cells == -1``).
-    """
-    points = np.asarray(points, dtype=float).reshape(-1, 3)
-    n = points.shape[0]
-    cells_out = np.full(n, -1, dtype=np.int64)
-    xi_out = np.zeros((n, 3))
-    if n == 0:
-        return cells_out, xi_out
-    element, vertices, simplex = _geometry(mesh)  # (ncell, nb, 3) geometry nodes
-    centroids = vertices.mean(axis=1)
-    radius = np.linalg.norm(vertices - centroids[:, None], axis=-1).max()
-    k = min(candidates * (4 if simplex else 1), centroids.shape[0])
-    dist, cand = cKDTree(centroids).query(points, k=k)
-    dist = dist.reshape(n, k)
-    cand = cand.reshape(n, k)
-    unresolved = np.nonzero(dist[:, 0] <= radius * (1 + 1e-9))[0]
-    for rank in range(k):  # candidates in order of centroid distance; most points stop at 0
-        if unresolved.size == 0:
-            break
-        cell = cand[unresolved, rank]
-        xi = _invert_map(element, vertices[cell], points[unresolved], simplex)
-        if simplex:
-            inside = np.all(xi >= -tol, axis=1) & (xi.sum(axis=1) <= 1 + tol)
-        else:
-            inside = np.all((xi >= -tol) & (xi <= 1 + tol), axis=1)
-        cells_out[unresolved[inside]] = cell[inside]
-        xi_out[unresolved[inside]] = xi[inside]
-        unresolved = unresolved[~inside]
-    xi_out = np.clip(xi_out, 0.0, 1.0)
-    if simplex:  # onto the unit tetrahedron
-        xi_out /= np.maximum(1.0, xi_out.sum(axis=1))[:, None]
-    return cells_out, xi_out
-
-
-def _invert_map(
-    element: Any, verts: FloatArray, pts: FloatArray, simplex: bool, iterations: int = 25
-) -> FloatArray:
-    """Reference coordinates of ``pts`` (m, 3) in the cells with geometry nodes ``verts``
-    (m, nb, 3) of ``element``."""
-    xi = np.full((pts.shape[0], 3), 0.25 if simplex else 0.5)
-    nb = verts.shape[1]
-    active = np.arange(pts.shape[0])
-    for _ in range(iterations):  # Newton, only on the pairs that have not converged
-        vals, grads = _shape_values(element, xi[active].T, nb)
-        x = np.einsum("ma,mai->mi", vals, verts[active])
-        jac = np.einsum("mai,maj->mij", verts[active], grads)  # dx_i/dxi_j
-        step = np.linalg.solve(jac, (pts[active] - x)[..., None])[..., 0]
-        xi[active] = np.clip(xi[active] + step, -1.0, 2.0)
-        active = active[np.abs(step).max(axis=1) > 1e-12]
-        if active.size == 0:
-            break
-    return xi
+__all__ = ["interpolate_displacement", "locate"]
 
 
 def interpolate_displacement(
@@ -140,11 +37,5 @@ def interpolate_displacement(
         Points inside the mesh.
     """
     U = np.atleast_2d(np.asarray(displacements, dtype=float))
-    cells, xi = locate(body.mesh, points)
-    inside = cells >= 0
-    out = np.full((U.shape[0], points.shape[0], 3), np.nan)
-    if inside.any():
-        vals, _ = _shape_values(body._scalar_element, xi[inside].T, body.nbasis)
-        dofs = body.element_dofs[cells[inside]]  # (m, nb, 3)
-        out[:, inside] = np.einsum("ma,tmai->tmi", vals, U[:, dofs])
-    return out, inside
+    out = displacement_at(body, U, np.asarray(points, dtype=float).reshape(-1, 3))
+    return out, ~np.isnan(out[0, :, 0]) if out.shape[0] else np.zeros(out.shape[1], bool)

@@ -273,3 +273,49 @@ def test_fibers_as_a_function_of_position():
     # evaluated at the body's own quadrature points, normalised
     np.testing.assert_allclose(body.fibers_qp, f / np.linalg.norm(f, axis=-1, keepdims=True),
                                rtol=1e-14)  # fmt: skip
+
+
+# --------------------------------------------------------------- modeller's API (issue 16.6)
+def test_solve_ramps_activation_with_the_loads():
+    spec = box((4.0, 1.0, 1.0), (4, 1, 1))
+    fib = np.tile([1.0, 0.0, 0.0], (spec.mesh.nelements, 1))
+    body = Body(spec, GUC, fibers=fib, active=ActiveContraction(t_max=0.0, law="prescribed"))
+    loads = [Fixed("left", (0, 1, 2))]
+    ramped = solve(body, loads, steps=4, t_max=10.0, max_iterations=30)
+    assert ramped.converged and np.all(body.t_max == 10.0)
+    # the same end state as switching the full activation on at once (path independent:
+    # hyperelastic + prescribed active stress), to solver tolerance
+    once = Body(spec, GUC, fibers=fib, active=ActiveContraction(t_max=10.0, law="prescribed"))
+    direct = solve(once, loads, steps=1)
+    np.testing.assert_allclose(ramped.u, direct.u, atol=1e-8)
+    assert ramped.u.reshape(-1, 3)[:, 0].min() < -0.05  # it shortens along the fibres
+    with pytest.raises(ValueError, match="no active contraction law"):
+        solve(Body(spec, NEO), loads, t_max=1.0)
+
+
+@pytest.mark.parametrize("element", ["hex20", "tet10"])
+def test_displacement_at_points(element, rng):
+    spec = box((2.0, 1.0, 1.0), (2, 1, 1))
+    body = Body(tetrahedralize(spec) if element == "tet10" else spec, NEO, element=element)
+    X = body.dof_points
+
+    def field(X):  # quadratic: in both spaces
+        return np.column_stack([X[:, 0] * X[:, 1], X[:, 2] ** 2, X[:, 0] - X[:, 1] * X[:, 2]])
+
+    u = field(X).ravel()
+    P = rng.uniform([0, 0, 0], [2, 1, 1], (50, 3))
+    np.testing.assert_allclose(body.displacement_at(u, P), field(P), atol=1e-10)
+    np.testing.assert_allclose(body.displacement_at(np.stack([u, 2 * u]), P)[1], 2 * field(P),
+                               atol=1e-10)  # fmt: skip
+    assert np.isnan(body.displacement_at(u, [3.0, 0.5, 0.5])).all()  # outside
+
+
+@pytest.mark.parametrize(("n_circumferential", "on_vertex"), [(8, True), (12, False)])
+def test_ventricle_apex_vertex(n_circumferential, on_vertex):
+    from harpx.mechanics import ventricle
+
+    spec = ventricle(n_circumferential=n_circumferential, n_longitudinal=3, n_transmural=1)
+    p = spec.mesh.p.T
+    gap = np.hypot(p[:, 0], p[:, 1]).min()
+    # the docstring: a vertex on the axis only for a multiple of 8
+    assert (gap < 1e-9) == on_vertex, gap
