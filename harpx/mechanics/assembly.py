@@ -457,13 +457,14 @@ def internal_forces(
         return Internal(None, None, min_j, bad)
     with np.errstate(over="ignore", invalid="ignore"):  # checked just below
         P, A = material_response(body, F, tangent=tangent)
-    p, cof, J, extra = _volumetric(body, F)
-    P = P + p[..., None, None] * cof
+        p, cof, J, extra = _volumetric(body, F)
+        P = P + p[..., None, None] * cof
     # an exponential law (Guccione) overflows at extreme strain before det F reaches 0: such
     # a state is as inadmissible as an inverted one (the caller halves its step)
-    finite = np.isfinite(P.reshape(P.shape[0], -1).sum(axis=1))
-    if A is not None:
-        finite &= np.isfinite(A.reshape(A.shape[0], -1).sum(axis=1))
+    with np.errstate(over="ignore", invalid="ignore"):  # inf - inf is the point of the test
+        finite = np.isfinite(P.reshape(P.shape[0], -1).sum(axis=1))
+        if A is not None:
+            finite &= np.isfinite(A.reshape(A.shape[0], -1).sum(axis=1))
     if not finite.all():
         return Internal(None, None, min_j, np.nonzero(~finite)[0])
     G = body.grad_N  # type: ignore[attr-defined]  (e, q, a, J)
