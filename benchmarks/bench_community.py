@@ -21,9 +21,8 @@ The paper's material is incompressible; here the uncoupled Guccione law with
 κ = 1000 C (modelling error ~C/κ ~ 1e-3) and the locking-free volumetric treatment of each
 element (mean dilatation for hex8 / tet10, Q2/P1 linear dilatation for hex20; hex20 Q2/P0
 is shown too). tet10 meshes are the conforming split of the same hexahedral meshes
-(:func:`harpx.mechanics.mesh.tetrahedralize`); on the ventricle their boundary edge nodes
-are projected onto the true endo- and epicardial ellipsoids (curved, isoparametric), the
-hexahedra keep straight edges. Points are evaluated with ``Body.displacement_at``.
+(:func:`harpx.mechanics.mesh.tetrahedralize`), straight-edged like the hexahedra (see
+``CURVED_TETS``). Points are evaluated with ``Body.displacement_at``.
 
 Run ``python benchmarks/bench_community.py`` (``--quick`` for the two coarsest levels); it
 writes ``benchmarks/results/community.md``. Times are wall-clock seconds of ``solve`` on
@@ -51,6 +50,10 @@ from harpx.mechanics import (
 from harpx.mechanics.body import curved_tet_mesh
 
 OUT = Path(__file__).parent / "results" / "community.md"
+#: project the ventricle's boundary edge nodes of tet10 onto the ellipsoids; off: with
+#: them on, skfem's FacetBasis (follower pressure) fails to invert the quadratic map of
+#: some curved boundary tetrahedra (Newton in MappingIsoparametric.invF), not resolved yet
+CURVED_TETS = False
 BEAM_REF, BEAM_SPREAD = 4.17, (4.151, 4.185)
 APEX_REF = {"endo": (-26.6, (-26.9, -26.4)), "epi": (-28.3, (-28.5, -28.1))}
 ENDO, EPI, BASE = (7.0, 17.0), (10.0, 20.0), 5.0
@@ -105,11 +108,9 @@ def _project_edges(spec):
         on[np.unique(mesh.facets[:, spec.boundaries[name]])] = True
         edge = on[mesh.edges[0]] & on[mesh.edges[1]]
         x = mid[:, edge]
-        # radial projection from the long axis' point at the same height keeps z
-        r = np.hypot(x[0], x[1])
-        rho = a * np.sqrt(np.clip(1.0 - (x[2] / c) ** 2, 0.0, None))
-        scale = np.where(r > 1e-12, rho / np.where(r > 1e-12, r, 1.0), 1.0)
-        x[:2] *= scale
+        # along the ray from the centre: the nearest point of the ellipsoid for a midpoint
+        # of a chord a fraction of a cell long
+        x = x / np.sqrt((x[0] ** 2 + x[1] ** 2) / a**2 + (x[2] / c) ** 2)
         mid[:, edge] = x
     return curved_tet_mesh(mesh, mid)
 
@@ -122,8 +123,9 @@ def inflation(levels):
                              n_longitudinal=nl, n_transmural=nt, segments=False)  # fmt: skip
             mesh = spec
             if tets:
-                spec = tetrahedralize(spec)
-                mesh = _project_edges(spec)
+                spec = mesh = tetrahedralize(spec)
+                if CURVED_TETS:
+                    mesh = _project_edges(spec)
             mat = Guccione(c=10.0, bf=1.0, bt=1.0, bfs=1.0, kappa=10000.0)
             body = Body(mesh, mat, fibers=spec.fibers, element=element, volumetric=volumetric,
                         boundaries=spec.boundaries, regions=spec.regions)  # fmt: skip
