@@ -26,6 +26,18 @@ place). Two volumetric treatments are offered (``Body.volumetric``):
   itself; only the volumetric energy sees :math:`\theta_e`. Condensing the element pressure
   :math:`p_e = U'(\theta_e/J_{g,e})` gives exactly the formulas below. The same treatment
   serves hex8 (Q1/P0) and hex20 (Q2/P0, inf--sup stable).
+* ``"nodal-dilatation"`` (tet4; average nodal pressure, Bonet & Burton 1998): a linear
+  tetrahedron has one dilatation per cell, so the mean dilatation is the pointwise one and
+  locks. Instead the volume is averaged over the cells around each vertex :math:`a`:
+  :math:`v_a = \sum_{e \ni a} v_e/4` with :math:`v_e = \int_e J\, dV`, grown reference
+  volume :math:`G_a = \sum_{e \ni a} V_e J_{g,e}/4`, energy
+  :math:`\Pi_{vol} = \sum_a G_a U(v_a/G_a)`. There are about as many vertices as
+  incompressibility constraints a tetrahedral mesh can carry (one per vertex instead of
+  one per cell, ~5.5 cells per vertex), which removes the locking. The residual is that of
+  an element pressure :math:`\bar p_e = \tfrac14\sum_{a \in e} U'(v_a/G_a)`; the tangent
+  adds :math:`\sum_a \frac{U''(v_a/G_a)}{G_a}\, \beta_a \beta_a^T` with
+  :math:`\beta_a = \sum_{e \ni a} b_e/4`, which couples the dofs of all cells around
+  a vertex (the stiffness pattern is widened accordingly, :func:`sparsity`).
 * ``"linear-dilatation"`` (Q2/P1-disc for hex20): the same with the dilatation and pressure
   linear in each element, :math:`\theta = \Pi_e J` the element-wise :math:`L^2` projection
   onto :math:`\psi = (1, X - X_c, Y - Y_c, Z - Z_c)`, energy
@@ -194,7 +206,14 @@ def sparsity(body: object) -> Pattern:
     ns = int(body.n_dof_nodes)  # type: ignore[attr-defined]
     nel, nb = sd.shape
     keys = (sd[:, :, None].astype(np.int64) * ns + sd[:, None, :]).ravel()  # (e, a, b)
-    uniq, inv = np.unique(keys, return_inverse=True)
+    if getattr(body, "volumetric", None) == "nodal-dilatation":
+        # dofs of all cells around a vertex are coupled through its nodal dilatation
+        inc = _vertex_incidence(sd, ns)
+        S = (inc.T @ inc).tocoo()
+        uniq = np.unique(np.concatenate([keys, S.row.astype(np.int64) * ns + S.col]))
+        inv = np.searchsorted(uniq, keys)
+    else:
+        uniq, inv = np.unique(keys, return_inverse=True)
     srow = uniq // ns
     scol = uniq % ns
     sindptr = np.zeros(ns + 1, dtype=np.int64)
@@ -231,6 +250,16 @@ def sparsity(body: object) -> Pattern:
     pat = dataclasses.replace(pat, diagonal=pat.positions(d, d))
     body._pattern = pat  # type: ignore[attr-defined]
     return pat
+
+
+def _vertex_incidence(sd: IntArray, ns: int) -> sparse.csr_matrix:
+    """(ns, ns) 0/1 matrix: row ``a`` marks the scalar dofs of every cell containing ``a``."""
+    nel, nb = sd.shape
+    rows = np.repeat(sd, nb, axis=1).ravel()
+    cols = np.tile(sd, (1, nb)).ravel()
+    inc = sparse.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(ns, ns))
+    inc.data[:] = 1.0
+    return inc
 
 
 def material_response(
@@ -336,6 +365,26 @@ def _volumetric(body: object, F: FloatArray) -> tuple[FloatArray, FloatArray, Fl
         p = np.asarray(dU, dtype=np.float64)
         extra["d2U"] = np.asarray(d2U, dtype=np.float64) / jg
         return p, cof, J, extra
+    if body.volumetric == "nodal-dilatation":  # type: ignore[attr-defined]
+        # (ncell, 4): the vertices
+        sd = body.cell_scalar_dofs  # type: ignore[attr-defined]
+        ns = int(body.n_dof_nodes)  # type: ignore[attr-defined]
+        dV = body.dV  # type: ignore[attr-defined]
+        nv = sd.shape[1]
+        grown = body.cell_volume * (1.0 if Jg is None else Jg) / nv  # type: ignore[attr-defined]
+        G = np.bincount(sd.ravel(), weights=np.repeat(grown, nv), minlength=ns)
+        v = np.bincount(sd.ravel(), weights=np.repeat((J * dV).sum(axis=1) / nv, nv), minlength=ns)
+        used = G > 0
+        Jn = np.ones(ns)
+        Jn[used] = v[used] / G[used]
+        _, dU, d2U = mat.volumetric(Jn)
+        dU = np.broadcast_to(np.asarray(dU, dtype=np.float64), (ns,))
+        pe = dU[sd].mean(axis=1)
+        p = np.broadcast_to(pe[:, None], J.shape).copy()
+        c = np.zeros(ns)
+        c[used] = np.broadcast_to(np.asarray(d2U, dtype=np.float64), (ns,))[used] / G[used]
+        extra["nodal"] = c
+        return p, cof, J, extra
     psi, psiW, Minv, proj = _pressure_space(body)
     theta = np.matmul(proj, J[..., None])[..., 0]  # L2 projection of J per element
     _, dU, d2U = mat.volumetric(theta / jg)
@@ -408,13 +457,14 @@ def internal_forces(
         return Internal(None, None, min_j, bad)
     with np.errstate(over="ignore", invalid="ignore"):  # checked just below
         P, A = material_response(body, F, tangent=tangent)
-    p, cof, J, extra = _volumetric(body, F)
-    P = P + p[..., None, None] * cof
+        p, cof, J, extra = _volumetric(body, F)
+        P = P + p[..., None, None] * cof
     # an exponential law (Guccione) overflows at extreme strain before det F reaches 0: such
     # a state is as inadmissible as an inverted one (the caller halves its step)
-    finite = np.isfinite(P.reshape(P.shape[0], -1).sum(axis=1))
-    if A is not None:
-        finite &= np.isfinite(A.reshape(A.shape[0], -1).sum(axis=1))
+    with np.errstate(over="ignore", invalid="ignore"):  # inf - inf is the point of the test
+        finite = np.isfinite(P.reshape(P.shape[0], -1).sum(axis=1))
+        if A is not None:
+            finite &= np.isfinite(A.reshape(A.shape[0], -1).sum(axis=1))
     if not finite.all():
         return Internal(None, None, min_j, np.nonzero(~finite)[0])
     G = body.grad_N  # type: ignore[attr-defined]  (e, q, a, J)
@@ -449,6 +499,7 @@ def internal_forces(
         C = np.matmul(_pressure_space(body)[1], Bq)  # (e, npr, 3 nb)
         Kvol += np.matmul(np.swapaxes(C, 1, 2), np.matmul(Q, C)).reshape(nel, nb, 3, nb, 3)
     Ke = Kvol.transpose(0, 1, 2, 4, 3).copy()  # (e, a, i, k, b)
+    nodal = extra.get("nodal")
     block = max(1, _BLOCK_FLOATS // (nq * 27 * nb))
     buf = np.empty((min(block, nel), nq, 3, 3, 3, 3))
     for s in range(0, nel, block):
@@ -461,4 +512,40 @@ def internal_forces(
         Ke[sl] += np.matmul(Gt[sl], B.reshape(n, nq * 3, 9 * nb)).reshape(n, nb, 3, 3, nb)
     pat = sparsity(body)
     data = np.bincount(pat.element_positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz)
+    if nodal is not None:
+        data += _nodal_tangent(body, pat, (Bq * dV[..., None]).sum(axis=1), nodal)
     return Internal(r, pat.matrix(data), min_j, bad)
+
+
+def _nodal_tangent(body: object, pat: Pattern, b: FloatArray, c: FloatArray) -> FloatArray:
+    """Pattern data of ``Σ_a c_a β_a β_aᵀ``, ``β_a = Σ_{e∋a} b_e / nv`` (nodal dilatation).
+
+    ``b`` (ncell, 3 nb) are the cell volume gradients ``∂v_e/∂u`` in element-dof order.
+    """
+    sd = body.cell_scalar_dofs  # type: ignore[attr-defined]
+    ed = body.element_dofs.reshape(sd.shape[0], -1)  # type: ignore[attr-defined]
+    ns = int(body.n_dof_nodes)  # type: ignore[attr-defined]
+    nel, nv = sd.shape
+    cache = getattr(body, "_nodal_cache", None)
+    if cache is None:
+        rows = np.broadcast_to(sd[:, :, None], (nel, nv, ed.shape[1]))
+        cols = np.broadcast_to(ed[:, None, :], rows.shape)
+        keys = rows.astype(np.int64).ravel() * pat.ndof + cols.ravel()
+        uniq, inv = np.unique(keys, return_inverse=True)
+        cache = {"inv": inv, "rows": uniq // pat.ndof, "cols": uniq % pat.ndof, "pos": None}
+        body._nodal_cache = cache  # type: ignore[attr-defined]
+    vals = np.broadcast_to(b[:, None, :] / nv, (nel, nv, ed.shape[1])).ravel()
+    beta = sparse.csr_matrix(
+        (np.bincount(cache["inv"], weights=vals), (cache["rows"], cache["cols"])),
+        shape=(ns, pat.ndof),
+    )
+    K = (beta.T @ sparse.diags(c) @ beta).tocoo()
+    pos = cache["pos"]
+    if (
+        pos is None
+        or pos[0].shape != K.row.shape
+        or not (np.array_equal(pos[0], K.row) and np.array_equal(pos[1], K.col))
+    ):
+        pos = (K.row.copy(), K.col.copy(), pat.positions(K.row, K.col))
+        cache["pos"] = pos
+    return np.bincount(pos[2], weights=K.data, minlength=pat.nnz)

@@ -1,23 +1,31 @@
 """A deformable body: mesh, element, material, fibres, regions and quadrature data.
 
-:class:`Body` ties a scikit-fem hexahedral mesh to a material and precomputes everything the
+:class:`Body` ties a scikit-fem hexahedral or tetrahedral mesh to a material and precomputes
+everything the
 vectorised assembly (:mod:`harpx.mechanics.assembly`) needs: reference gradients of the shape
 functions at every quadrature point, quadrature weights, element-to-dof maps, per-point fibre
 directions, active-stress levels and growth tensors.
 
+Elements (``ELEMENTS``): ``hex8`` (trilinear, 2x2x2 Gauss), ``hex20`` (serendipity,
+3x3x3 Gauss), ``tet4`` (linear tetrahedron, 1 point) and ``tet10`` (quadratic tetrahedron,
+14-point rule of degree 5 with positive weights). A ``skfem.MeshTet2`` carries curved
+(isoparametric) tetrahedra: its edge nodes may lie on a curved surface.
+
 Degrees of freedom: scalar dof ``n`` of the scalar element (mesh vertices first, then, for
-hex20, one node per mesh edge) carries the displacement components ``3n, 3n+1, 3n+2``
+hex20 and tet10, one node per mesh edge) carries the displacement components ``3n, 3n+1, 3n+2``
 (x, y, z). This is the ordering of ``skfem.ElementVector`` on the same mesh (``body.basis``).
 Units: mm, kPa.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import os
 import warnings
-from collections.abc import Mapping, Sequence
-from typing import Any, Literal
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal, cast
 
 import meshio
 import numpy as np
@@ -31,53 +39,135 @@ from harpx.errors import CoincidentNodesWarning, SchemaError
 from harpx.mechanics import kinematics
 from harpx.mechanics.mesh import MeshSpec, check_nodes, check_unused_nodes, coincident_nodes
 
-__all__ = ["Body", "ELEMENTS", "check_fits_image"]
+__all__ = [
+    "Body",
+    "ELEMENTS",
+    "ElementKind",
+    "check_fits_image",
+    "curved_tet_mesh",
+    "default_element",
+]
 
-#: element name -> (scalar skfem element factory, quadrature order giving the Gauss rule)
-ELEMENTS: dict[str, tuple[Any, int, int]] = {
-    "hex8": (skfem.ElementHex1, 3, 8),  # 2x2x2 Gauss
-    "hex20": (skfem.ElementHexS2, 5, 27),  # 3x3x3 Gauss
-}
 
-# VTK hexahedron20 edges as pairs of VTK corner ids.
-_VTK_EDGES = np.array(
+@dataclass(frozen=True)
+class ElementKind:
+    """What a :class:`Body` needs to know about one element type.
+
+    Attributes
+    ----------
+    factory : callable
+        The scalar scikit-fem element class.
+    intorder : int
+        skfem integration order of the cell quadrature.
+    nqp : int
+        Number of quadrature points per cell that order gives.
+    facet_intorder : int
+        Integration order on boundary facets (follower pressure, cavity volume).
+    meshes : tuple of type
+        skfem mesh classes the element accepts.
+    volumetric : tuple of str
+        Volumetric formulations offered; the first is the default.
+    vtk_edges : ndarray of int, shape (nedge, 2)
+        Corner pairs (VTK order) of the edge nodes, in VTK order (empty for linear cells).
+    """
+
+    factory: Any
+    intorder: int
+    nqp: int
+    facet_intorder: int
+    meshes: tuple[type, ...]
+    volumetric: tuple[str, ...]
+    vtk_edges: IntArray
+
+
+_NO_EDGES = np.zeros((0, 2), dtype=np.int64)
+# VTK hexahedron20 and tetra10 edges as pairs of VTK corner ids.
+_VTK_HEX_EDGES = np.array(
     [[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4],
      [0, 4], [1, 5], [2, 6], [3, 7]]
 )  # fmt: skip
+_VTK_TET_EDGES = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])
+_HEX_MESHES = (skfem.MeshHex1,)
+_TET_MESHES = (skfem.MeshTet1, skfem.MeshTet2)
+
+#: element name -> :class:`ElementKind`
+ELEMENTS: dict[str, ElementKind] = {
+    "hex8": ElementKind(
+        skfem.ElementHex1, 3, 8, 3, _HEX_MESHES, ("mean-dilatation", "pointwise"), _NO_EDGES
+    ),
+    "hex20": ElementKind(
+        skfem.ElementHexS2, 5, 27, 5, _HEX_MESHES,
+        ("mean-dilatation", "linear-dilatation", "pointwise"), _VTK_HEX_EDGES,
+    ),
+    "tet4": ElementKind(
+        skfem.ElementTetP1, 1, 1, 2, (skfem.MeshTet1,), ("nodal-dilatation", "pointwise"),
+        _NO_EDGES,
+    ),
+    "tet10": ElementKind(
+        skfem.ElementTetP2, 5, 14, 4, _TET_MESHES, ("mean-dilatation", "pointwise"),
+        _VTK_TET_EDGES,
+    ),
+}  # fmt: skip
+
+_VOLUMETRIC = ("mean-dilatation", "linear-dilatation", "nodal-dilatation", "pointwise")
 
 
-def _read_mesh(path: str | os.PathLike[str]) -> tuple[skfem.MeshHex1, FloatArray | None]:
-    """Read a hexahedral mesh (meshio ``hexahedron`` or ``hexahedron20``) and cell fibres.
+def default_element(mesh: Any) -> str:
+    """The element a mesh implies: hex8 for hexahedra, tet4 / tet10 for linear / quadratic
+    tetrahedra."""
+    if isinstance(mesh, skfem.MeshTet2):
+        return "tet10"
+    if isinstance(mesh, skfem.MeshTet1):
+        return "tet4"
+    return "hex8"
 
-    Nodes that no hexahedron uses (points of other cell blocks, stray points) are dropped.
+
+def _read_mesh(path: str | os.PathLike[str]) -> tuple[Any, FloatArray | None]:
+    """Read a hexahedral or tetrahedral mesh file and its cell fibres.
+
+    ``hexahedron``, ``hexahedron20`` (straight-edged geometry from the corners; the edge
+    nodes become element dofs again), ``tetra`` and ``tetra10`` (curved: the edge nodes
+    are kept as geometry, a ``skfem.MeshTet2``) cells are accepted; cell data ``fiber``
+    (one vector per cell) becomes the fibres.
     """
     from harpx.io.mesh import read_meshio  # io builds on mechanics: import on use
 
     m = read_meshio(path)
     kinds = m.cells_dict
-    if not any(len(v) for k, v in kinds.items() if k in ("hexahedron", "hexahedron20")):
+    known = ("hexahedron", "hexahedron20", "tetra", "tetra10")
+    present = [k for k in known if len(kinds.get(k, ()))]
+    if not present:
         raise ValueError(
-            f"mesh file {os.fspath(path)!r} has no hexahedra (cell blocks "
-            f"{ {k: len(v) for k, v in kinds.items()}!r}); expected 'hexahedron' or "
-            "'hexahedron20' cells"
+            f"mesh file {os.fspath(path)!r} has no hexahedra or tetrahedra (cell blocks "
+            f"{ {k: len(v) for k, v in kinds.items()}!r}); expected 'hexahedron', "
+            "'hexahedron20', 'tetra' or 'tetra10' cells"
         )
+    kind = present[0]
+    k = [i for i, c in enumerate(m.cells) if c.type == kind][0]
     fibers = None
-    if "hexahedron20" in kinds and "hexahedron" not in kinds:
-        # straight-edged geometry from the corners; the edge nodes become element dofs again
-        k = [i for i, c in enumerate(m.cells) if c.type == "hexahedron20"][0]
+    if "fiber" in m.cell_data:
+        fibers = np.asarray(m.cell_data["fiber"][k], dtype=np.float64)
+    cell_data = {name: [np.asarray(v[k])] for name, v in m.cell_data.items()}
+    if kind == "hexahedron20":
         corners = m.cells[k].data[:, :8]
         used, inv = np.unique(corners, return_inverse=True)
-        cell_data = {name: [np.asarray(v[k])] for name, v in m.cell_data.items()}
         m = meshio.Mesh(m.points[used], [("hexahedron", inv.reshape(-1, 8))], cell_data=cell_data)
-    k = [i for i, c in enumerate(m.cells) if c.type == "hexahedron"][0]
-    used, inv = np.unique(m.cells[k].data, return_inverse=True)
-    if used.size != len(m.points) or len(m.cells) > 1:  # keep the hexahedra and their nodes
-        cell_data = {name: [np.asarray(v[k])] for name, v in m.cell_data.items()}
-        m = meshio.Mesh(m.points[used], [("hexahedron", inv.reshape(-1, 8))], cell_data=cell_data)
-    if "fiber" in m.cell_data:
-        k = [i for i, c in enumerate(m.cells) if c.type == "hexahedron"][0]
-        fibers = np.asarray(m.cell_data["fiber"][k], dtype=np.float64)
+    elif kind == "tetra10":
+        # skfem numbers the vertices first; keep the corner points, rebuild the edge nodes
+        # from the file (so curved edges stay curved)
+        cells = m.cells[k].data
+        used, inv = np.unique(cells[:, :4], return_inverse=True)
+        t = inv.reshape(-1, 4)
+        base = skfem.MeshTet1(np.ascontiguousarray(m.points[used].T), np.ascontiguousarray(t.T))
+        base = _orient_tets(base)
+        return curved_tet_mesh(base, _edge_points(base, t, m.points[cells[:, 4:]])), fibers
+    else:  # keep these cells and their nodes (drop other cell blocks and stray points)
+        used, inv = np.unique(m.cells[k].data, return_inverse=True)
+        nv = m.cells[k].data.shape[1]
+        m = meshio.Mesh(m.points[used], [(kind, inv.reshape(-1, nv))], cell_data=cell_data)
     mesh = skfem.io.meshio.from_meshio(m)
+    if isinstance(mesh, skfem.MeshTet1):
+        mesh = _orient_tets(mesh)
     return mesh, fibers
 
 
@@ -181,11 +271,17 @@ def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> 
         raise SchemaError(
             f"the mesh spans {size:.4g} mm but one acquired voxel is {voxel:.4g} mm{hint}"
         )
-    corners = nodes[body.cells[:, :8]]  # (ncell, 8, 3)
     count = 1
-    for edges in _EDGES_BY_DIRECTION:  # the tracker's rule: n points along the longest edge
-        length = np.linalg.norm(corners[:, edges[:, 0]] - corners[:, edges[:, 1]], axis=-1)
-        count *= max(1, int(np.ceil(float(length.max()) / voxel)))
+    if body.element.startswith("tet"):  # the tracker's rule: m³ points, m from the longest edge
+        corners = nodes[body.cells[:, :4]]  # (ncell, 4, 3)
+        pairs = _VTK_TET_EDGES
+        length = np.linalg.norm(corners[:, pairs[:, 0]] - corners[:, pairs[:, 1]], axis=-1)
+        count = max(1, int(np.ceil(float(length.max()) / (1.5 * voxel)))) ** 3
+    else:
+        corners = nodes[body.cells[:, :8]]  # (ncell, 8, 3)
+        for edges in _EDGES_BY_DIRECTION:  # n points along the longest edge per direction
+            length = np.linalg.norm(corners[:, edges[:, 0]] - corners[:, edges[:, 1]], axis=-1)
+            count *= max(1, int(np.ceil(float(length.max()) / voxel)))
     points = count * body.ncell
     if points > max_points:
         gib = points * (_BYTES_PER_POINT + _BYTES_PER_POINT_BASIS * body.nbasis) / 2**30
@@ -197,7 +293,75 @@ def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> 
         )
 
 
-# reference corners and centre of the unit hexahedron, where the geometry Jacobian is checked
+def _orient_tets(mesh: skfem.MeshTet1) -> skfem.MeshTet1:
+    """The same tetrahedra, each with a positive (right-handed) vertex order.
+
+    Swapping two vertices of a cell leaves ``mesh.edges`` (sorted vertex pairs) unchanged,
+    so the edge nodes of a ``MeshTet2`` stay where they are.
+    """
+    p, t = mesh.p, mesh.t
+    a, b, c, d = (p[:, t[i]] for i in range(4))
+    vol = np.einsum("ie,ie->e", np.cross(b - a, c - a, axis=0), d - a)
+    if np.all(vol > 0):
+        return mesh
+    t = t.copy()
+    neg = vol < 0
+    t[1, neg], t[2, neg] = mesh.t[2, neg], mesh.t[1, neg]
+    return dataclasses.replace(mesh, t=t)
+
+
+def _edge_points(mesh: skfem.MeshTet1, t: IntArray, nodes: FloatArray) -> FloatArray:
+    """Positions of the mesh edges' nodes from per-cell VTK tetra10 edge nodes.
+
+    ``t`` (ncell, 4) are the cells' corners as given (before orientation), ``nodes``
+    (ncell, 6, 3) their edge nodes in VTK order; returns (3, nedge) ordered like
+    ``mesh.edges``.
+    """
+    pairs = np.sort(t[:, _VTK_TET_EDGES], axis=-1).reshape(-1, 2)
+    n = mesh.p.shape[1]
+    keys = pairs[:, 0] * n + pairs[:, 1]
+    edges = np.sort(mesh.edges, axis=0)
+    ekeys = edges[0] * n + edges[1]
+    order = np.argsort(keys)
+    pos = order[np.searchsorted(keys[order], ekeys)]
+    return np.ascontiguousarray(nodes.reshape(-1, 3)[pos].T)
+
+
+def curved_tet_mesh(mesh: skfem.MeshTet1, edge_points: ArrayLike | None = None) -> skfem.MeshTet2:
+    """A quadratic (isoparametric) tetrahedral mesh from a linear one.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshTet1
+        Vertices (mm) and cells.
+    edge_points : array_like, shape (3, nedge), optional
+        Position of the node of every edge of ``mesh.edges`` (mm), e.g. projected onto a
+        curved surface; the edge midpoints by default (straight edges).
+
+    Returns
+    -------
+    skfem.MeshTet2
+        Carries the boundaries and subdomains of ``mesh``.
+    """
+    mid = 0.5 * (mesh.p[:, mesh.edges[0]] + mesh.p[:, mesh.edges[1]])
+    pts = mid if edge_points is None else np.asarray(edge_points, dtype=np.float64)
+    if pts.shape != mid.shape:
+        raise ValueError(
+            f"edge_points has shape {pts.shape!r}; expected {mid.shape!r} (3, nedge), one "
+            "point per column of mesh.edges"
+        )
+    doflocs = np.hstack([mesh.p, pts])
+    mesh = _orient_tets(mesh)
+    return skfem.MeshTet2(
+        doflocs,
+        mesh.t,
+        _boundaries=mesh._boundaries,
+        _subdomains=mesh._subdomains,
+    )
+
+
+# reference corners and centre of the unit hexahedron / tetrahedron, where the geometry
+# Jacobian is checked
 _CHECK_POINTS = np.array(
     [
         [0, 0, 0],
@@ -212,51 +376,62 @@ _CHECK_POINTS = np.array(
     ],
     dtype=np.float64,
 ).T
+_TET_CHECK_POINTS = np.array(
+    [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.25, 0.25, 0.25]], dtype=np.float64
+).T
 
 
-def _check_cells(mesh: skfem.MeshHex1) -> None:
-    """Raise if any hexahedron is inverted, twisted or collapsed.
+def _check_cells(mesh: Any) -> None:
+    """Raise if any cell is inverted, twisted or collapsed.
 
-    The Jacobian determinant of the trilinear map is evaluated at the 8 corners and the
-    centre of every cell; a valid mesh has one sign everywhere (skfem's reference
-    orientation makes it negative for positively ordered cells). A cell with the opposite
-    sign somewhere (inverted or bow-tie) or with a vanishing determinant (collapsed) is
-    named.
+    The Jacobian determinant of the cell map is evaluated at the corners and the centre of
+    every cell; a valid mesh has one sign everywhere (skfem's reference orientation makes
+    it negative for positively ordered hexahedra; tetrahedra are oriented positively on
+    input). A cell with the opposite sign somewhere (inverted or bow-tie) or with a
+    vanishing determinant (collapsed) is named.
     """
-    det = mesh._mapping().detDF(_CHECK_POINTS)  # (ncell, 9), mm³
+    tet = isinstance(mesh, skfem.MeshTet1)
+    det = mesh._mapping().detDF(_TET_CHECK_POINTS if tet else _CHECK_POINTS)  # (ncell, k), mm³
+    det = np.broadcast_to(det, (mesh.nelements, det.shape[-1]))
     scale = np.abs(det).max()
     negative = np.count_nonzero(det.mean(axis=1) < 0)
     sign = -1.0 if 2 * negative >= det.shape[0] else 1.0  # the majority orientation
     bad = np.nonzero(np.any(det * sign <= 1e-10 * scale, axis=1))[0]
     if bad.size:
+        what = "tetrahedra" if tet else "hexahedra"
         raise ValueError(
-            f"mesh has {bad.size} inverted or degenerate hexahedra: cells {bad[:10].tolist()} "
+            f"mesh has {bad.size} inverted or degenerate {what}: cells {bad[:10].tolist()} "
             "(the Jacobian of the cell map changes sign or vanishes at a corner); fix the "
             "vertex order or the geometry of those cells"
         )
 
 
 class Body:
-    """A hyperelastic body discretised with hexahedral finite elements.
+    """A hyperelastic body discretised with hexahedral or tetrahedral finite elements.
 
     Parameters
     ----------
-    mesh : skfem.MeshHex1, MeshSpec or path
-        The reference configuration (mm): a scikit-fem hexahedral mesh, a
+    mesh : skfem.MeshHex1, skfem.MeshTet1, skfem.MeshTet2, MeshSpec or path
+        The reference configuration (mm): a scikit-fem hexahedral or tetrahedral mesh
+        (``MeshTet2``: curved quadratic tetrahedra), a
         :class:`~harpx.mechanics.mesh.MeshSpec` from the builders in
-        :mod:`harpx.mechanics.mesh`, or a file meshio can read (``hexahedron`` or
-        ``hexahedron20`` cells; cell data ``fiber`` becomes the fibres).
+        :mod:`harpx.mechanics.mesh`, or a file meshio can read (``hexahedron``,
+        ``hexahedron20``, ``tetra`` or ``tetra10`` cells; cell data ``fiber`` becomes the
+        fibres).
     material : object
         Material with ``isochoric_response(F, fiber)``, ``volumetric(J)``, ``kappa`` and
         ``needs_fibers`` (e.g. :class:`~harpx.mechanics.materials.NeoHookean`).
-    fibers : array_like, shape (ncell, 3) or (ncell, nqp, 3), optional
-        Reference fibre directions, normalised here. Needed by fibre materials, active
+    fibers : array_like of shape (ncell, 3) or (ncell, nqp, 3), or callable, optional
+        Reference fibre directions, normalised here: per cell, per quadrature point, or a
+        function ``fibers(X) -> (n, 3)`` of reference positions ``X`` (n, 3) in mm,
+        evaluated at the body's quadrature points. Needed by fibre materials, active
         contraction and fibre growth.
     regions : dict of str to array of int, optional
         Named cell sets. Defaults to the mesh's regions/subdomains or ``{"body": all}``.
-    element : {"hex8", "hex20"}, default "hex8"
-        Trilinear hexahedron with 2x2x2 Gauss points, or 20-node serendipity hexahedron
-        with 3x3x3 Gauss points.
+    element : {"hex8", "hex20", "tet4", "tet10"}, optional
+        Trilinear hexahedron (2x2x2 Gauss points), 20-node serendipity hexahedron (3x3x3),
+        linear tetrahedron (1 point) or quadratic tetrahedron (14 points). Default: what the
+        mesh implies (hex8 for hexahedra, tet4 for ``MeshTet1``, tet10 for ``MeshTet2``).
     active : ActiveContraction, optional
         Active fibre stress law (``response(F, fiber, t_max)``).
     t_max : float or dict of str to float, optional
@@ -267,26 +442,41 @@ class Body:
         law or one stretch θ per cell (dimensionless).
     boundaries : dict of str to array of int, optional
         Named facet sets (columns of ``mesh.facets``). Defaults to the mesh's boundaries.
-    volumetric : {"mean-dilatation", "linear-dilatation", "pointwise"}, default "mean-dilatation"
-        Treatment of the volumetric energy: element-constant dilatation and pressure
-        (three-field, locking-free; Q1/P0 and Q2/P0), element-linear dilatation and pressure
-        (Q2/P1-disc, locking-free, optimal order for hex20), or pointwise (plain displacement
-        formulation; locks for nearly incompressible materials).
+    volumetric : {"mean-dilatation", "linear-dilatation", "nodal-dilatation", "pointwise"}, optional
+        Treatment of the volumetric energy:
+
+        * mean dilatation: element-constant dilatation and pressure (three-field,
+          locking-free; Q1/P0, Q2/P0, and P2/P0 for tet10);
+        * linear dilatation: element-linear dilatation and pressure (Q2/P1-disc, hex20
+          only, locking-free and optimal order). Switch to it for hex20 in bending with
+          fewer than about six cells through the thickness, where Q2/P0 is too soft: on the
+          Land et al. 2015 beam (10 x 1 x 1 mm, 2 cells thick) Q2/P0 is 14 % and Q2/P1
+          0.7 % off the reference deflection. Q2/P0 stays the default: it is cheaper and
+          the tracking scenes were tuned with it;
+        * nodal dilatation: tet4 only, the volume change averaged over the cells around
+          each vertex (Bonet & Burton 1998), locking-free;
+        * pointwise: the plain displacement formulation; locks for nearly incompressible
+          materials.
+
+        Default: the element's first locking-free one (nodal dilatation for tet4, else
+        mean dilatation).
 
     Attributes
     ----------
     ndof : int
         Number of displacement dofs (3 per dof node).
     ncell, nqp : int
-        Number of cells and of quadrature points per cell (8 for hex8, 27 for hex20).
+        Number of cells and of quadrature points per cell (8 for hex8, 27 for hex20, 1 for
+        tet4, 14 for tet10).
     nodes : ndarray, shape (nvertex, 3)
         Mesh vertices, mm.
     dof_points : ndarray, shape (n_dof_nodes, 3)
-        Positions of all dof nodes (vertices, then edge midpoints for hex20), mm.
+        Positions of all dof nodes (vertices, then edge nodes for hex20 and tet10), mm.
     node_dofs : ndarray, shape (n_dof_nodes, 3)
         Dof ids of the x, y, z displacement of each dof node.
-    cells : ndarray, shape (ncell, 8) or (ncell, 20)
-        Dof-node ids per cell in VTK/meshio ``hexahedron``/``hexahedron20`` order.
+    cells : ndarray, shape (ncell, 8), (ncell, 20), (ncell, 4) or (ncell, 10)
+        Dof-node ids per cell in VTK/meshio ``hexahedron``/``hexahedron20``/``tetra``/
+        ``tetra10`` order.
     element_dofs : ndarray, shape (ncell, nbasis, 3)
         Dof ids per cell, basis function and component (assembly order).
     grad_N : ndarray, shape (ncell, nqp, nbasis, 3)
@@ -319,16 +509,15 @@ class Body:
         mesh: Any,
         material: Any,
         *,
-        fibers: ArrayLike | None = None,
+        fibers: ArrayLike | Callable[[FloatArray], ArrayLike] | None = None,
         regions: Mapping[str, ArrayLike] | None = None,
-        element: Literal["hex8", "hex20"] = "hex8",
+        element: Literal["hex8", "hex20", "tet4", "tet10"] | None = None,
         active: Any = None,
         t_max: float | Mapping[str, float] | None = None,
         growth: Any = None,
         boundaries: Mapping[str, ArrayLike] | None = None,
-        volumetric: Literal[
-            "mean-dilatation", "linear-dilatation", "pointwise"
-        ] = "mean-dilatation",
+        volumetric: Literal["mean-dilatation", "linear-dilatation", "nodal-dilatation", "pointwise"]
+        | None = None,
     ) -> None:
         spec_regions: Mapping[str, ArrayLike] = {}
         spec_boundaries: Mapping[str, ArrayLike] = {}
@@ -341,24 +530,36 @@ class Body:
             mesh, file_fibers = _read_mesh(mesh)
             if fibers is None:
                 fibers = file_fibers
-        if not isinstance(mesh, skfem.MeshHex1):
+        if isinstance(mesh, skfem.MeshTet1):
+            mesh = _orient_tets(mesh)
+        if type(mesh) is skfem.MeshHex2 or not isinstance(mesh, (skfem.MeshHex1, skfem.MeshTet1)):
             raise TypeError(
-                f"mesh must be a skfem.MeshHex1, a MeshSpec or a mesh file path, got "
-                f"{type(mesh).__name__!r}; build one with harpx.mechanics.mesh.box/cylinder"
+                f"mesh must be a skfem.MeshHex1, MeshTet1 or MeshTet2, a MeshSpec or a mesh "
+                f"file path, got {type(mesh).__name__!r}; build one with "
+                "harpx.mechanics.mesh.box/cylinder (and tetrahedralize for tetrahedra)"
             )
+        if element is None:
+            element = default_element(mesh)  # type: ignore[assignment]
         if element not in ELEMENTS:
             raise ValueError(f"element={element!r} is not one of {sorted(ELEMENTS)!r}")
-        if volumetric not in ("mean-dilatation", "linear-dilatation", "pointwise"):
+        kind = ELEMENTS[element]
+        if not isinstance(mesh, kind.meshes):
             raise ValueError(
-                f"volumetric={volumetric!r} must be 'mean-dilatation', 'linear-dilatation' "
-                "or 'pointwise'"
+                f"element={element!r} needs a {' or '.join(m.__name__ for m in kind.meshes)} "
+                f"mesh, got {type(mesh).__name__!r}; pick the element that matches the cells "
+                f"(or omit element= to use {default_element(mesh)!r})"
             )
-        if volumetric == "linear-dilatation" and element != "hex20":
+        if volumetric is None:
+            volumetric = kind.volumetric[0]  # type: ignore[assignment]
+        if volumetric not in _VOLUMETRIC:
+            raise ValueError(f"volumetric={volumetric!r} must be one of {list(_VOLUMETRIC)!r}")
+        if volumetric not in kind.volumetric:
             raise ValueError(
-                f"volumetric='linear-dilatation' needs element='hex20' (Q2/P1); with "
-                f"element={element!r} (Q1/P1 is not inf-sup stable and locks) use "
-                "'mean-dilatation'"
+                f"volumetric={volumetric!r} is not available for element={element!r}; "
+                f"choose one of {list(kind.volumetric)!r} (Q1/P1 and P1/P0 are not inf-sup "
+                "stable and lock; linear dilatation needs hex20, nodal dilatation tet4)"
             )
+        mesh = cast(Any, mesh)  # skfem meshes are untyped
         self.mesh = mesh
         self.material = material
         self.element = element
@@ -366,20 +567,24 @@ class Body:
         self.active = active
         self.ncell = int(mesh.nelements)
 
-        check_nodes(np.asarray(mesh.p).T, np.asarray(mesh.t).T, nvertex=8)
-        pairs = coincident_nodes(np.asarray(mesh.p).T)
+        # the cells' vertices (a MeshTet2 also holds its edge nodes in mesh.p)
+        nvert = int(mesh.nvertices) if isinstance(mesh, skfem.MeshTet2) else mesh.p.shape[1]
+        vertices = np.asarray(mesh.p)[:, :nvert]
+        check_nodes(vertices.T, np.asarray(mesh.t).T, nvertex=int(mesh.t.shape[0]))
+        pairs = coincident_nodes(vertices.T)
         if pairs.size:
             warnings.warn(
                 f"mesh has {pairs.shape[0]} pairs of coincident nodes, e.g. nodes "
-                f"{pairs[0].tolist()} at {np.asarray(mesh.p)[:, pairs[0, 0]].tolist()} mm: the "
+                f"{pairs[0].tolist()} at {vertices[:, pairs[0, 0]].tolist()} mm: the "
                 "cells on either side are not connected and move independently; if that is "
                 "not a deliberate cut, merge them (mesh = mesh.remove_duplicate_nodes())",
                 CoincidentNodesWarning,
                 stacklevel=2,
             )
         _check_cells(mesh)
-        check_unused_nodes(mesh.p.shape[1], np.asarray(mesh.t).T)
-        factory, intorder, nqp = ELEMENTS[element]
+        check_unused_nodes(vertices.shape[1], np.asarray(mesh.t).T)
+        factory, intorder, nqp = kind.factory, kind.intorder, kind.nqp
+        self.kind = kind
         self._scalar_element = factory()
         self._intorder = intorder
         sb = skfem.CellBasis(mesh, self._scalar_element, intorder=intorder)
@@ -425,6 +630,16 @@ class Body:
         # fibres
         self.fibers: FloatArray | None = None
         self.fibers_qp: FloatArray | None = None
+        if callable(fibers):
+            X = self.quadrature_points
+            fibers = np.asarray(fibers(X.reshape(-1, 3)), dtype=np.float64)
+            if fibers.shape != (self.ncell * nqp, 3):
+                raise ValueError(
+                    f"the fibers function returned shape {fibers.shape!r} for "
+                    f"{self.ncell * nqp} points; expected ({self.ncell * nqp}, 3), one "
+                    "direction per reference point"
+                )
+            fibers = fibers.reshape(self.ncell, nqp, 3)
         if fibers is not None:
             f = kinematics.unit_fibers(fibers)
             if f.shape == (self.ncell, 3):
@@ -502,16 +717,25 @@ class Body:
         self.t_max = values
 
     def _vtk_cells(self) -> IntArray:
-        corners = self.mesh.t.T[:, HEX_MAPPING[:8]].astype(np.int64)  # VTK corner order
-        if self.element == "hex8":
+        if isinstance(self.mesh, skfem.MeshTet1):
+            corners = self.mesh.t.T.astype(np.int64)  # skfem and VTK agree on tetrahedra
+        else:
+            corners = self.mesh.t.T[:, HEX_MAPPING[:8]].astype(np.int64)  # VTK corner order
+        vtk_edges = self.kind.vtk_edges
+        nc = corners.shape[1]
+        if vtk_edges.shape[0] == 0:
             return corners
-        # match each VTK edge midpoint to the element's edge dofs by position
-        edge_dofs = self.cell_scalar_dofs[:, 8:]  # (nel, 12)
-        pos = self.dof_points[edge_dofs]  # (nel, 12, 3)
-        mid = 0.5 * (
-            self.nodes[corners[:, _VTK_EDGES[:, 0]]] + self.nodes[corners[:, _VTK_EDGES[:, 1]]]
+        # match each VTK edge to the element's edge dofs by the edge's end vertices
+        edge_dofs = self.cell_scalar_dofs[:, nc:]  # (nel, nedge)
+        if isinstance(self.mesh, skfem.MeshTet2):
+            ends = self.mesh.edges[:, edge_dofs - self.nodes.shape[0]]  # (2, nel, nedge)
+            mid = 0.5 * (self.nodes[ends[0]] + self.nodes[ends[1]])
+        else:
+            mid = self.dof_points[edge_dofs]
+        want = 0.5 * (
+            self.nodes[corners[:, vtk_edges[:, 0]]] + self.nodes[corners[:, vtk_edges[:, 1]]]
         )
-        d = np.linalg.norm(mid[:, :, None, :] - pos[:, None, :, :], axis=-1)
+        d = np.linalg.norm(want[:, :, None, :] - mid[:, None, :, :], axis=-1)
         order = np.argmin(d, axis=2)
         edges = np.take_along_axis(edge_dofs, order, axis=1)
         return np.concatenate([corners, edges], axis=1)
@@ -593,6 +817,15 @@ class Body:
         """``J = det F`` at every quadrature point, shape (ncell, nqp)."""
         return np.linalg.det(self.deformation_gradient(u))
 
+    def displacement_at(self, u: ArrayLike, points: ArrayLike) -> FloatArray:
+        """Displacement (mm) at arbitrary reference points (mm), NaN outside the mesh.
+
+        See :func:`harpx.mechanics.locate.displacement_at`.
+        """
+        from harpx.mechanics.locate import displacement_at
+
+        return displacement_at(self, u, points)
+
     def _cell_average(self, q: FloatArray) -> FloatArray:
         w = self.dV / self.cell_volume[:, None]
         return np.einsum("eq,eq...->e...", w, q)
@@ -652,7 +885,7 @@ class Body:
     def to_meshio(
         self, u: ArrayLike | None = None, *, point_data: Mapping[str, ArrayLike] | None = None
     ) -> meshio.Mesh:
-        """The mesh (hexahedron cells) as a :class:`meshio.Mesh`.
+        """The mesh (hexahedron or tetra cells) as a :class:`meshio.Mesh`.
 
         Parameters
         ----------
@@ -675,9 +908,8 @@ class Body:
             cdata["fiber"] = [self.fibers]
         mesh = self.mesh
         if self.regions or self.boundaries:
-            mesh = skfem.MeshHex1(
-                mesh.p,
-                mesh.t,
+            mesh = dataclasses.replace(
+                mesh,
                 _boundaries={k: v.astype(np.int32) for k, v in self.boundaries.items()} or None,
                 _subdomains={k: v.astype(np.int32) for k, v in self.regions.items()} or None,
             )

@@ -181,7 +181,7 @@ def _facet_quadrature(body: Any, facet: Any) -> _FacetQuadrature:
     key = facets.tobytes()
     if key in cache:
         return cache[key]
-    order = 3 if body.element == "hex8" else 5
+    order = body.kind.facet_intorder
     fb = skfem.FacetBasis(
         body.mesh, body._scalar_element, facets=facets.astype(np.int32), intorder=order
     )

@@ -1,4 +1,4 @@
-r"""Point location in trilinear hexahedral meshes: containing cell and reference coordinates.
+r"""Point location in hexahedral and tetrahedral meshes: containing cell and reference coordinates.
 
 One locator serves every caller that needs "which cell holds this point, and where in it":
 evaluating a finite-element field at voxel centres (:mod:`harpx.tracking.resample`), and
@@ -26,17 +26,33 @@ vertices: :data:`VTK_CORNERS` (VTK/meshio ``hexahedron``, :attr:`Body.cells
 <harpx.mechanics.body.Body.cells>`) or :data:`SKFEM_CORNERS` (``skfem.MeshHex1.t``, the
 order of ``skfem.ElementHex1``'s basis). The reference coordinates returned are those of the
 same convention, so they can be fed to the matching shape functions.
+
+Tetrahedral meshes (``skfem.MeshTet1``, and ``skfem.MeshTet2`` with curved, quadratic
+cells) use the same scheme with the linear or quadratic geometry map, four times as many
+candidates (about 24 tetrahedra share a vertex where 8 hexahedra do) and the unit
+tetrahedron as the reference cell. :func:`displacement_at` evaluates a body's displacement
+at points with this locator.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import skfem
+from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
 from harpx._typing import FloatArray, IntArray
 
-__all__ = ["SKFEM_CORNERS", "VTK_CORNERS", "HexLocator", "locate", "trilinear"]
+__all__ = [
+    "SKFEM_CORNERS",
+    "VTK_CORNERS",
+    "HexLocator",
+    "displacement_at",
+    "locate",
+    "trilinear",
+]
 
 #: reference coordinates of the eight vertices in VTK/meshio ``hexahedron`` order
 VTK_CORNERS: FloatArray = np.array(
@@ -238,29 +254,152 @@ class HexLocator:
         return cells_out, np.clip(xi_out, 0.0, 1.0)
 
 
-def locate(
-    mesh: skfem.MeshHex1, points: FloatArray, *, candidates: int = 8, tol: float = 1e-7
+def _tet_geometry(mesh: Any) -> tuple[Any, FloatArray]:
+    """Geometry element and its nodes per cell (ncell, nb, 3) of a tetrahedral mesh."""
+    if isinstance(mesh, skfem.MeshTet2):
+        return skfem.ElementTetP2(), mesh.doflocs.T[mesh.dofs.element_dofs.T]
+    return skfem.ElementTetP1(), mesh.p.T[mesh.t.T]
+
+
+def _shape_values(element: Any, xi: FloatArray, nbasis: int) -> tuple[FloatArray, FloatArray]:
+    """Values (n, nb) and reference gradients (n, nb, 3) of an element's basis at ``xi`` (3, n)."""
+    vals = np.empty((xi.shape[1], nbasis))
+    grads = np.empty((xi.shape[1], nbasis, 3))
+    for a in range(nbasis):  # loop over the ≤ 20 basis functions, vectorised over points
+        phi, dphi = element.lbasis(xi, a)
+        vals[:, a] = phi
+        grads[:, a, :] = dphi.T
+    return vals, grads
+
+
+def _locate_tets(
+    mesh: Any, points: FloatArray, *, candidates: int, tol: float
 ) -> tuple[IntArray, FloatArray]:
-    """Find the cell and reference coordinates of each point in a scikit-fem hex mesh.
+    """:func:`locate` for ``skfem.MeshTet1`` / ``MeshTet2`` (see the module docstring)."""
+    n = points.shape[0]
+    cells_out = np.full(n, -1, dtype=np.int64)
+    xi_out = np.zeros((n, 3))
+    element, vertices = _tet_geometry(mesh)  # (ncell, nb, 3) geometry nodes
+    if n == 0 or vertices.shape[0] == 0:
+        return cells_out, xi_out
+    centroids = vertices.mean(axis=1)
+    cell_radius = np.linalg.norm(vertices - centroids[:, None], axis=-1).max(axis=1) * 1.001
+    k = min(4 * candidates, centroids.shape[0])
+    dist, cand = cKDTree(centroids).query(points, k=k)
+    dist = dist.reshape(n, k)
+    cand = cand.reshape(n, k)
+    unresolved = np.nonzero(dist[:, 0] <= cell_radius.max())[0]
+    for rank in range(k):  # candidates in order of centroid distance; most points stop at 0
+        if unresolved.size == 0:
+            break
+        cell = cand[unresolved, rank]
+        xi, residual = _invert_map(element, vertices[cell], points[unresolved], True)
+        inside = np.all(xi >= -tol, axis=1) & (xi.sum(axis=1) <= 1 + tol)
+        # a Newton run that stalled (distorted curved cell) is no hit
+        inside &= residual <= 1e-6 * cell_radius[cell]
+        cells_out[unresolved[inside]] = cell[inside]
+        xi_out[unresolved[inside]] = xi[inside]
+        unresolved = unresolved[~inside]
+    xi_out = np.clip(xi_out, 0.0, 1.0)
+    xi_out /= np.maximum(1.0, xi_out.sum(axis=1))[:, None]  # onto the unit tetrahedron
+    return cells_out, xi_out
+
+
+def _invert_map(
+    element: Any, verts: FloatArray, pts: FloatArray, simplex: bool, iterations: int = 25
+) -> tuple[FloatArray, FloatArray]:
+    """Reference coordinates of ``pts`` (m, 3) in the cells with geometry nodes ``verts``
+    (m, nb, 3) of ``element``, and the distance (m,) mm between ``pts`` and their image."""
+    xi = np.full((pts.shape[0], 3), 0.25 if simplex else 0.5)
+    nb = verts.shape[1]
+    active = np.arange(pts.shape[0])
+    for _ in range(iterations):  # Newton, only on the pairs that have not converged
+        vals, grads = _shape_values(element, xi[active].T, nb)
+        x = np.einsum("ma,mai->mi", vals, verts[active])
+        jac = np.einsum("mai,maj->mij", verts[active], grads)  # dx_i/dxi_j
+        step = np.linalg.solve(jac, (pts[active] - x)[..., None])[..., 0]
+        xi[active] = np.clip(xi[active] + step, -1.0, 2.0)
+        active = active[np.abs(step).max(axis=1) > 1e-12]
+        if active.size == 0:
+            break
+    vals, _ = _shape_values(element, xi.T, nb)
+    residual = np.linalg.norm(np.einsum("ma,mai->mi", vals, verts) - pts, axis=1)
+    return xi, residual
+
+
+def locate(
+    mesh: Any, points: FloatArray, *, candidates: int = 8, tol: float = 1e-7
+) -> tuple[IntArray, FloatArray]:
+    """Find the cell and reference coordinates of each point in a scikit-fem mesh.
 
     Parameters
     ----------
-    mesh : skfem.MeshHex1
-        Hexahedral mesh (trilinear geometry), mm.
+    mesh : skfem.MeshHex1, skfem.MeshTet1 or skfem.MeshTet2
+        Hexahedral (trilinear) or tetrahedral (linear or quadratic) mesh, mm.
     points : ndarray, shape (n, 3)
         Physical points, mm.
     candidates : int, default 8
-        Nearest cells (by centroid) tried per point.
+        Nearest cells (by centroid) tried per point; four times as many for tetrahedra.
     tol : float, default 1e-7
-        Tolerance on the reference coordinates' unit-cube bounds (dimensionless).
+        Tolerance on the reference cell's bounds (dimensionless).
 
     Returns
     -------
     cells : ndarray of int, shape (n,)
         Containing cell, or -1 where the point lies in no cell.
     xi : ndarray, shape (n, 3)
-        Reference coordinates in [0, 1]³ in scikit-fem's convention (the reference element
-        of ``skfem.ElementHex1``/``ElementHexS2``); 0 where ``cells == -1``.
+        Reference coordinates in scikit-fem's convention (the reference element of
+        ``skfem.ElementHex1``/``ElementHexS2``: [0, 1]³; of ``ElementTetP1``/``ElementTetP2``:
+        the unit tetrahedron); 0 where ``cells == -1``.
     """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if isinstance(mesh, (skfem.MeshTet1, skfem.MeshTet2)):
+        return _locate_tets(mesh, points, candidates=candidates, tol=tol)
     locator = HexLocator(mesh.p.T, mesh.t.T, corners=SKFEM_CORNERS)
     return locator.locate(points, candidates=candidates, tol=tol)
+
+
+def displacement_at(body: Any, u: ArrayLike, points: ArrayLike) -> FloatArray:
+    """Displacement at arbitrary reference points (apex, landmarks), mm.
+
+    Parameters
+    ----------
+    body : Body
+        The body ``u`` belongs to.
+    u : array_like, shape (ndof,) or (ntime, ndof)
+        Displacement dofs, mm.
+    points : array_like, shape (n, 3) or (3,)
+        Reference positions, mm.
+
+    Returns
+    -------
+    ndarray, shape (n, 3) (or (ntime, n, 3), or (3,) for one point)
+        Displacement, mm; NaN for points outside the mesh.
+
+    Examples
+    --------
+    >>> from harpx.mechanics import Body, NeoHookean, box
+    >>> body = Body(box((2.0, 1.0, 1.0), (2, 1, 1)), NeoHookean(c1=1.0, kappa=100.0))
+    >>> u = (0.1 * body.dof_points).ravel()  # uniform 10 % dilation
+    >>> displacement_at(body, u, [1.5, 0.5, 0.25]).round(6).tolist()
+    [0.15, 0.05, 0.025]
+    """
+    U = np.asarray(u, dtype=np.float64)
+    X = np.asarray(points, dtype=np.float64)
+    if X.shape[-1:] != (3,) or X.ndim > 2:
+        raise ValueError(f"points has shape {X.shape!r}; expected (n, 3) or (3,) positions in mm")
+    if U.shape[-1:] != (body.ndof,) or U.ndim > 2:
+        raise ValueError(
+            f"u has shape {U.shape!r}; expected ({body.ndof},) or (ntime, {body.ndof})"
+        )
+    cells, xi = locate(body.mesh, X.reshape(-1, 3))
+    inside = cells >= 0
+    Ut = U.reshape(-1, body.ndof)
+    out = np.full((Ut.shape[0], cells.size, 3), np.nan)
+    if inside.any():
+        vals, _ = _shape_values(body._scalar_element, xi[inside].T, body.nbasis)
+        dofs = body.element_dofs[cells[inside]]  # (m, nb, 3)
+        out[:, inside] = np.einsum("ma,tmai->tmi", vals, Ut[:, dofs])
+    if U.ndim == 1:
+        out = out[0]
+    return out.reshape(X.shape) if U.ndim == 1 else out.reshape(Ut.shape[0], *X.shape)

@@ -12,6 +12,7 @@ positive Jacobian. Units: mm.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -32,6 +33,7 @@ __all__ = [
     "hex_mesh",
     "facets_where",
     "labelled_spec",
+    "tetrahedralize",
 ]
 
 #: skfem local vertex k of a hexahedron is VTK vertex ``_VTK_TO_SKFEM[k]``.
@@ -603,3 +605,101 @@ def tube(
         tests["start"] = (on_start, True)
         tests["end"] = (on_end, True)
     return _finish(points, cells, {"tissue": np.arange(len(cells))}, tests)
+
+
+# Kuhn split of a VTK-ordered hexahedron into six tetrahedra around its diagonal 0-6: on a
+# consistently oriented grid, neighbouring cells split their shared face along the same
+# diagonal, so the tetrahedra are conforming.
+_KUHN = np.array(
+    [[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]]
+)
+# the six faces of a VTK hexahedron, each counter-clockwise seen from outside
+_HEX_FACES = np.array(
+    [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+)
+
+
+def _keys(triples: NDArray[np.int64], n: int) -> NDArray[np.int64]:
+    t = np.sort(triples, axis=-1).astype(np.int64)
+    return (t[..., 0] * n + t[..., 1]) * n + t[..., 2]
+
+
+def tetrahedralize(spec: MeshSpec) -> MeshSpec:
+    """Split a hexahedral :class:`MeshSpec` into conforming tetrahedra.
+
+    Each hexahedron becomes six tetrahedra (Kuhn split around one main diagonal) when that
+    is conforming across all shared faces (structured, consistently oriented grids such as
+    the builders' boxes and tubes); otherwise twelve: every face is split along the
+    diagonal through its lowest-numbered vertex (the same choice from both sides, so always
+    conforming) and each triangle is joined to a new point at the cell centre (e.g. the
+    O-grid core of :func:`cylinder` or the ventricle's apex). Regions, fibres (per cell)
+    and named boundaries carry over.
+
+    Parameters
+    ----------
+    spec : MeshSpec
+        Hexahedral mesh (mm).
+
+    Returns
+    -------
+    MeshSpec
+        A :class:`skfem.MeshTet1` with positively oriented cells. Use
+        :func:`harpx.mechanics.body.curved_tet_mesh` (or ``Body(..., element="tet10")``)
+        for quadratic tetrahedra.
+
+    Examples
+    --------
+    >>> from harpx.mechanics.mesh import box, tetrahedralize
+    >>> tets = tetrahedralize(box((1.0, 1.0, 1.0), (2, 2, 2)))
+    >>> tets.mesh.nelements, sorted(tets.boundaries)[:2]
+    (48, ['back', 'bottom'])
+    """
+    mesh = spec.mesh
+    if not isinstance(mesh, skfem.MeshHex1):
+        raise TypeError(f"tetrahedralize needs a hexahedral MeshSpec, got {type(mesh).__name__!r}")
+    cells = mesh.t.T[:, HEX_MAPPING[:8]].astype(np.int64)  # VTK order
+    points = mesh.p.T
+    n_hex = cells.shape[0]
+    nv = points.shape[0]
+    tets = cells[:, _KUHN].reshape(-1, 4)
+    parent = np.repeat(np.arange(n_hex), len(_KUHN))
+    # conforming iff every interior face keys exactly two tetrahedron faces
+    faces = np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 2, 3]], tets[:, [0, 1, 3]],
+                            tets[:, [0, 1, 2]]])  # fmt: skip
+    _, counts = np.unique(_keys(faces, nv), return_counts=True)
+    n_boundary_quads = len(mesh.boundary_facets())
+    centred = np.count_nonzero(counts == 1) != 2 * n_boundary_quads or np.any(counts > 2)
+    if centred:
+        # every face split along the diagonal through its lowest-numbered vertex (the same
+        # choice from both sides), each triangle joined to a new point at the cell centre
+        quads = cells[:, _HEX_FACES]  # (nhex, 6, 4), cyclic
+        first = np.argmin(quads, axis=2)
+        q = np.take_along_axis(quads, (first[..., None] + np.arange(4)) % 4, axis=2)
+        tri = np.stack([q[..., [0, 1, 2]], q[..., [0, 2, 3]]], axis=2)  # (nhex, 6, 2, 3)
+        cc = np.broadcast_to((nv + np.arange(n_hex))[:, None, None, None], (n_hex, 6, 2, 1))
+        tets = np.concatenate([cc, tri], axis=-1).reshape(-1, 4)
+        points = np.concatenate([points, points[cells].mean(axis=1)], axis=0)
+        parent = np.repeat(np.arange(n_hex), 12)
+    tmesh = skfem.MeshTet1(np.ascontiguousarray(points.T), np.ascontiguousarray(tets.T))
+    from harpx.mechanics.body import _orient_tets  # local: body imports this module
+
+    tmesh = _orient_tets(tmesh)
+    npt = points.shape[0]
+    bfacets = tmesh.boundary_facets()
+    bkeys = _keys(tmesh.facets[:, bfacets].T, npt)
+    boundaries = {}
+    for name, ids in spec.boundaries.items():
+        quad = np.sort(mesh.facets[:, ids].T.astype(np.int64), axis=1)  # (nq, 4)
+        # the triangles of a boundary quad are the facets with three of its vertices
+        tri = np.concatenate([np.delete(quad, i, axis=1) for i in range(4)])
+        boundaries[name] = np.sort(bfacets[np.isin(bkeys, _keys(tri, npt))]).astype(np.int64)
+    npc = len(tets) // n_hex
+    regions = {k: (npc * np.asarray(v)[:, None] + np.arange(npc)).ravel() for k, v in
+               spec.regions.items()}  # fmt: skip
+    fibers = None if spec.fibers is None else np.asarray(spec.fibers)[parent]
+    labelled = dataclasses.replace(
+        tmesh,
+        _boundaries={k: v.astype(np.int32) for k, v in boundaries.items()},
+        _subdomains={k: np.asarray(v).astype(np.int32) for k, v in regions.items()} or None,
+    )
+    return MeshSpec(mesh=labelled, regions=regions, fibers=fibers, boundaries=boundaries)

@@ -166,8 +166,10 @@ class _Newton:
         line_search: bool,
         linear_solver: str | LinearSolver,
         max_backtracks: int = 5,
+        t_max: Any = None,
     ) -> None:
         self.body = body
+        self.t_max = _activation_target(body, t_max)
         self.dirichlet, self.terms = split_loads(loads)
         self.tol = float(tol)
         if atol is None:
@@ -219,6 +221,8 @@ class _Newton:
 
     def assemble(self, u: FloatArray, s: float) -> _Assembled:
         t0 = time.perf_counter()
+        if self.t_max is not None:  # activation ramped with the loads: t_max(s) = s t_max
+            self.body.t_max = s * self.t_max
         internal = internal_forces(self.body, u, tangent=True)
         if internal.r is None or internal.K is None:
             self.time_assembly += time.perf_counter() - t0
@@ -369,6 +373,19 @@ class _Newton:
         raise AssertionError("unreachable")  # pragma: no cover
 
 
+def _activation_target(body: Any, t_max: Any) -> FloatArray | None:
+    """Per-cell activation (kPa) that ``t_max`` names, or None (the body's level stays)."""
+    if t_max is None:
+        return None
+    if getattr(body, "active", None) is None:
+        raise ValueError(
+            "t_max was given but the body has no active contraction law; build it with "
+            "Body(..., active=ActiveContraction(...))"
+        )
+    body.set_t_max(t_max)
+    return np.asarray(body.t_max, dtype=np.float64).copy()
+
+
 def _check_u0(body: Any, u0: ArrayLike | None) -> FloatArray:
     if u0 is None:
         return np.zeros(body.ndof)
@@ -483,6 +500,7 @@ def solve(
     max_cutbacks: int = 6,
     linear_solver: str | LinearSolver = "auto",
     raise_on_failure: bool = True,
+    t_max: Any = None,
 ) -> SolveResult:
     """Static equilibrium under loads ramped over load steps, with cut-back on failure.
 
@@ -518,6 +536,11 @@ def solve(
     raise_on_failure : bool, default True
         Raise on failure; otherwise return the last converged state with
         ``converged=False``.
+    t_max : float, dict of str to float or array_like of shape (ncell,), optional
+        Target activation in kPa (as :meth:`Body.set_t_max`), ramped together with the
+        loads: ``t_max(s) = s · t_max`` at load factor ``s`` (cut-backs included). The
+        body keeps the full level afterwards. Needs a body with an active law; by
+        default the body's current level is held fixed.
 
     Returns
     -------
@@ -552,6 +575,7 @@ def solve(
         max_iterations=max_iterations,
         line_search=line_search,
         linear_solver=linear_solver,
+        t_max=t_max,
     )
     nominal = 1.0 / int(steps)
     ds = nominal

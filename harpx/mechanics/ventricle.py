@@ -431,7 +431,10 @@ def ventricle(
         z of the base plane in mm (the apex is at ``z = -c``).
     n_circumferential : int, default 48
         Cells around the circumference; a multiple of 4, at least 8 (the apical O-grid
-        core has ``n_circumferential/4`` cells per side).
+        core has ``n_circumferential/4`` cells per side). The apex (on the axis) is a mesh
+        vertex only for a multiple of 8 (an even number of core cells per side); otherwise
+        it is the centre of the middle core cell (e.g. 12 or 20) -- evaluate fields there
+        with :meth:`Body.displacement_at` instead of reading a node.
     n_longitudinal : int, default 27
         Cells along the meridian between the apical cap and the base.
     n_transmural : int, default 4

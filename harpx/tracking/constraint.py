@@ -85,11 +85,19 @@ def constraint_quadrature(body: object, spacing: float) -> tuple[FloatArray, Flo
     Returns
     -------
     points : ndarray, shape (3, nq)
-        Reference coordinates in [0, 1]³.
+        Reference coordinates in [0, 1]³ (in the unit tetrahedron for tetrahedral meshes).
     weights : ndarray, shape (nq,)
-        Weights summing to 1 (the reference cell's volume).
+        Weights summing to the reference cell's volume (1, or 1/6 for tetrahedra).
+
+    Notes
+    -----
+    Tetrahedra get the centroids of a regular subdivision into ``m³`` congruent
+    tetrahedra, equal weights (exact for linear integrands), ``m`` set by the longest cell
+    edge so that neighbouring points are at most about ``spacing`` apart.
     """
     mesh = body.mesh  # type: ignore[attr-defined]
+    if isinstance(mesh, skfem.MeshTet1):
+        return _tet_quadrature(mesh, spacing)
     ref = skfem.ElementHex1().doflocs  # (8, 3) reference coordinates of the local vertices
     rules = []
     for j in range(3):
@@ -107,6 +115,34 @@ def constraint_quadrature(body: object, spacing: float) -> tuple[FloatArray, Flo
     grids = np.meshgrid(*(r[0] for r in rules), indexing="ij")
     weights = np.einsum("i,j,k->ijk", *(r[1] for r in rules)).ravel()
     return np.stack([g.ravel() for g in grids]), weights
+
+
+def _tet_quadrature(mesh: skfem.MeshTet1, spacing: float) -> tuple[FloatArray, FloatArray]:
+    """Centroids of the regular subdivision of the unit tetrahedron into ``m³`` tetrahedra.
+
+    The unit tetrahedron is the image of the Kuhn simplex ``1 >= a >= b >= c >= 0`` under
+    ``x = a - b, y = b - c, z = c``; the Freudenthal triangulation of the ``m³`` sub-cubes
+    of the unit cube puts ``m³`` congruent simplices in the Kuhn simplex. Their centroids
+    are about half a sub-edge apart, so ``m = ceil(longest edge / (1.5 spacing))``.
+    """
+    p, t = mesh.p, mesh.t
+    longest = max(
+        float(np.linalg.norm(p[:, t[i]] - p[:, t[j]], axis=0).max())
+        for i in range(4)
+        for j in range(i + 1, 4)
+    )
+    m = max(1, int(np.ceil(longest / (1.5 * spacing))))
+    i, j, k = (g.ravel() for g in np.meshgrid(*(np.arange(m),) * 3, indexing="ij"))
+    corner = np.stack([i, j, k], axis=1)
+    perms = np.array([[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]])
+    # offset of the centroid of the simplex s_p0 >= s_p1 >= s_p2 in its sub-cube
+    offset = np.zeros((6, 3))
+    np.put_along_axis(offset, perms, np.array([[0.75, 0.5, 0.25]]), axis=1)
+    c = (corner[:, None, :] + offset[None]).reshape(-1, 3) / m  # (a, b, c) of all simplices
+    keep = (c[:, 0] >= c[:, 1]) & (c[:, 1] >= c[:, 2])  # simplices inside the Kuhn simplex
+    a_, b_, c_ = c[keep].T
+    points = np.stack([a_ - b_, b_ - c_, c_])
+    return points, np.full(points.shape[1], 1.0 / (6.0 * points.shape[1]))
 
 
 @dataclass

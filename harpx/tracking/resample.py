@@ -1,8 +1,8 @@
 """Evaluate a finite-element displacement at arbitrary reference points (e.g. voxel centres).
 
-Points are located in the hexahedral mesh by :func:`harpx.mechanics.locate.locate`
-(vectorised, no Python loop over cells). Points in no cell are reported as outside (NaN
-displacement), never extrapolated.
+Points are located in the hexahedral or tetrahedral mesh by
+:func:`harpx.mechanics.locate.locate` (vectorised, no Python loop over cells). Points in no
+cell are reported as outside (NaN displacement), never extrapolated.
 """
 
 from __future__ import annotations
@@ -12,20 +12,9 @@ from typing import Any
 import numpy as np
 
 from harpx._typing import FloatArray
-from harpx.mechanics.locate import locate
+from harpx.mechanics.locate import displacement_at, locate
 
 __all__ = ["interpolate_displacement", "locate"]
-
-
-def _shape_values(element: Any, xi: FloatArray, nbasis: int) -> tuple[FloatArray, FloatArray]:
-    """Values (n, nb) and reference gradients (n, nb, 3) of an element's basis at ``xi`` (3, n)."""
-    vals = np.empty((xi.shape[1], nbasis))
-    grads = np.empty((xi.shape[1], nbasis, 3))
-    for a in range(nbasis):  # loop over the ≤ 20 basis functions, vectorised over points
-        phi, dphi = element.lbasis(xi, a)
-        vals[:, a] = phi
-        grads[:, a, :] = dphi.T
-    return vals, grads
 
 
 def interpolate_displacement(
@@ -50,11 +39,5 @@ def interpolate_displacement(
         Points inside the mesh.
     """
     U = np.atleast_2d(np.asarray(displacements, dtype=float))
-    cells, xi = locate(body.mesh, points)
-    inside = cells >= 0
-    out = np.full((U.shape[0], points.shape[0], 3), np.nan)
-    if inside.any():
-        vals, _ = _shape_values(body._scalar_element, xi[inside].T, body.nbasis)
-        dofs = body.element_dofs[cells[inside]]  # (m, nb, 3)
-        out[:, inside] = np.einsum("ma,tmai->tmi", vals, U[:, dofs])
-    return out, inside
+    out = displacement_at(body, U, np.asarray(points, dtype=float).reshape(-1, 3))
+    return out, ~np.isnan(out[0, :, 0]) if out.shape[0] else np.zeros(out.shape[1], bool)

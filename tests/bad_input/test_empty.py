@@ -40,7 +40,9 @@ def test_empty_vtu_is_named(tmp_path: Path) -> None:
 def test_mesh_file_without_hexahedra_is_named(tmp_path: Path) -> None:
     path = tmp_path / "tri.vtu"
     meshio.write(path, meshio.Mesh(np.eye(3), [("triangle", np.array([[0, 1, 2]]))]))
-    with pytest.raises(ValueError, match=r"has no hexahedra \(cell blocks \{'triangle': 1\}\)"):
+    with pytest.raises(
+        ValueError, match=r"has no hexahedra or tetrahedra \(cell blocks \{'triangle': 1\}\)"
+    ):
         Body(path, MAT)
 
 

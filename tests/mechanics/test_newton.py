@@ -30,6 +30,7 @@ from harpx.mechanics import (
 )
 from harpx.mechanics.assembly import cauchy_stress, first_piola, internal_forces
 from harpx.mechanics.linsolve import LinearSolver, available_methods
+from harpx.mechanics.mesh import tetrahedralize
 from harpx.mechanics.newton import _Newton
 
 C1, KAPPA = 1.0, 120.0
@@ -186,7 +187,10 @@ def test_newton_converges_quadratically():
 
 
 def _manufactured(element, n, volumetric):
-    """Smooth exact solution, body force -Div P from 4th-order differences of P(X)."""
+    """Smooth exact solution, body force -Div P from 4th-order differences of P(X).
+
+    Tetrahedral elements run on the Kuhn split of the same boxes (6 tetrahedra per cube).
+    """
     mat = NeoHookean(c1=1.0, kappa=10.0)
     amp = 0.05
 
@@ -214,7 +218,10 @@ def _manufactured(element, n, volumetric):
             div += d[:, :, J]
         return -s * div
 
-    body = Body(box((1.0, 1.0, 1.0), (n, n, n)), mat, element=element, volumetric=volumetric)
+    spec = box((1.0, 1.0, 1.0), (n, n, n))
+    if element.startswith("tet"):
+        spec = tetrahedralize(spec)
+    body = Body(spec, mat, element=element, volumetric=volumetric)
     loads = [Prescribed(_all_boundary(body), lambda X, s: s * u_exact(X)), BodyForce(force)]
     res = solve(body, loads, steps=1, tol=1e-12)
     Xq, wq, N = body.interpolation_operator(intorder=7)
@@ -228,6 +235,8 @@ def _manufactured(element, n, volumetric):
         pytest.param("hex8", "mean-dilatation", (2, 4, 8), 2.0, id="hex8-mean-dilatation"),
         pytest.param("hex20", "pointwise", (1, 2, 4), 3.0, id="hex20-pointwise"),
         pytest.param("hex20", "linear-dilatation", (1, 2, 4), 3.0, id="hex20-Q2P1"),
+        pytest.param("tet4", "nodal-dilatation", (2, 4, 8), 2.0, id="tet4-nodal-dilatation"),
+        pytest.param("tet10", "pointwise", (1, 2, 4), 3.0, id="tet10-pointwise"),
     ],
 )
 def test_mesh_refinement_order(element, volumetric, sizes, rate):
