@@ -1,15 +1,15 @@
-"""The noise floor of the tracking residual ε that the images themselves allow.
+r"""The noise floor of the tracking residual ε that the images themselves allow.
 
-Even at the true motion the residual :math:`W(\\phi(x, t) - \\phi_0(X))` is not zero: both
+Even at the true motion the residual :math:`W(\phi(x, t) - \phi_0(X))` is not zero: both
 phases carry image noise, the band-pass filter blurs the phase near the tissue's edges, and
 the tags fade. Raising the penalty past that floor only fits noise, and costs Gauss–Newton
 iterations. The floor is estimated from the data, before any tracking:
 
 1. **Reference frame.** At the tagging time the tags are undeformed, so each tag's phase is
-   affine in the material position, :math:`\\phi_{0,t}(X) = k_t \\cdot X + c_t`. The weighted
-   mean :math:`\\varepsilon_{0,t}` of :math:`|W(\\phi_{0,t} - k_t \\cdot X - c_t)|` over the
+   affine in the material position, :math:`\phi_{0,t}(X) = k_t \cdot X + c_t`. The weighted
+   mean :math:`\varepsilon_{0,t}` of :math:`|W(\phi_{0,t} - k_t \cdot X - c_t)|` over the
    constraint points, after fitting :math:`k_t` and :math:`c_t` (starting from the nominal
-   wave vector :math:`2\\pi f_t \\hat d_t`), is that frame's phase noise and edge error.
+   wave vector :math:`2\pi f_t \hat d_t`), is that frame's phase noise and edge error.
 2. **Later frames.** Phase noise scales as :math:`\sigma/|H|` (for a harmonic image with
    additive complex noise σ, the phase error is σ/|H| to first order), so as the tags fade
    the floor grows with the mean harmonic magnitude :math:`\bar m` at the tissue:
