@@ -317,25 +317,10 @@ class Body:
             raise ValueError("t_max was given without an active contraction law (active=None)")
 
         # growth
-        self.growth = growth
+        self.growth: Any = None
         self.growth_tensor: FloatArray | None = None
         self.growth_jacobian: FloatArray | None = None
-        if growth is not None:
-            assert self.fibers_qp is not None
-            if hasattr(growth, "tensor"):
-                Fg = np.asarray(growth.tensor(self.fibers_qp), dtype=np.float64)
-                Fg = np.broadcast_to(Fg, (self.ncell, nqp, 3, 3))
-            else:
-                theta = np.asarray(growth, dtype=np.float64)
-                if theta.shape != (self.ncell,) or np.any(theta <= 0):
-                    raise ValueError(
-                        f"growth stretch array has shape {theta.shape!r}; expected "
-                        f"({self.ncell},) positive values, or a FiberGrowth"
-                    )
-                Fg = kinematics.growth_tensor(self.fibers_qp, theta[:, None])
-            self.growth_tensor = np.ascontiguousarray(Fg)
-            Jg = np.linalg.det(self.growth_tensor)
-            self.growth_jacobian = (Jg * self.dV).sum(axis=1) / self.cell_volume
+        self.set_growth(growth)
 
     # ------------------------------------------------------------------ set-up helpers
     def set_t_max(self, t_max: float | Mapping[str, float] | ArrayLike) -> None:
@@ -359,6 +344,49 @@ class Body:
         else:
             values = np.broadcast_to(np.asarray(t_max, dtype=np.float64), (self.ncell,)).copy()
         self.t_max = values
+
+    def set_growth(self, growth: Any) -> None:
+        """Set the growth (``F = Fe Fg``), or remove it with ``None``.
+
+        Parameters
+        ----------
+        growth : FiberGrowth, GrowthField, array_like of shape (ncell,), or None
+            A law or field with ``tensor(fibers_qp) -> Fg`` (e.g.
+            :class:`~harpx.mechanics.materials.FiberGrowth`,
+            :class:`~harpx.mechanics.growth.GrowthField`), or one fibre stretch θ per cell
+            (``Fg = I + (θ - 1) f0 ⊗ f0``, dimensionless, > 0).
+
+        Notes
+        -----
+        Sets ``growth``, ``growth_tensor`` (ncell, nqp, 3, 3) and ``growth_jacobian``, the
+        volume average of ``det Fg`` per cell (the growth Jacobian is computed here only).
+        """
+        if growth is None:
+            self.growth, self.growth_tensor, self.growth_jacobian = None, None, None
+            return
+        fibers = self.fibers_qp
+        if fibers is None:
+            if not hasattr(growth, "tensors"):
+                raise ValueError(
+                    "fibre growth needs 'fibers' but none were given; pass fibers=(ncell, 3) "
+                    "unit vectors (or use a mesh builder that provides them)"
+                )
+            fibers = np.zeros((self.ncell, self.nqp, 3))  # a tensor field needs no fibres
+        if hasattr(growth, "tensor"):
+            Fg = np.asarray(growth.tensor(fibers), dtype=np.float64)
+            Fg = np.broadcast_to(Fg, (self.ncell, self.nqp, 3, 3))
+        else:
+            theta = np.asarray(growth, dtype=np.float64)
+            if theta.shape != (self.ncell,) or np.any(theta <= 0):
+                raise ValueError(
+                    f"growth stretch array has shape {theta.shape!r}; expected "
+                    f"({self.ncell},) positive values, or a FiberGrowth"
+                )
+            Fg = kinematics.growth_tensor(fibers, theta[:, None])
+        self.growth = growth
+        self.growth_tensor = np.ascontiguousarray(Fg)
+        Jg = np.linalg.det(self.growth_tensor)
+        self.growth_jacobian = (Jg * self.dV).sum(axis=1) / self.cell_volume
 
     def _vtk_cells(self) -> IntArray:
         corners = self.mesh.t.T[:, HEX_MAPPING[:8]].astype(np.int64)  # VTK corner order

@@ -146,10 +146,6 @@ class VentricleGeometry:
         nu_base = float(np.arccos(np.clip(-self.truncation / c, -1.0, 1.0)))
         return nu, arc, float(np.interp(nu_base, nu, arc))
 
-    def meridian_length(self, t: float) -> float:
-        """Arc length (mm) of layer ``t``'s meridian from the apex to the base plane."""
-        return self._meridian_table(t)[2]
-
     def _project(self, sigma: FloatArray, t: float) -> FloatArray:
         """Arc position (mm) on layer ``t`` of the mid-wall normal through arc fraction σ."""
         nu_m, arc_m, length_m = self._meridian_table(0.5)

@@ -7,11 +7,11 @@ import pytest
 
 from harpx.imaging.harp import extract_phase
 from harpx.mechanics.assembly import cauchy_stress
-from harpx.mechanics.cut import opening_angle, release
+from harpx.mechanics.cut import opening_angle
+from harpx.mechanics.growth import fiber_prestretch, release
 from harpx.scenes.lv import (
     TRACKING,
     Systole,
-    fiber_prestretch,
     fiber_shortening,
     lv,
 )
