@@ -378,7 +378,7 @@ def plot_stretch_agreement(
     fig = Figure(figsize=(10.0, 4.0), layout="constrained")
     ax, ax2 = fig.subplots(1, 2)
     x = np.arange(len(names))
-    bars = [
+    bars: list[tuple[str, Any, Any]] = [
         (
             "tracked (images)",
             comparison["stretch_tracked"].values,
@@ -407,11 +407,11 @@ def plot_stretch_agreement(
     ax.set_ylabel("mean fibre strain λ − 1 (%)")
     ax.set_title("fibre stretch per muscle")
     ax.legend(fontsize=8, loc="lower right")
-    label = comparison["region_label"].values
+    region_of_cell = comparison["region_label"].values
     tr = comparison["fiber_stretch_tracked"].values
     sim = comparison["fiber_stretch_simulated"].values
     for k, n in enumerate(names):  # one colour per muscle
-        sel = label == k
+        sel = region_of_cell == k
         ax2.scatter(tr[sel], sim[sel], s=8, label=n)
     both = np.concatenate([tr, sim])
     lim = (float(np.nanmin(both)) - 0.01, float(np.nanmax(both)) + 0.01)

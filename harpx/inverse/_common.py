@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import xarray as xr
 
@@ -68,13 +66,7 @@ def attrs(name: str) -> dict[str, str]:
     return dict(ATTRS[name])
 
 
-def cell_mean(body: Body, q: FloatArray) -> FloatArray:
-    """Volume average over each cell of a Gauss-point field (ncell, nqp, ...)."""
-    w = body.dV / body.cell_volume[:, None]
-    return np.einsum("eq,eq...->e...", w, q)
-
-
-def matching_regions(estimate: xr.Dataset, body: Any) -> list[str]:
+def matching_regions(estimate: xr.Dataset, body: Body) -> list[str]:
     """The body's region names, checked against those of an activation estimate."""
     names = list(body.regions)
     if list(estimate["region"].values) != names:

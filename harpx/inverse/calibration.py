@@ -21,6 +21,7 @@ from harpx.inverse._common import (
 from harpx.inverse.correction import correct_activation
 from harpx.inverse.estimate import estimate_activation
 from harpx.mechanics.active import default_law, fibred_body, simulate_history
+from harpx.mechanics.body import Body
 from harpx.mechanics.materials import ActiveContraction
 
 __all__ = ["calibrate_activation"]
@@ -29,7 +30,7 @@ __all__ = ["calibrate_activation"]
 def calibrate_activation(
     estimate: xr.Dataset,
     tracked: xr.Dataset,
-    body: Any,
+    body: Body,
     *,
     measure: Callable[[Any, FloatArray], xr.Dataset],
     dirichlet: Sequence[Any] = (),

@@ -29,6 +29,7 @@ from harpx.mechanics.active import (
     simulate_activation,
     with_active_law,
 )
+from harpx.mechanics.body import Body
 from harpx.mechanics.materials import ActiveContraction
 from harpx.schema import standard_attrs
 
@@ -36,7 +37,7 @@ __all__ = ["resimulate"]
 
 
 def resimulate(
-    body: Any,
+    body: Body,
     t_max_by_region: Any,
     *,
     dirichlet: Sequence[Any] = (),

@@ -35,7 +35,6 @@ from scipy.sparse import linalg as spla
 from harpx._typing import FloatArray
 from harpx.inverse._common import (
     attrs,
-    cell_mean,
     matching_regions,
     region_means,
     time_index,
@@ -49,24 +48,32 @@ from harpx.mechanics.materials import ActiveContraction
 __all__ = ["correct_activation"]
 
 
+def _residual(body: Body, u: FloatArray) -> FloatArray:
+    """Internal force vector at ``u``, whose tangent the caller found admissible (mN)."""
+    r = internal_forces(body, u, tangent=False).r
+    assert r is not None  # same state as the admissible tangent: no inverted cell
+    return r
+
+
 def _stretch_derivative(body: Body, u: FloatArray, du: FloatArray) -> FloatArray:
     """Cell-averaged ``dλ`` for displacement directions ``du`` (m, ndof) -> (m, ncell)."""
     F = body.deformation_gradient(u)
     f0 = body.fibers_qp
+    assert f0 is not None  # checked by fibred_body
     a = np.einsum("eqiJ,eqJ->eqi", F, f0)
     lam = np.linalg.norm(a, axis=-1)
     out = []
     for d in du:  # loop over the few regions
         dF = body.deformation_gradient(d) - np.eye(3)
         dlam = np.einsum("eqi,eqiJ,eqJ->eq", a, dF, f0) / lam
-        out.append(cell_mean(body, dlam))
+        out.append(body.cell_average(dlam))
     return np.asarray(out)
 
 
 def correct_activation(
     estimate: xr.Dataset,
     tracked: xr.Dataset,
-    body: Any,
+    body: Body,
     *,
     dirichlet: Sequence[Any] = (),
     terms: Sequence[Any] = (),
@@ -154,11 +161,11 @@ def correct_activation(
         if K_t is not None:
             K = K + K_t
     active.set_t_max(0.0)
-    R_p = internal_forces(active, u, tangent=False).r + R_extra
+    R_p = _residual(active, u) + R_extra
     rhs = [R_p]
     for name in names:  # residual per unit T_max of each region (linear in T_max)
         active.set_t_max({name: 1.0})
-        rhs.append(internal_forces(active, u, tangent=False).r + R_extra - R_p)
+        rhs.append(_residual(active, u) + R_extra - R_p)
     fixed = [np.asarray(d.dofs(body), dtype=np.int64) for d in dirichlet]
     is_fixed = np.zeros(body.ndof, dtype=bool)
     if fixed:

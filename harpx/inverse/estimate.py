@@ -68,13 +68,13 @@ from numpy.typing import ArrayLike
 from harpx._typing import FloatArray
 from harpx.inverse._common import (
     attrs,
-    cell_mean,
     region_table,
     time_index,
     tracked_u,
     weighted_stats,
 )
 from harpx.mechanics.active import default_law, fibred_body
+from harpx.mechanics.body import Body
 from harpx.mechanics.kinematics import split_growth
 from harpx.mechanics.materials import ActiveContraction
 
@@ -131,7 +131,7 @@ def uniaxial_active_tension(
 
 def estimate_activation(
     tracked: xr.Dataset,
-    body: Any,
+    body: Body,
     *,
     time: int = -1,
     law: ActiveContraction | None = None,
@@ -184,8 +184,9 @@ def estimate_activation(
     F = body.deformation_gradient(u)
     if body.growth_tensor is not None:
         F = split_growth(F, body.growth_tensor)
+    assert body.fibers_qp is not None  # checked by fibred_body
     T_qp, lam_qp = uniaxial_active_tension(body.material, F, body.fibers_qp)
-    T_cell = cell_mean(body, T_qp)
+    T_cell = body.cell_average(T_qp)
     if "fiber_stretch" in tracked:
         lam = np.asarray(tracked["fiber_stretch"].isel(time=index).values, dtype=np.float64)
         if lam.shape != (body.ncell,):
@@ -194,7 +195,7 @@ def estimate_activation(
                 "cells of the body"
             )
     else:
-        lam = cell_mean(body, lam_qp)
+        lam = body.cell_average(lam_qp)
     t_cell = np.asarray(law.t_max_for_tension(lam, T_cell), dtype=np.float64)
 
     names, label = region_table(body)

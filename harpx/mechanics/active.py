@@ -34,7 +34,7 @@ __all__ = [
 ]
 
 
-def fibred_body(body: Any) -> Body:
+def fibred_body(body: object) -> Body:
     """``body`` itself, checked to be a :class:`~harpx.mechanics.body.Body` with fibres.
 
     Raises
@@ -97,12 +97,12 @@ def with_active_law(body: Body, law: ActiveContraction) -> Body:
         body.material,
         fibers=body.fibers_qp,
         regions=body.regions,
-        element=body.element,  # type: ignore[arg-type]
+        element=body.element,
         active=law,
         t_max=0.0,
         growth=body.growth,
         boundaries=body.boundaries,
-        volumetric=body.volumetric,  # type: ignore[arg-type]
+        volumetric=body.volumetric,
     )
 
 
@@ -122,7 +122,7 @@ def default_law(body: Body, law: ActiveContraction | None) -> ActiveContraction:
 
 
 def simulate_activation(
-    body: Any,
+    body: Body,
     t_max: Any,
     *,
     loads: Sequence[Any] = (),
@@ -227,7 +227,7 @@ def simulate_activation(
 
 
 def simulate_history(
-    body: Any,
+    body: Body,
     t_max_by_region: Any,
     frames: int,
     *,

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import functools
 import os
-from collections.abc import Mapping, Sequence
-from typing import Any, Literal
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, Literal, TypeVar
 
 import meshio
 import numpy as np
@@ -30,6 +30,8 @@ from harpx.mechanics import kinematics
 from harpx.mechanics.mesh import MeshSpec
 
 __all__ = ["Body", "ELEMENTS"]
+
+_T = TypeVar("_T")
 
 #: element name -> (scalar skfem element factory, quadrature order giving the Gauss rule)
 ELEMENTS: dict[str, tuple[Any, int, int]] = {
@@ -230,6 +232,7 @@ class Body:
                 f"element={element!r} (Q1/P1 is not inf-sup stable and locks) use "
                 "'mean-dilatation'"
             )
+        self._caches: dict[str, Any] = {}
         self.mesh = mesh
         self.material = material
         self.element = element
@@ -402,6 +405,40 @@ class Body:
         order = np.argmin(d, axis=2)
         edges = np.take_along_axis(edge_dofs, order, axis=1)
         return np.concatenate([corners, edges], axis=1)
+
+    # ------------------------------------------------------------ read-only accessors
+    @property
+    def scalar_element(self) -> skfem.Element:
+        """The scalar scikit-fem element (``ElementHex1`` for hex8, ``ElementHexS2`` hex20)."""
+        return self._scalar_element
+
+    @property
+    def basis_values(self) -> FloatArray:
+        """Shape-function values at the reference Gauss points, shape (nbasis, nqp)."""
+        return self._N_values
+
+    def cell_average(self, q: FloatArray) -> FloatArray:
+        """Volume average per cell of a quadrature-point field ``q`` (ncell, nqp, ...)."""
+        return self._cell_average(q)
+
+    def cached(self, key: str, build: Callable[[], _T]) -> _T:
+        """Derived data kept with the body (sparsity pattern, pressure space), built once.
+
+        Parameters
+        ----------
+        key : str
+            Name of the cached item.
+        build : callable
+            ``build()`` computes it the first time.
+
+        Returns
+        -------
+        object
+            The cached item.
+        """
+        if key not in self._caches:
+            self._caches[key] = build()
+        return self._caches[key]
 
     @functools.cached_property
     def basis(self) -> skfem.CellBasis:

@@ -184,7 +184,8 @@ def opening_angle(
         if u_ref.shape != (body.ndof,):
             raise ValueError(f"u_reference has shape {u_ref.shape!r}; expected ({body.ndof},)")
         F_ref = body.deformation_gradient(u_ref)[keep]
-        Fg = np.linalg.inv(F_ref) if Fg is None else np.matmul(Fg, np.linalg.inv(F_ref))
+        inv_ref = np.asarray(np.linalg.inv(F_ref), dtype=np.float64)
+        Fg = inv_ref if Fg is None else np.matmul(Fg, inv_ref)
         nodes = nodes + u_ref.reshape(-1, 3)[: len(nodes)]
         if fibers is not None:
             fibers = np.einsum("eqij,eqj->eqi", F_ref, fibers)

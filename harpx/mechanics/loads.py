@@ -183,7 +183,7 @@ def _facet_quadrature(body: Any, facet: Any) -> _FacetQuadrature:
         return cache[key]
     order = 3 if body.element == "hex8" else 5
     fb = skfem.FacetBasis(
-        body.mesh, body._scalar_element, facets=facets.astype(np.int32), intorder=order
+        body.mesh, body.scalar_element, facets=facets.astype(np.int32), intorder=order
     )
     nb = body.nbasis
     phi = np.stack([np.asarray(fb.basis[j][0]) for j in range(nb)], axis=-1)
@@ -239,13 +239,18 @@ class Pressure:
         cof = kinematics.cofactor(F)
         t = np.einsum("fqiJ,fqJ->fqi", cof, q.normal) * (p * q.dA)[..., None]
         re = np.einsum("fqa,fqi->fai", q.phi, t)
-        r = np.bincount(q.dofs.ravel(), weights=re.ravel(), minlength=body.ndof)
+        r = np.asarray(
+            np.bincount(q.dofs.ravel(), weights=re.ravel(), minlength=body.ndof), dtype=np.float64
+        )
         w = np.cross(F, q.normal[:, :, None, :])  # (nf, nq, m, L) = F_m x N
         T = np.einsum("ikm,fqmL->fqikL", _EPS, w)
         C = np.einsum("fqikL,fqbL->fqikb", T, q.grad)
         Ke = np.einsum("fqa,fqikb->faikb", q.phi * (p * q.dA)[..., None], C)
         pat = sparsity(body)
-        data = np.bincount(q.positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz)
+        data = np.asarray(
+            np.bincount(q.positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz),
+            dtype=np.float64,
+        )
         return r, pat.matrix(data)
 
 
@@ -273,6 +278,9 @@ class BodyForce:
             b = b.reshape(X.shape)
         else:
             b = float(s) * np.broadcast_to(np.asarray(self.force, dtype=np.float64), X.shape)
-        re = np.einsum("qa,eqi,eq->eai", body._N_values.T, b, body.dV)
-        r = -np.bincount(body.element_dofs.ravel(), weights=re.ravel(), minlength=body.ndof)
+        re = np.einsum("qa,eqi,eq->eai", body.basis_values.T, b, body.dV)
+        r = -np.asarray(
+            np.bincount(body.element_dofs.ravel(), weights=re.ravel(), minlength=body.ndof),
+            dtype=np.float64,
+        )
         return r, None

@@ -63,6 +63,7 @@ References
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import skfem
@@ -70,6 +71,9 @@ from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
 from harpx.mechanics.mesh import MeshSpec, facets_where, hex_mesh, labelled_spec
+
+if TYPE_CHECKING:
+    from harpx.mechanics.body import Body
 
 __all__ = ["VentricleGeometry", "cavity_volume", "ventricle"]
 
@@ -540,7 +544,7 @@ def ventricle(
     return labelled_spec(mesh, regions, boundaries, fibers)
 
 
-def cavity_volume(body: object, u: ArrayLike | None = None, *, base: float | None = None) -> float:
+def cavity_volume(body: Body, u: ArrayLike | None = None, *, base: float | None = None) -> float:
     """Volume enclosed by the (deformed) endocardium and the base plane, mm³.
 
     Parameters
@@ -563,13 +567,13 @@ def cavity_volume(body: object, u: ArrayLike | None = None, *, base: float | Non
     """
     from harpx.mechanics.kinematics import cofactor
 
-    facets = body.facets("endo")  # type: ignore[attr-defined]
-    mesh = body.mesh  # type: ignore[attr-defined]
-    element = body._scalar_element  # type: ignore[attr-defined]
+    facets = body.facets("endo")
+    mesh = body.mesh
+    element = body.scalar_element
     fb = skfem.FacetBasis(mesh, element, facets=facets.astype(np.int32), intorder=4)
     nb = len(fb.basis)
     if u is None:
-        u = np.zeros(body.ndof)  # type: ignore[attr-defined]
+        u = np.zeros(body.ndof)
     u = np.asarray(u, dtype=np.float64)
     ue = u[3 * fb.element_dofs.T[:, :, None] + np.arange(3)]  # (nf, nb, 3)
     phi = np.stack([np.asarray(fb.basis[a][0]) for a in range(nb)], axis=-1)  # (nf, nq, nb)
@@ -578,6 +582,6 @@ def cavity_volume(body: object, u: ArrayLike | None = None, *, base: float | Non
     nda = np.einsum("fqiJ,fqJ->fqi", cofactor(F), np.asarray(fb.normals).transpose(1, 2, 0))
     x = np.asarray(fb.global_coordinates()).transpose(1, 2, 0) + np.einsum("fqa,fai->fqi", phi, ue)
     if base is None:
-        base_facets = body.facets("base")  # type: ignore[attr-defined]
+        base_facets = body.facets("base")
         base = float(mesh.p[2, np.unique(mesh.facets[:, base_facets])].mean())
     return float(-np.sum((x[..., 2] - base) * nda[..., 2] * np.asarray(fb.dx)))

@@ -399,7 +399,7 @@ class LVScene:
     tagged: xr.Dataset
     mesh: MeshSpec
     material: Any
-    reference: str
+    reference: Reference
     truth: FEMotion
     geometry: VentricleGeometry = GEOMETRY
     info: dict = field(default_factory=dict)

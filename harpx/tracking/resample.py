@@ -54,7 +54,7 @@ def interpolate_displacement(
     inside = cells >= 0
     out = np.full((U.shape[0], points.shape[0], 3), np.nan)
     if inside.any():
-        vals, _ = _shape_values(body._scalar_element, xi[inside].T, body.nbasis)
+        vals, _ = _shape_values(body.scalar_element, xi[inside].T, body.nbasis)
         dofs = body.element_dofs[cells[inside]]  # (m, nb, 3)
         out[:, inside] = np.einsum("ma,tmai->tmi", vals, U[:, dofs])
     return out, inside
