@@ -478,7 +478,8 @@ def ventricle(
         raise ValueError(
             f"n_longitudinal={n_longitudinal!r} and n_transmural={n_transmural!r} must be >= 1"
         )
-    geom = VentricleGeometry(inner=tuple(inner), outer=tuple(outer), truncation=truncation)
+    (a_in, c_in), (a_out, c_out) = inner, outer
+    geom = VentricleGeometry(inner=(a_in, c_in), outer=(a_out, c_out), truncation=truncation)
     m = nc // 4
     kappa = 0.75
     sigma_cap = kappa * m / (nl + kappa * m)

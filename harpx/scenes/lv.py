@@ -497,7 +497,7 @@ def lv(
         segments=False,
     )
     truth_body = Body(fine, material, active=ActiveContraction(t_max=0.0))
-    times = g.frame_interval * np.arange(g.frames)
+    times = g.frame_interval * np.arange(g.frames, dtype=np.float64)
     U, forward = simulate_systole(
         truth_body, g.frames, systole, base_conditions(geometry), linear_solver=linear_solver
     )
