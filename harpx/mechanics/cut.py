@@ -56,7 +56,7 @@ class NodeFixed:
     points: Any
     components: tuple[int, ...]
 
-    def dofs(self, body: Any) -> IntArray:
+    def dofs(self, body: Body) -> IntArray:
         """Constrained dof ids (sorted, unique)."""
         p = np.asarray(self.points, dtype=np.float64).reshape(-1, 3)
         if len(p) != len(self.components):
@@ -68,7 +68,7 @@ class NodeFixed:
         nodes = d.argmin(axis=0)
         return np.unique(3 * nodes + np.asarray(self.components, dtype=np.int64))
 
-    def values(self, body: Any, s: float) -> FloatArray:
+    def values(self, body: Body, s: float) -> FloatArray:
         """Zeros (mm)."""
         return np.zeros(self.dofs(body).size)
 

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from harpx._typing import FloatArray
+from harpx.mechanics.body import Body
 from harpx.mechanics.locate import locate
 
 __all__ = ["interpolate_displacement", "locate"]
@@ -29,7 +30,7 @@ def _shape_values(element: Any, xi: FloatArray, nbasis: int) -> tuple[FloatArray
 
 
 def interpolate_displacement(
-    body: Any, displacements: FloatArray, points: FloatArray
+    body: Body, displacements: FloatArray, points: FloatArray
 ) -> tuple[FloatArray, np.ndarray]:
     """Displacement of material points given by reference positions.
 
