@@ -218,12 +218,14 @@ def write(results: list[dict], size: str, scene: str = "phantom") -> None:
         writer.writeheader()
         writer.writerows(results)
     lines = [
-        "| method | mean ± sd (mm) | p95 (mm) | max (mm) | wall time (s) | Gauss–Newton it. | λ max |",
+        "| method | mean ± sd (mm) | p95 (mm) | max (mm) | wall time (s) | Gauss–Newton it. "
+        "| λ max |",
         "|---|---|---|---|---|---|---|",
     ]
     for r in results:
         lines.append(
-            f"| {r['method']} | {r['mean']:.3f} ± {r['sd']:.3f} | {r['p95']:.3f} | {r['max']:.2f} | "
+            f"| {r['method']} | {r['mean']:.3f} ± {r['sd']:.3f} | {r['p95']:.3f} | "
+            f"{r['max']:.2f} | "
             f"{r['seconds']:.1f} | {r.get('iterations', '')} | {r.get('penalty_max', '')} |"
         )
     stem.with_suffix(".md").write_text("\n".join(lines) + "\n")

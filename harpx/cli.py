@@ -33,7 +33,8 @@ def _demo(args: argparse.Namespace) -> int:
     t = time.perf_counter()
     scene = phantom(args.size)
     print(
-        f"phantom ({args.size}): images {dict(scene.tagged.sizes)} built in {time.perf_counter() - t:.1f} s"
+        f"phantom ({args.size}): images {dict(scene.tagged.sizes)} built in "
+        f"{time.perf_counter() - t:.1f} s"
     )
     t = time.perf_counter()
     phase = extract_phase(scene.tagged, upsample=args.upsample)
@@ -77,7 +78,8 @@ def _demo(args: argparse.Namespace) -> int:
             max=float(err.max_all),
         )
         print(
-            f"| {row['method']} | {row['mean']:.3f} ± {row['sd']:.3f} | {row['p95']:.3f} | {row['max']:.2f} | {row['seconds']:.1f} |"
+            f"| {row['method']} | {row['mean']:.3f} ± {row['sd']:.3f} | {row['p95']:.3f} | "
+            f"{row['max']:.2f} | {row['seconds']:.1f} |"
         )
     frame_time = 54.0 if args.size == "paper" else float(scene.tagged.time[-2])
     displacement_maps(
@@ -134,7 +136,8 @@ def _report(args: argparse.Namespace) -> int:
     if args.truth:
         err = tracking_error(ds, open_dataset(args.truth))
         print(
-            f"error against truth: mean {float(err.mean_all):.3f} ± {float(err.sd_all):.3f} mm, p95 {float(err.p95_all):.3f} mm, max {float(err.max_all):.3f} mm"
+            f"error against truth: mean {float(err.mean_all):.3f} ± {float(err.sd_all):.3f} mm, "
+            f"p95 {float(err.p95_all):.3f} mm, max {float(err.max_all):.3f} mm"
         )
     return 0
 

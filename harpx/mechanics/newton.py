@@ -21,9 +21,9 @@ moves with it. Steps are full Newton steps (keeping quadratic convergence, which
 the volumetric energy yet lands in the basin of convergence: measured 4--5 instead of 7--12
 iterations per step at κ/C1 = 10⁴). The line search is a safeguard: a trial with an inverted
 element or NaN is halved (:math:`\alpha = 1, 1/2, \dots`; if the trial still moves the
-prescribed boundary the step fails at once, so that the load increment is halved), and once :math:`\|R_F\|` has
-grown in two consecutive iterations the energy-slope line search takes over, accepting
-:math:`\alpha` when :math:`|\delta u \cdot R_F(u + \alpha\delta u)| \le 0.9\,
+prescribed boundary the step fails at once, so that the load increment is halved), and
+once :math:`\|R_F\|` has grown in two consecutive iterations the energy-slope line search
+takes over, accepting :math:`\alpha` when :math:`|\delta u \cdot R_F(u + \alpha\delta u)| \le 0.9\,
 |\delta u \cdot R_F(u)|` and otherwise moving to the secant zero of that slope (it needs
 only residuals, so it serves non-conservative terms too). Convergence: the boundary values
 are reached and :math:`\|R_F\| \le \max(\mathrm{tol}\cdot\rho, \mathrm{atol})`, with the

@@ -6,7 +6,8 @@ its phase in the reference frame, the constraint energy is
 
 .. math::
 
-    \Pi_c(u) = \int_{\mathcal R} \tfrac12\, m(X) \sum_t \Big(\lambda\, r_t^2 + 2\Lambda_t r_t\Big)\, dV,
+    \Pi_c(u) = \int_{\mathcal R} \tfrac12\, m(X) \sum_t
+              \Big(\lambda\, r_t^2 + 2\Lambda_t r_t\Big)\, dV,
     \qquad r_t = W\big(\phi_t(x, t) - \phi_{0,t}(X)\big),
 
 with :math:`W(a) = \operatorname{angle}(e^{ia})` the wrap to :math:`[-\pi, \pi)`, :math:`m` the
