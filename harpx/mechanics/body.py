@@ -16,8 +16,8 @@ from __future__ import annotations
 import functools
 import os
 import warnings
-from collections.abc import Mapping, Sequence
-from typing import Any, Literal
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, Literal, TypeVar
 
 import meshio
 import numpy as np
@@ -32,6 +32,8 @@ from harpx.mechanics import kinematics
 from harpx.mechanics.mesh import MeshSpec, check_nodes, check_unused_nodes, coincident_nodes
 
 __all__ = ["Body", "ELEMENTS", "check_fits_image"]
+
+_T = TypeVar("_T")
 
 #: element name -> (scalar skfem element factory, quadrature order giving the Gauss rule)
 ELEMENTS: dict[str, tuple[Any, int, int]] = {
@@ -359,6 +361,7 @@ class Body:
                 f"element={element!r} (Q1/P1 is not inf-sup stable and locks) use "
                 "'mean-dilatation'"
             )
+        self._caches: dict[str, Any] = {}
         self.mesh = mesh
         self.material = material
         self.element = element
@@ -458,25 +461,10 @@ class Body:
             raise ValueError("t_max was given without an active contraction law (active=None)")
 
         # growth
-        self.growth = growth
+        self.growth: Any = None
         self.growth_tensor: FloatArray | None = None
         self.growth_jacobian: FloatArray | None = None
-        if growth is not None:
-            assert self.fibers_qp is not None
-            if hasattr(growth, "tensor"):
-                Fg = np.asarray(growth.tensor(self.fibers_qp), dtype=np.float64)
-                Fg = np.broadcast_to(Fg, (self.ncell, nqp, 3, 3))
-            else:
-                theta = np.asarray(growth, dtype=np.float64)
-                if theta.shape != (self.ncell,) or np.any(theta <= 0):
-                    raise ValueError(
-                        f"growth stretch array has shape {theta.shape!r}; expected "
-                        f"({self.ncell},) positive values, or a FiberGrowth"
-                    )
-                Fg = kinematics.growth_tensor(self.fibers_qp, theta[:, None])
-            self.growth_tensor = np.ascontiguousarray(Fg)
-            Jg = np.linalg.det(self.growth_tensor)
-            self.growth_jacobian = (Jg * self.dV).sum(axis=1) / self.cell_volume
+        self.set_growth(growth)
 
     # ------------------------------------------------------------------ set-up helpers
     def set_t_max(self, t_max: float | Mapping[str, float] | ArrayLike) -> None:
@@ -501,6 +489,49 @@ class Body:
             values = np.broadcast_to(np.asarray(t_max, dtype=np.float64), (self.ncell,)).copy()
         self.t_max = values
 
+    def set_growth(self, growth: Any) -> None:
+        """Set the growth (``F = Fe Fg``), or remove it with ``None``.
+
+        Parameters
+        ----------
+        growth : FiberGrowth, GrowthField, array_like of shape (ncell,), or None
+            A law or field with ``tensor(fibers_qp) -> Fg`` (e.g.
+            :class:`~harpx.mechanics.materials.FiberGrowth`,
+            :class:`~harpx.mechanics.growth.GrowthField`), or one fibre stretch θ per cell
+            (``Fg = I + (θ - 1) f0 ⊗ f0``, dimensionless, > 0).
+
+        Notes
+        -----
+        Sets ``growth``, ``growth_tensor`` (ncell, nqp, 3, 3) and ``growth_jacobian``, the
+        volume average of ``det Fg`` per cell (the growth Jacobian is computed here only).
+        """
+        if growth is None:
+            self.growth, self.growth_tensor, self.growth_jacobian = None, None, None
+            return
+        fibers = self.fibers_qp
+        if fibers is None:
+            if not hasattr(growth, "tensors"):
+                raise ValueError(
+                    "fibre growth needs 'fibers' but none were given; pass fibers=(ncell, 3) "
+                    "unit vectors (or use a mesh builder that provides them)"
+                )
+            fibers = np.zeros((self.ncell, self.nqp, 3))  # a tensor field needs no fibres
+        if hasattr(growth, "tensor"):
+            Fg = np.asarray(growth.tensor(fibers), dtype=np.float64)
+            Fg = np.broadcast_to(Fg, (self.ncell, self.nqp, 3, 3))
+        else:
+            theta = np.asarray(growth, dtype=np.float64)
+            if theta.shape != (self.ncell,) or np.any(theta <= 0):
+                raise ValueError(
+                    f"growth stretch array has shape {theta.shape!r}; expected "
+                    f"({self.ncell},) positive values, or a FiberGrowth"
+                )
+            Fg = kinematics.growth_tensor(fibers, theta[:, None])
+        self.growth = growth
+        self.growth_tensor = np.ascontiguousarray(Fg)
+        Jg = np.linalg.det(self.growth_tensor)
+        self.growth_jacobian = (Jg * self.dV).sum(axis=1) / self.cell_volume
+
     def _vtk_cells(self) -> IntArray:
         corners = self.mesh.t.T[:, HEX_MAPPING[:8]].astype(np.int64)  # VTK corner order
         if self.element == "hex8":
@@ -515,6 +546,40 @@ class Body:
         order = np.argmin(d, axis=2)
         edges = np.take_along_axis(edge_dofs, order, axis=1)
         return np.concatenate([corners, edges], axis=1)
+
+    # ------------------------------------------------------------ read-only accessors
+    @property
+    def scalar_element(self) -> skfem.Element:
+        """The scalar scikit-fem element (``ElementHex1`` for hex8, ``ElementHexS2`` hex20)."""
+        return self._scalar_element
+
+    @property
+    def basis_values(self) -> FloatArray:
+        """Shape-function values at the reference Gauss points, shape (nbasis, nqp)."""
+        return self._N_values
+
+    def cell_average(self, q: FloatArray) -> FloatArray:
+        """Volume average per cell of a quadrature-point field ``q`` (ncell, nqp, ...)."""
+        return self._cell_average(q)
+
+    def cached(self, key: str, build: Callable[[], _T]) -> _T:
+        """Derived data kept with the body (sparsity pattern, pressure space), built once.
+
+        Parameters
+        ----------
+        key : str
+            Name of the cached item.
+        build : callable
+            ``build()`` computes it the first time.
+
+        Returns
+        -------
+        object
+            The cached item.
+        """
+        if key not in self._caches:
+            self._caches[key] = build()
+        return self._caches[key]
 
     @functools.cached_property
     def basis(self) -> skfem.CellBasis:

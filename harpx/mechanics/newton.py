@@ -44,7 +44,7 @@ from __future__ import annotations
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -54,6 +54,9 @@ from harpx._typing import FloatArray, IntArray
 from harpx.errors import ConvergenceError, ElementInversionError
 from harpx.mechanics.assembly import Pattern, internal_forces, sparsity
 from harpx.mechanics.linsolve import LinearSolver, rigid_body_modes
+
+if TYPE_CHECKING:
+    from harpx.mechanics.body import Body
 
 __all__ = ["SolveResult", "equilibrate", "solve", "split_loads"]
 
@@ -157,7 +160,7 @@ class _Newton:
 
     def __init__(
         self,
-        body: Any,
+        body: Body,
         loads: Iterable[Any],
         *,
         tol: float,
@@ -369,7 +372,7 @@ class _Newton:
         raise AssertionError("unreachable")  # pragma: no cover
 
 
-def _check_u0(body: Any, u0: ArrayLike | None) -> FloatArray:
+def _check_u0(body: Body, u0: ArrayLike | None) -> FloatArray:
     if u0 is None:
         return np.zeros(body.ndof)
     u = np.asarray(u0, dtype=np.float64)
@@ -397,7 +400,7 @@ def _failure(reason: str, cells: IntArray, s: float, history: list[float], tries
 
 
 def equilibrate(
-    body: Any,
+    body: Body,
     loads: Iterable[Any],
     u0: ArrayLike | None = None,
     s: float = 1.0,
@@ -471,7 +474,7 @@ def equilibrate(
 
 
 def solve(
-    body: Any,
+    body: Body,
     loads: Iterable[Any],
     *,
     steps: int = 10,

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from harpx._typing import FloatArray
+from harpx.mechanics.body import Body
 from harpx.mechanics.locate import locate
 
 __all__ = ["interpolate_displacement", "locate"]
@@ -29,7 +30,7 @@ def _shape_values(element: Any, xi: FloatArray, nbasis: int) -> tuple[FloatArray
 
 
 def interpolate_displacement(
-    body: Any, displacements: FloatArray, points: FloatArray
+    body: Body, displacements: FloatArray, points: FloatArray
 ) -> tuple[FloatArray, np.ndarray]:
     """Displacement of material points given by reference positions.
 
@@ -54,7 +55,7 @@ def interpolate_displacement(
     inside = cells >= 0
     out = np.full((U.shape[0], points.shape[0], 3), np.nan)
     if inside.any():
-        vals, _ = _shape_values(body._scalar_element, xi[inside].T, body.nbasis)
+        vals, _ = _shape_values(body.scalar_element, xi[inside].T, body.nbasis)
         dofs = body.element_dofs[cells[inside]]  # (m, nb, 3)
         out[:, inside] = np.einsum("ma,tmai->tmi", vals, U[:, dofs])
     return out, inside
