@@ -1,12 +1,13 @@
 # Quick start: `make demo` runs the phantom scene end to end; `make test` runs the test suite;
 # `make docs` builds the user guide and API reference (warnings are errors) into docs/_build/html.
+# `make lint` checks style and types (ruff check, ruff format --check, mypy).
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 DOCS_STAMP := $(VENV)/.installed-docs
 
-.PHONY: demo test docs bench clean
+.PHONY: demo test docs lint bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -29,6 +30,10 @@ docs: $(DOCS_STAMP)
 	rm -rf docs/_build
 	$(BIN)/python -m sphinx -W --keep-going -q -b html docs docs/_build/html
 	@echo "user guide: docs/_build/html/index.html"
+lint: $(STAMP)
+	$(BIN)/ruff check harpx tests benchmarks tutorials conftest.py
+	$(BIN)/ruff format --check harpx tests benchmarks tutorials conftest.py
+	$(BIN)/mypy harpx
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_phase.py

@@ -281,7 +281,8 @@ def write(results: list[dict], size: str, scene: str = "phantom") -> None:
     for r in results:
         cells = [
             r["method"], f"{r['mean']:.3f} ± {r['sd']:.3f}", f"{r['p95']:.3f}",
-            f"{r['max']:.2f}", f"{r['coverage']:.3f}", f"{r['seconds']:.1f}", str(r.get("iterations", "")),
+            f"{r['max']:.2f}", f"{r['coverage']:.3f}", f"{r['seconds']:.1f}",
+            str(r.get("iterations", "")),
             str(r.get("penalty_max", "")),
         ]  # fmt: skip
         if sa:

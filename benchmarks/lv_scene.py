@@ -18,9 +18,9 @@ Usage::
 Phase extraction uses ``--radius 0.7`` by default (band-pass radius as a fraction of the
 tag frequency; CSPAMM has no DC peak, and the wider filter halves HARP's edge bias in the
 10 mm wall: the true motion's tracking residual at end systole drops from 0.21 to 0.14 rad
-on the small scene) and ``--upsample 1``; tracking uses the penalty method with Gauss-Newton increments
-converged to ``--tolerance`` mm (default 1e-3; the same errors as the tracker's 0.01 on the
-small scene). Errors are over frames 1 to N-1 (the reference frame is excluded).
+on the small scene) and ``--upsample 1``; tracking uses the penalty method with Gauss-Newton
+increments converged to ``--tolerance`` mm (default 1e-3; the same errors as the tracker's
+0.01 on the small scene). Errors are over frames 1 to N-1 (the reference frame is excluded).
 """
 
 from __future__ import annotations

@@ -43,6 +43,7 @@ import argparse
 import contextlib
 import csv
 import multiprocessing as mp
+import sys
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
@@ -62,10 +63,20 @@ from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import box, cylinder
 from harpx.mechanics.newton import solve
 from harpx.scenes._motion import RotationalImpact
-from harpx.scenes._rigid import RigidRotation, Stretch, Translation, cylinder_scene, frame_profile
 from harpx.scenes.phantom import GEOMETRIES, Scene, phantom
 from harpx.tracking.results import tracking_error
 from harpx.tracking.track import track
+
+# the analytic rigid/affine motions are shared with tests/test_stability.py: one copy, in
+# tests/_rigid.py, importable once the repository root is on the path
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from tests._rigid import (  # noqa: E402
+    RigidRotation,
+    Stretch,
+    Translation,
+    cylinder_scene,
+    frame_profile,
+)
 
 OUT = Path(__file__).resolve().parent / "results"
 TAG_PERIOD = 8.0  # mm

@@ -20,13 +20,13 @@ import time
 from pathlib import Path
 
 from harpx.imaging.harp import extract_phase
-from harpx.inverse.activation import (
+from harpx.inverse import (
     calibrate_activation,
     correct_activation,
     estimate_activation,
-    plot_stretch_agreement,
     resimulate,
 )
+from harpx.plotting import plot_stretch_agreement
 from harpx.scenes.tongue import TRACKING, tongue
 from harpx.tracking.results import tracking_error
 from harpx.tracking.track import track

@@ -277,6 +277,8 @@ def _progress_option(parser: argparse.ArgumentParser) -> None:
         help="progress bar over frames (default: shown when stderr is a terminal, after a "
         "few seconds)",
     )
+
+
 def _refuse_overwriting_input(output: str, inputs: Sequence[str]) -> None:
     """Raise before any work if ``output`` is one of the input files."""
     target = Path(output).resolve()

@@ -6,7 +6,7 @@ too, so users can catch either the family or the builtin (``ValueError``, ``Runt
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 
 class HarpxError(Exception):
@@ -59,7 +59,7 @@ class ElementInversionError(ConvergenceError):
         Residual norms of the iterations that were run.
     """
 
-    def __init__(self, message: str, cells: Sequence[int], history: Sequence[float] = ()) -> None:
+    def __init__(self, message: str, cells: Iterable[int], history: Sequence[float] = ()) -> None:
         self.cells: list[int] = [int(c) for c in cells]
         super().__init__(message, history)
 

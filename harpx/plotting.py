@@ -515,3 +515,126 @@ def bullseye(
     mappable = matplotlib.cm.ScalarMappable(norm=norm, cmap=colours)
     plt.colorbar(mappable, ax=ax, label=label or "", shrink=0.8)
     return ax
+
+
+def opening_angle_view(result: Any, ax: Any = None, *, scale: float = 1.0) -> Any:
+    """Top view of a cut ring before (grey) and after the cut (black).
+
+    Parameters
+    ----------
+    result : OpeningAngle
+        Output of :func:`harpx.mechanics.cut.opening_angle`.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw in (default: a new 4 × 4 in figure).
+    scale : float, default 1
+        Displacement magnification (dimensionless).
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    if ax is None:
+        _, ax = plt.subplots(figsize=(4, 4))
+    ring = result.ring
+    p0 = ring.nodes
+    p1 = ring.nodes + scale * result.u.reshape(-1, 3)[: len(ring.nodes)]
+    edges = ring.cells[:, [0, 1, 1, 2, 2, 3, 3, 0]].reshape(-1, 2)
+    for pts, colour, lw in ((p0, "0.7", 0.6), (p1, "k", 0.8)):
+        seg = pts[edges][:, :, :2]
+        ax.plot(seg[:, :, 0].T, seg[:, :, 1].T, color=colour, lw=lw)
+    for nodes, colour in zip(result.faces, ("tab:red", "tab:blue"), strict=True):
+        ax.plot(p1[nodes, 0], p1[nodes, 1], ".", color=colour, ms=4)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_title(f"opening angle {result.degrees:.1f}°")
+    return ax
+
+
+def plot_stretch_agreement(
+    comparison: xr.Dataset,
+    *,
+    path: PathLike | None = None,
+    truth: Mapping[str, float] | None = None,
+) -> Any:
+    """Tracked against simulated fibre stretch per muscle and per element (paper Fig. 3c).
+
+    Parameters
+    ----------
+    comparison : xarray.Dataset
+        Output of :func:`harpx.inverse.resimulate` with ``tracked=``.
+    path : str or Path, optional
+        Save the figure there (PNG, 150 dpi).
+    truth : dict of str to float, optional
+        True mean fibre stretch per region, drawn as a third bar.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Left: bars of the volume-weighted mean fibre strain λ − 1 per muscle in % (error
+        bars: sd over the muscle's cells); right: element-by-element scatter of the stretch
+        with the identity line.
+
+    Raises
+    ------
+    ValueError
+        If ``comparison`` has no tracked stretch.
+    """
+    if "stretch_tracked" not in comparison:
+        raise ValueError(
+            "'comparison' has no tracked stretch; run resimulate(..., tracked=tracked)"
+        )
+    from matplotlib.figure import Figure
+
+    names = [str(n) for n in comparison["region"].values]
+    fig = Figure(figsize=(10.0, 4.0), layout="constrained")
+    ax, ax2 = fig.subplots(1, 2)
+    x = np.arange(len(names))
+    bars: list[tuple[str, Any, Any]] = [
+        (
+            "tracked (images)",
+            comparison["stretch_tracked"].values,
+            comparison["stretch_tracked_sd"].values,
+        ),
+        (
+            "simulated (estimate)",
+            comparison["stretch_simulated"].values,
+            comparison["stretch_simulated_sd"].values,
+        ),
+    ]
+    if truth:
+        bars.append(("ground truth", np.array([truth.get(n, np.nan) for n in names]), None))
+    width = 0.8 / len(bars)
+    for k, (label, mean, sd) in enumerate(bars):  # two or three bar groups
+        ax.bar(
+            x + width * (k - (len(bars) - 1) / 2),
+            100.0 * (mean - 1.0),
+            width,
+            yerr=None if sd is None else 100.0 * sd,
+            capsize=3,
+            label=label,
+        )
+    ax.axhline(0.0, color="0.3", lw=0.8)
+    ax.set_xticks(x, names)
+    ax.set_ylabel("mean fibre strain λ − 1 (%)")
+    ax.set_title("fibre stretch per muscle")
+    ax.legend(fontsize=8, loc="lower right")
+    region_of_cell = comparison["region_label"].values
+    tr = comparison["fiber_stretch_tracked"].values
+    sim = comparison["fiber_stretch_simulated"].values
+    for k, n in enumerate(names):  # one colour per muscle
+        sel = region_of_cell == k
+        ax2.scatter(tr[sel], sim[sel], s=8, label=n)
+    both = np.concatenate([tr, sim])
+    lim = (float(np.nanmin(both)) - 0.01, float(np.nanmax(both)) + 0.01)
+    ax2.plot(lim, lim, color="0.3", lw=0.8)
+    ax2.set_xlim(lim)
+    ax2.set_ylim(lim)
+    ax2.set_xlabel("tracked fibre stretch")
+    ax2.set_ylabel("simulated fibre stretch")
+    r = float(comparison["correlation_all"]) if "correlation_all" in comparison else np.nan
+    ax2.set_title(f"per element (r = {r:.2f})")
+    ax2.legend(fontsize=8, markerscale=2)
+    if path is not None:
+        fig.savefig(path, dpi=150)
+    return fig

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import signal
-import time
 from collections.abc import Iterator
 
 import numpy as np
@@ -19,7 +18,6 @@ import pytest
 from harpx.errors import (
     ConvergenceError,
     ElementInversionError,
-    HarpxError,
     HarpxWarning,
     SchemaError,
 )
@@ -31,12 +29,12 @@ from harpx.mechanics.loads import Fixed, Pressure
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import box
 from harpx.mechanics.newton import solve
-from harpx.scenes._rigid import RigidRotation, Translation, cylinder_scene, frame_profile
 from harpx.scenes.phantom import phantom
 from harpx.tracking.constraint import PhaseConstraint
 from harpx.tracking.equilibrium import equilibrate
 from harpx.tracking.results import tracking_error
 from harpx.tracking.track import track
+from tests._rigid import RigidRotation, Translation, cylinder_scene, frame_profile
 
 PERIOD = 8.0  # tag period, mm
 FRAME = 18.0  # ms
@@ -188,20 +186,16 @@ def test_epsilon_does_not_rise_with_a_pinned_penalty():
         pytest.param(lambda: rotation(0.5, snr=3.0), {}, id="snr-3"),
     ],
 )
-def test_extreme_cases_end_in_a_finite_result_or_a_named_error(make, kwargs):
+def test_extreme_cases_end_in_a_finite_result(make, kwargs):
+    # measured: every case tracks to a result (max ε 0.006, 0.0002, 0.048, 0.049 rad) without
+    # a warning; harpx warnings are errors in the tests, so a missed target fails here too
     scene = make()
     phase = extract_phase(scene.tagged)
-    start = time.perf_counter()
-    with deadline(60.0):  # measured ≤ 4 s; a hang fails here instead of stalling the suite
-        try:
-            out = track(phase, scene.body(), **kwargs)
-        except HarpxError as exc:  # a clear error is an accepted ending
-            assert str(exc), type(exc)
-            return
-    # a result: no NaN anywhere in what the user reads
+    with deadline(60.0):  # measured ≤ 9 s; a hang fails here instead of stalling the suite
+        out = track(phase, scene.body(), **kwargs)
+    # no NaN anywhere in what the user reads
     for name in ("displacement", "epsilon", "penalty", "green_strain"):
         assert np.isfinite(out[name].values).all(), name
-    assert time.perf_counter() - start < 60.0
 
 
 # ----------------------------------------------------------------------------- near-inversion

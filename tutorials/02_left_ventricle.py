@@ -42,7 +42,9 @@ import numpy as np
 import harpx.accessor  # noqa: F401  (registers the ds.harp accessor)
 from harpx.io.netcdf import open_dataset, to_netcdf
 from harpx.mechanics.cut import opening_angle
-from harpx.scenes.lv import TRACKING, fiber_prestretch, fiber_shortening, lv
+from harpx.mechanics.growth import fiber_prestretch
+from harpx.plotting import opening_angle_view
+from harpx.scenes.lv import TRACKING, fiber_shortening, lv
 
 start = time.perf_counter()
 scene = lv(size="small")  # scale up: lv(size="paper")
@@ -121,7 +123,7 @@ opening_angle_sfr = cuts["stress-free"].degrees
 opening_angle_psr = cuts["prestretched"].degrees
 fig, axes = plt.subplots(1, 2, figsize=(8, 4))
 for ax, (ref, cut) in zip(axes, cuts.items(), strict=True):
-    cut.plot(ax)
+    opening_angle_view(cut, ax)
     ax.set_title(f"{ref}: opening {cut.degrees:.1f}°")
 fig.tight_layout()
 fig.savefig("lv_radial_cut.png")

@@ -34,15 +34,15 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import harpx  # noqa: F401  (registers the ds.harp accessor)
-from harpx.inverse.activation import (
+from harpx.inverse import (
     calibrate_activation,
     correct_activation,
     estimate_activation,
-    plot_stretch_agreement,
     resimulate,
 )
 from harpx.io.netcdf import open_dataset, to_netcdf
 from harpx.mechanics.loads import Fixed
+from harpx.plotting import plot_stretch_agreement
 from harpx.scenes.tongue import tongue
 
 scene = tongue("small")  # scale up: tongue("paper")

@@ -33,7 +33,7 @@ import numpy as np
 import pyfftw
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["clear_plan_cache", "default_threads", "fft2", "get_plan", "ifft2", "irfft2", "rfft2"]
+__all__ = ["default_threads", "fft2", "get_plan", "ifft2", "irfft2", "rfft2"]
 
 #: FFTW planner effort of cached plans with at least MEASURE_MIN_SIZE elements.
 PLANNER_EFFORT = "FFTW_MEASURE"
@@ -79,11 +79,6 @@ def _cache() -> OrderedDict[tuple, pyfftw.FFTW]:
         cache = OrderedDict()
         _LOCAL.plans = cache
     return cache
-
-
-def clear_plan_cache() -> None:
-    """Drop the plans cached by the calling thread (FFTW wisdom is kept)."""
-    _cache().clear()
 
 
 def get_plan(

@@ -1,29 +1,42 @@
-"""Inverse problems on tracked motion: muscle activation from tracked fibre stretch.
+r"""Inverse problems on tracked motion: muscle activation from tracked fibre stretch (§4.3).
 
-Public names::
+The paper estimates the contractile stress of each tongue muscle *directly* from the
+image-derived fibre shortening, by solving the active-contraction law for :math:`T_{max}`,
+instead of running an optimisation loop of forward simulations. This subpackage does that,
+plus two optional closed-form corrections, as plain functions, one module per step:
 
-    estimate_activation, correct_activation, calibrate_activation, resimulate,
-    simulate_activation, simulate_history, plot_stretch_agreement
+1. :mod:`~harpx.inverse.estimate` (:func:`estimate_activation`): the paper's direct
+   estimate; per element, uniaxial fibre equilibrium solved for :math:`T_{max}`; per
+   muscle, the median (or volume-weighted mean) of the element values with their spread.
+2. :mod:`~harpx.inverse.correction` (:func:`correct_activation`): *one* linear
+   equilibrium correction at the tracked configuration for the load that neighbouring
+   muscles and attachments carry (a linear system of the size of the number of muscles).
+3. :mod:`~harpx.inverse.calibration` (:func:`calibrate_activation`): *one* per-muscle
+   scaling for the attenuation of the measurement chain (imaging, phase filtering,
+   regularised tracking), measured by passing a re-simulation with the estimate through
+   the same chain.
+4. :mod:`~harpx.inverse.comparison` (:func:`resimulate`): a forward simulation of the
+   tracking model with the per-muscle estimates, compared with the tracked fibre stretch
+   element by element and per muscle (paper Fig. 3c;
+   :func:`harpx.plotting.plot_stretch_agreement`).
+
+None of them iterates: there is no objective function and no search.
+
+The forward simulations they use live in :mod:`harpx.mechanics.active`
+(``simulate_activation``, ``simulate_history``), the figure in :mod:`harpx.plotting`.
 """
 
 from __future__ import annotations
 
-from harpx.inverse.activation import (
-    calibrate_activation,
-    correct_activation,
-    estimate_activation,
-    plot_stretch_agreement,
-    resimulate,
-    simulate_activation,
-    simulate_history,
-)
+from harpx.inverse.calibration import calibrate_activation
+from harpx.inverse.comparison import resimulate
+from harpx.inverse.correction import correct_activation
+from harpx.inverse.estimate import estimate_activation, uniaxial_active_tension
 
 __all__ = [
     "calibrate_activation",
     "correct_activation",
     "estimate_activation",
-    "plot_stretch_agreement",
     "resimulate",
-    "simulate_activation",
-    "simulate_history",
+    "uniaxial_active_tension",
 ]

@@ -99,13 +99,17 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from scipy import sparse
 
 from harpx._typing import FloatArray, IntArray
 from harpx.mechanics import kinematics
+
+if TYPE_CHECKING:
+    from harpx.mechanics.body import Body
 
 __all__ = [
     "Internal",
@@ -141,11 +145,11 @@ class Pattern:
     """
 
     ndof: int
-    indptr: IntArray
-    indices: IntArray
+    indptr: NDArray[np.int32]
+    indices: NDArray[np.int32]
     element_positions: IntArray
     diagonal: IntArray
-    row_of_entry: IntArray
+    row_of_entry: NDArray[np.int32]
     _scalar_keys: IntArray
     _scalar_indptr: IntArray
     _n_scalar: int
@@ -187,7 +191,7 @@ class Pattern:
         return 9 * start + 3 * deg * (rows % 3) + 3 * (p - start) + cols % 3
 
 
-def sparsity(body: object) -> Pattern:
+def sparsity(body: Body) -> Pattern:
     """The body's stiffness pattern, computed on first use and cached on the body.
 
     Parameters
@@ -199,11 +203,12 @@ def sparsity(body: object) -> Pattern:
     -------
     Pattern
     """
-    cached = getattr(body, "_pattern", None)
-    if cached is not None:
-        return cached
-    sd = body.cell_scalar_dofs  # type: ignore[attr-defined]
-    ns = int(body.n_dof_nodes)  # type: ignore[attr-defined]
+    return body.cached("sparsity", lambda: _build_sparsity(body))
+
+
+def _build_sparsity(body: Body) -> Pattern:
+    sd = body.cell_scalar_dofs
+    ns = int(body.n_dof_nodes)
     nel, nb = sd.shape
     keys = (sd[:, :, None].astype(np.int64) * ns + sd[:, None, :]).ravel()  # (e, a, b)
     if getattr(body, "volumetric", None) == "nodal-dilatation":
@@ -247,9 +252,7 @@ def sparsity(body: object) -> Pattern:
         _n_scalar=ns,
     )
     d = np.arange(3 * ns)
-    pat = dataclasses.replace(pat, diagonal=pat.positions(d, d))
-    body._pattern = pat  # type: ignore[attr-defined]
-    return pat
+    return dataclasses.replace(pat, diagonal=pat.positions(d, d))
 
 
 def _vertex_incidence(sd: IntArray, ns: int) -> sparse.csr_matrix:
@@ -263,7 +266,7 @@ def _vertex_incidence(sd: IntArray, ns: int) -> sparse.csr_matrix:
 
 
 def material_response(
-    body: object, F: FloatArray, *, tangent: bool = True
+    body: Body, F: FloatArray, *, tangent: bool = True
 ) -> tuple[FloatArray, FloatArray | None]:
     """Isochoric (+ active) first Piola--Kirchhoff stress and tangent at the Gauss points.
 
@@ -285,13 +288,13 @@ def material_response(
     A : ndarray, shape (ncell, nqp, 3, 3, 3, 3) or None
         ``dP_iJ/dF_kL``, kPa.
     """
-    Fg = body.growth_tensor  # type: ignore[attr-defined]
-    fiber = body.fibers_qp  # type: ignore[attr-defined]
+    Fg = body.growth_tensor
+    fiber = body.fibers_qp
     Fe = F if Fg is None else kinematics.split_growth(F, Fg)
-    P, A = body.material.isochoric_response(Fe, fiber)  # type: ignore[attr-defined]
-    active = body.active  # type: ignore[attr-defined]
+    P, A = body.material.isochoric_response(Fe, fiber)
+    active = body.active
     if active is not None:
-        t_max = body.t_max  # type: ignore[attr-defined]
+        t_max = body.t_max
         Pa, Aa = active.response(Fe, fiber, t_max=None if t_max is None else t_max[:, None])
         P = P + Pa
         A = A + Aa
@@ -324,7 +327,7 @@ class Internal:
     inverted_cells: IntArray
 
 
-def _pressure_space(body: object) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+def _pressure_space(body: Body) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Element pressure/dilatation basis ψ at the Gauss points and its projector (cached).
 
     Returns ``psi`` (ncell, nqp, npr), ``psiW = ψᵀ diag(dV)`` (ncell, npr, nqp),
@@ -332,14 +335,15 @@ def _pressure_space(body: object) -> tuple[FloatArray, FloatArray, FloatArray, F
     (ncell, nqp, nqp). ``npr`` = 1 (mean dilatation) or 4 (linear dilatation: 1 and the
     centred, scaled coordinates).
     """
-    cached = getattr(body, "_pressure_space_cache", None)
-    if cached is not None:
-        return cached
-    dV = body.dV  # type: ignore[attr-defined]
-    Ve = body.cell_volume  # type: ignore[attr-defined]
+    return body.cached("pressure_space", lambda: _build_pressure_space(body))
+
+
+def _build_pressure_space(body: Body) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    dV = body.dV
+    Ve = body.cell_volume
     nel, nq = dV.shape
-    if body.volumetric == "linear-dilatation":  # type: ignore[attr-defined]
-        X = body.quadrature_points  # type: ignore[attr-defined]
+    if body.volumetric == "linear-dilatation":
+        X = body.quadrature_points
         xc = np.einsum("eq,eqi->ei", dV, X) / Ve[:, None]
         ell = np.cbrt(Ve)
         psi = np.concatenate([np.ones((nel, nq, 1)), (X - xc[:, None, :]) / ell[:, None, None]], -1)
@@ -348,19 +352,17 @@ def _pressure_space(body: object) -> tuple[FloatArray, FloatArray, FloatArray, F
     psiW = np.ascontiguousarray((psi * dV[..., None]).transpose(0, 2, 1))
     Minv = np.linalg.inv(np.matmul(psiW, psi))
     proj = np.matmul(psi, np.matmul(Minv, psiW))
-    cached = (psi, psiW, Minv, proj)
-    body._pressure_space_cache = cached  # type: ignore[attr-defined]
-    return cached
+    return psi, psiW, Minv, proj
 
 
-def _volumetric(body: object, F: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, dict]:
+def _volumetric(body: Body, F: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, dict]:
     """Pressure field p (ncell,nqp), cof F, J and extra data for the tangent."""
-    Jg = body.growth_jacobian  # type: ignore[attr-defined]
+    Jg = body.growth_jacobian
     J, cof = _det_cof(F)
-    mat = body.material  # type: ignore[attr-defined]
+    mat = body.material
     extra: dict = {}
     jg = 1.0 if Jg is None else Jg[:, None]
-    if body.volumetric == "pointwise":  # type: ignore[attr-defined]
+    if body.volumetric == "pointwise":
         _, dU, d2U = mat.volumetric(J / jg)
         p = np.asarray(dU, dtype=np.float64)
         extra["d2U"] = np.asarray(d2U, dtype=np.float64) / jg
@@ -402,28 +404,28 @@ def _det_cof(F: FloatArray) -> tuple[FloatArray, FloatArray]:
     return J, cof
 
 
-def first_piola(body: object, u: ArrayLike) -> FloatArray:
+def first_piola(body: Body, u: ArrayLike) -> FloatArray:
     """Total first Piola--Kirchhoff stress at the Gauss points, shape (ncell, nqp, 3, 3), kPa.
 
     Includes the volumetric pressure of the body's formulation (element-constant for mean
     dilatation).
     """
-    F = body.deformation_gradient(u)  # type: ignore[attr-defined]
+    F = body.deformation_gradient(u)
     P, _ = material_response(body, F, tangent=False)
     p, cof, _, _ = _volumetric(body, F)
     return P + p[..., None, None] * cof
 
 
-def cauchy_stress(body: object, u: ArrayLike) -> FloatArray:
+def cauchy_stress(body: Body, u: ArrayLike) -> FloatArray:
     """Cauchy stress ``σ = J⁻¹ P Fᵀ`` at the Gauss points, shape (ncell, nqp, 3, 3), kPa."""
-    F = body.deformation_gradient(u)  # type: ignore[attr-defined]
+    F = body.deformation_gradient(u)
     P = first_piola(body, u)
     J = np.linalg.det(F)
     return np.matmul(P, np.swapaxes(F, -1, -2)) / J[..., None, None]
 
 
 def internal_forces(
-    body: object, u: ArrayLike, *, tangent: bool = True, pressure_stiffness: bool = True
+    body: Body, u: ArrayLike, *, tangent: bool = True, pressure_stiffness: bool = True
 ) -> Internal:
     """Internal force vector and consistent tangent of the body's stored energy.
 
@@ -449,7 +451,7 @@ def internal_forces(
         ``r`` and ``K`` are None when some Gauss point has ``det F <= 0``, or some cell's
         stress or tangent is not finite (then ``inverted_cells`` lists the cells).
     """
-    F = body.deformation_gradient(u)  # type: ignore[attr-defined]
+    F = body.deformation_gradient(u)
     Jq, _ = _det_cof(F)
     min_j = float(Jq.min()) if Jq.size else 1.0
     bad = np.nonzero(~(Jq > 0.0).all(axis=1))[0]
@@ -467,15 +469,16 @@ def internal_forces(
             finite &= np.isfinite(A.reshape(A.shape[0], -1).sum(axis=1))
     if not finite.all():
         return Internal(None, None, min_j, np.nonzero(~finite)[0])
-    G = body.grad_N  # type: ignore[attr-defined]  (e, q, a, J)
-    dV = body.dV  # type: ignore[attr-defined]
-    ed = body.element_dofs  # type: ignore[attr-defined]
+    G = body.grad_N  # (e, q, a, J)
+    dV = body.dV
+    ed = body.element_dofs
     nel, nq, nb, _ = G.shape
     Gt = G.transpose(0, 2, 1, 3).reshape(nel, nb, nq * 3)  # (e, a, (q, J))
     Pt = (P * dV[..., None, None]).transpose(0, 1, 3, 2).reshape(nel, nq * 3, 3)
     re = np.matmul(Gt, Pt)  # (e, a, i)
-    ndof = int(body.ndof)  # type: ignore[attr-defined]
-    r = np.bincount(ed.ravel(), weights=re.ravel(), minlength=ndof)
+    ndof = int(body.ndof)
+    # bincount of float weights is float64 (numpy's stubs type it as int)
+    r = np.asarray(np.bincount(ed.ravel(), weights=re.ravel(), minlength=ndof), dtype=np.float64)
     if not tangent:
         return Internal(r, None, min_j, bad)
     assert A is not None

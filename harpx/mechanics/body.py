@@ -25,7 +25,7 @@ import os
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal, cast
+from typing import Any, Literal, TypeVar, cast
 
 import meshio
 import numpy as np
@@ -48,6 +48,7 @@ __all__ = [
     "default_element",
 ]
 
+_T = TypeVar("_T")
 
 @dataclass(frozen=True)
 class ElementKind:
@@ -560,6 +561,7 @@ class Body:
                 "stable and lock; linear dilatation needs hex20, nodal dilatation tet4)"
             )
         mesh = cast(Any, mesh)  # skfem meshes are untyped
+        self._caches: dict[str, Any] = {}
         self.mesh = mesh
         self.material = material
         self.element = element
@@ -673,25 +675,10 @@ class Body:
             raise ValueError("t_max was given without an active contraction law (active=None)")
 
         # growth
-        self.growth = growth
+        self.growth: Any = None
         self.growth_tensor: FloatArray | None = None
         self.growth_jacobian: FloatArray | None = None
-        if growth is not None:
-            assert self.fibers_qp is not None
-            if hasattr(growth, "tensor"):
-                Fg = np.asarray(growth.tensor(self.fibers_qp), dtype=np.float64)
-                Fg = np.broadcast_to(Fg, (self.ncell, nqp, 3, 3))
-            else:
-                theta = np.asarray(growth, dtype=np.float64)
-                if theta.shape != (self.ncell,) or np.any(theta <= 0):
-                    raise ValueError(
-                        f"growth stretch array has shape {theta.shape!r}; expected "
-                        f"({self.ncell},) positive values, or a FiberGrowth"
-                    )
-                Fg = kinematics.growth_tensor(self.fibers_qp, theta[:, None])
-            self.growth_tensor = np.ascontiguousarray(Fg)
-            Jg = np.linalg.det(self.growth_tensor)
-            self.growth_jacobian = (Jg * self.dV).sum(axis=1) / self.cell_volume
+        self.set_growth(growth)
 
     # ------------------------------------------------------------------ set-up helpers
     def set_t_max(self, t_max: float | Mapping[str, float] | ArrayLike) -> None:
@@ -716,6 +703,49 @@ class Body:
             values = np.broadcast_to(np.asarray(t_max, dtype=np.float64), (self.ncell,)).copy()
         self.t_max = values
 
+    def set_growth(self, growth: Any) -> None:
+        """Set the growth (``F = Fe Fg``), or remove it with ``None``.
+
+        Parameters
+        ----------
+        growth : FiberGrowth, GrowthField, array_like of shape (ncell,), or None
+            A law or field with ``tensor(fibers_qp) -> Fg`` (e.g.
+            :class:`~harpx.mechanics.materials.FiberGrowth`,
+            :class:`~harpx.mechanics.growth.GrowthField`), or one fibre stretch θ per cell
+            (``Fg = I + (θ - 1) f0 ⊗ f0``, dimensionless, > 0).
+
+        Notes
+        -----
+        Sets ``growth``, ``growth_tensor`` (ncell, nqp, 3, 3) and ``growth_jacobian``, the
+        volume average of ``det Fg`` per cell (the growth Jacobian is computed here only).
+        """
+        if growth is None:
+            self.growth, self.growth_tensor, self.growth_jacobian = None, None, None
+            return
+        fibers = self.fibers_qp
+        if fibers is None:
+            if not hasattr(growth, "tensors"):
+                raise ValueError(
+                    "fibre growth needs 'fibers' but none were given; pass fibers=(ncell, 3) "
+                    "unit vectors (or use a mesh builder that provides them)"
+                )
+            fibers = np.zeros((self.ncell, self.nqp, 3))  # a tensor field needs no fibres
+        if hasattr(growth, "tensor"):
+            Fg = np.asarray(growth.tensor(fibers), dtype=np.float64)
+            Fg = np.broadcast_to(Fg, (self.ncell, self.nqp, 3, 3))
+        else:
+            theta = np.asarray(growth, dtype=np.float64)
+            if theta.shape != (self.ncell,) or np.any(theta <= 0):
+                raise ValueError(
+                    f"growth stretch array has shape {theta.shape!r}; expected "
+                    f"({self.ncell},) positive values, or a FiberGrowth"
+                )
+            Fg = kinematics.growth_tensor(fibers, theta[:, None])
+        self.growth = growth
+        self.growth_tensor = np.ascontiguousarray(Fg)
+        Jg = np.linalg.det(self.growth_tensor)
+        self.growth_jacobian = (Jg * self.dV).sum(axis=1) / self.cell_volume
+
     def _vtk_cells(self) -> IntArray:
         if isinstance(self.mesh, skfem.MeshTet1):
             corners = self.mesh.t.T.astype(np.int64)  # skfem and VTK agree on tetrahedra
@@ -739,6 +769,40 @@ class Body:
         order = np.argmin(d, axis=2)
         edges = np.take_along_axis(edge_dofs, order, axis=1)
         return np.concatenate([corners, edges], axis=1)
+
+    # ------------------------------------------------------------ read-only accessors
+    @property
+    def scalar_element(self) -> skfem.Element:
+        """The scalar scikit-fem element (``ElementHex1`` for hex8, ``ElementHexS2`` hex20)."""
+        return self._scalar_element
+
+    @property
+    def basis_values(self) -> FloatArray:
+        """Shape-function values at the reference Gauss points, shape (nbasis, nqp)."""
+        return self._N_values
+
+    def cell_average(self, q: FloatArray) -> FloatArray:
+        """Volume average per cell of a quadrature-point field ``q`` (ncell, nqp, ...)."""
+        return self._cell_average(q)
+
+    def cached(self, key: str, build: Callable[[], _T]) -> _T:
+        """Derived data kept with the body (sparsity pattern, pressure space), built once.
+
+        Parameters
+        ----------
+        key : str
+            Name of the cached item.
+        build : callable
+            ``build()`` computes it the first time.
+
+        Returns
+        -------
+        object
+            The cached item.
+        """
+        if key not in self._caches:
+            self._caches[key] = build()
+        return self._caches[key]
 
     @functools.cached_property
     def basis(self) -> skfem.CellBasis:

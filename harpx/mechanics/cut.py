@@ -1,14 +1,10 @@
-r"""Residual stress from growth: general growth fields, release by continuation, radial cut.
+r"""The radial-cut experiment that reveals residual stress, and node-wise supports.
 
-Residual stress in a body held in its reference configuration comes from an incompatible
-growth (prestrain) field :math:`F_g` (paper §4.2, Rodriguez et al. 1994): the energy is
-:math:`J_g W(F F_g^{-1})`, so at :math:`F = I` the tissue is strained by
-:math:`F_e = F_g^{-1}` and stressed although no load acts. :class:`GrowthField` carries any
-:math:`F_g` per quadrature point (not only growth along the fibres), :func:`release` finds
-the equilibrium of a grown body by continuation in the growth, and :func:`opening_angle`
-reproduces the classic experiment that reveals residual stress (Omens & Fung 1990): a
-ring-like short-axis slab is cut along a radial plane and released; a residually stressed
-ring springs open, a stress-free one does not move.
+:func:`opening_angle` reproduces the classic experiment (Omens & Fung 1990): a ring-like
+short-axis slab of a residually stressed body (growth, :mod:`harpx.mechanics.growth`) is
+cut along a radial plane and released; a residually stressed ring springs open, a
+stress-free one does not move. :class:`NodeFixed` holds components at the dof nodes nearest
+to given points (pins).
 
 Opening angle
 -------------
@@ -26,109 +22,25 @@ signed angle from the mid-line of the clockwise face to that of the counter-cloc
 
 References
 ----------
-.. [1] Rodriguez EK, Hoger A, McCulloch AD. Stress-dependent finite growth in soft elastic
-   tissues. J Biomech 27:455--467, 1994.
-.. [2] Omens JH, Fung YC. Residual strain in rat left ventricle. Circ Res 66:37--45, 1990.
-.. [3] Maas SA, Erdemir A, Halloran JP, Weiss JA. A general framework for application of
-   prestrain to computational models of biological materials. J Mech Behav Biomed Mater
-   61:499--510, 2016.
+.. [1] Omens JH, Fung YC. Residual strain in rat left ventricle. Circ Res 66:37--45, 1990.
 """
 
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
-from harpx.errors import CoincidentNodesWarning, ConvergenceError
+from harpx.errors import CoincidentNodesWarning
 from harpx.mechanics.body import Body
-from harpx.mechanics.linsolve import LinearSolver
+from harpx.mechanics.growth import release, set_growth
 from harpx.mechanics.mesh import hex_mesh
-from harpx.mechanics.newton import SolveResult, equilibrate
 
-__all__ = ["GrowthField", "NodeFixed", "OpeningAngle", "opening_angle", "release", "set_growth"]
-
-
-@dataclass(frozen=True, eq=False)
-class GrowthField:
-    """A growth tensor per quadrature point, usable as ``Body(..., growth=GrowthField(Fg))``.
-
-    Parameters
-    ----------
-    tensors : ndarray, shape (ncell, nqp, 3, 3)
-        Growth tensors :math:`F_g` (dimensionless, ``det > 0``) at the body's Gauss points.
-
-    Examples
-    --------
-    >>> from harpx.mechanics import Body, NeoHookean, box
-    >>> from harpx.mechanics.cut import GrowthField
-    >>> Fg = np.broadcast_to(np.diag([1.1, 1.0, 1.0]), (1, 8, 3, 3))
-    >>> body = Body(box(divisions=(1, 1, 1)), NeoHookean(1.0, 100.0),
-    ...             fibers=[[1.0, 0.0, 0.0]], growth=GrowthField(Fg))
-    >>> round(float(body.growth_jacobian[0]), 12)
-    1.1
-    """
-
-    tensors: FloatArray
-    needs_fibers: ClassVar[bool] = True
-
-    def __post_init__(self) -> None:
-        t = np.ascontiguousarray(np.asarray(self.tensors, dtype=np.float64))
-        if t.ndim != 4 or t.shape[-2:] != (3, 3):
-            raise ValueError(f"growth tensors have shape {t.shape!r}; expected (ncell, nqp, 3, 3)")
-        if not np.all(np.linalg.det(t) > 0):
-            raise ValueError("growth tensors must have det Fg > 0 at every point")
-        object.__setattr__(self, "tensors", t)
-
-    def tensor(self, fiber: ArrayLike) -> FloatArray:
-        """The stored tensors; ``fiber`` (ncell, nqp, 3) only fixes the expected shape."""
-        shape = np.shape(fiber)[:-1]
-        if tuple(shape) != self.tensors.shape[:2]:
-            raise ValueError(
-                f"GrowthField has {self.tensors.shape[:2]!r} (cells, points) but the body has "
-                f"{tuple(shape)!r}; build the field on the same mesh and element"
-            )
-        return self.tensors
-
-    def fiber_prestretch(self, fibers: ArrayLike) -> FloatArray:
-        r"""In-situ elastic fibre stretch at the reference, :math:`1/|F_g f_0|` (dimensionless).
-
-        Parameters
-        ----------
-        fibers : array_like, shape (ncell, nqp, 3)
-            Unit reference fibres.
-
-        Returns
-        -------
-        ndarray, shape (ncell, nqp)
-            Reference fibre length over its stress-free length (< 1: compressed in situ).
-        """
-        g = np.einsum("eqij,eqj->eqi", self.tensors, np.asarray(fibers, dtype=np.float64))
-        return 1.0 / np.linalg.norm(g, axis=-1)
-
-
-def set_growth(body: Body, tensors: ArrayLike | None) -> None:
-    """Replace a body's growth tensors in place (``None`` removes growth).
-
-    Parameters
-    ----------
-    body : Body
-        The body; its ``growth_tensor`` and ``growth_jacobian`` are updated.
-    tensors : array_like, shape (ncell, nqp, 3, 3), or None
-        New growth tensors :math:`F_g` (dimensionless).
-    """
-    if tensors is None:
-        body.growth, body.growth_tensor, body.growth_jacobian = None, None, None
-        return
-    field_ = GrowthField(np.broadcast_to(tensors, (body.ncell, body.nqp, 3, 3)))
-    body.growth = field_
-    body.growth_tensor = field_.tensors
-    body.growth_jacobian = (np.linalg.det(field_.tensors) * body.dV).sum(axis=1) / body.cell_volume
+__all__ = ["NodeFixed", "OpeningAngle", "opening_angle"]
 
 
 @dataclass(frozen=True)
@@ -146,7 +58,7 @@ class NodeFixed:
     points: Any
     components: tuple[int, ...]
 
-    def dofs(self, body: Any) -> IntArray:
+    def dofs(self, body: Body) -> IntArray:
         """Constrained dof ids (sorted, unique)."""
         p = np.asarray(self.points, dtype=np.float64).reshape(-1, 3)
         if len(p) != len(self.components):
@@ -158,112 +70,9 @@ class NodeFixed:
         nodes = d.argmin(axis=0)
         return np.unique(3 * nodes + np.asarray(self.components, dtype=np.int64))
 
-    def values(self, body: Any, s: float) -> FloatArray:
+    def values(self, body: Body, s: float) -> FloatArray:
         """Zeros (mm)."""
         return np.zeros(self.dofs(body).size)
-
-
-def release(
-    body: Body,
-    dirichlet: Sequence[Any],
-    *,
-    u0: ArrayLike | None = None,
-    tol: float = 1e-8,
-    max_iterations: int = 12,
-    min_step: float = 1e-4,
-    linear_solver: str | LinearSolver = "auto",
-) -> SolveResult:
-    """Equilibrium of a grown body, by continuation from no growth to its growth field.
-
-    The growth is ramped as :math:`F_g(s) = I + s (F_g - I)`, ``s`` from 0 to 1, with
-    Newton at each ``s`` (:func:`harpx.mechanics.newton.equilibrate`); a failed step is
-    halved, a converged one lets the next step double. The body's growth is left at
-    :math:`F_g(1)`. Elasticity is path independent, so the end state does not depend on
-    the ramp.
-
-    Parameters
-    ----------
-    body : Body
-        Body with growth (``growth_tensor``); without growth the result is ``u0``.
-    dirichlet : sequence
-        Dirichlet conditions removing rigid-body motions.
-    u0 : array_like, shape (ndof,), optional
-        Starting displacement (mm), zeros by default. The first step tries the full growth
-        (``s = 1``) directly, which is all a warm start close to equilibrium needs.
-    tol : float, default 1e-8
-        Newton tolerance (relative residual).
-    max_iterations : int, default 12
-        Newton iterations per step before halving it.
-    min_step : float, default 1e-4
-        Smallest continuation step before giving up.
-    linear_solver : str or LinearSolver, default "auto"
-        Linear solver (one instance is reused over all steps, keeping its symbolic
-        analysis); see :mod:`harpx.mechanics.linsolve`.
-
-    Returns
-    -------
-    SolveResult
-        ``u`` (mm), ``iterations`` over all steps and the growth levels in
-        ``load_factors``.
-
-    Raises
-    ------
-    ConvergenceError
-        If the step falls below ``min_step``.
-    """
-    u = np.zeros(body.ndof) if u0 is None else np.array(u0, dtype=np.float64)
-    out = SolveResult(u=u, converged=True)
-    if body.growth_tensor is None:
-        return out
-    target = body.growth_tensor.copy()
-    done, step = 0.0, 1.0
-    eye = np.eye(3)
-    solver = (
-        linear_solver if isinstance(linear_solver, LinearSolver) else LinearSolver(linear_solver)
-    )
-    previous: tuple[float, FloatArray] | None = None
-    try:
-        while done < 1.0 - 1e-12:
-            s = min(1.0, done + step)
-            set_growth(body, eye + s * (target - eye))
-            start = u
-            if previous is not None:  # secant predictor along the growth path
-                trial = u + (u - previous[1]) * (s - done) / (done - previous[0])
-                if body.jacobian(trial).min() > 0.1:
-                    start = trial
-            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-                r = equilibrate(
-                    body,
-                    dirichlet,
-                    start,
-                    1.0,
-                    tol=tol,
-                    max_iterations=max_iterations,
-                    raise_on_failure=False,
-                    linear_solver=solver,
-                )
-            out.iterations += r.iterations
-            if r.converged:
-                previous = (done, u)
-                u, done = r.u, s
-                out.load_factors.append(s)
-                out.step_iterations.append(r.iterations)
-                out.min_jacobian = r.min_jacobian
-                step = min(1.0, 2.0 * step)
-            else:
-                out.cutbacks += 1
-                step *= 0.5
-                if step < min_step:
-                    raise ConvergenceError(
-                        f"releasing the growth stalled at growth level s={done:.4g} (step "
-                        f"{step:.2g} < min_step={min_step!r}); check the Dirichlet conditions "
-                        "or reduce the growth",
-                        [],
-                    )
-    finally:
-        set_growth(body, target)
-    out.u = u
-    return out
 
 
 # ---------------------------------------------------------------------------- radial cut
@@ -294,27 +103,6 @@ class OpeningAngle:
     faces: tuple[IntArray, IntArray]
     iterations: int = 0
     info: dict = field(default_factory=dict)
-
-    def plot(self, ax: Any = None, *, scale: float = 1.0) -> Any:
-        """Top view of the ring before (grey) and after the cut (black); returns the axes."""
-        import matplotlib.pyplot as plt
-
-        if ax is None:
-            _, ax = plt.subplots(figsize=(4, 4))
-        ring = self.ring
-        p0 = ring.nodes
-        p1 = ring.nodes + scale * self.u.reshape(-1, 3)[: len(ring.nodes)]
-        edges = ring.cells[:, [0, 1, 1, 2, 2, 3, 3, 0]].reshape(-1, 2)
-        for pts, colour, lw in ((p0, "0.7", 0.6), (p1, "k", 0.8)):
-            seg = pts[edges][:, :, :2]
-            ax.plot(seg[:, :, 0].T, seg[:, :, 1].T, color=colour, lw=lw)
-        for nodes, colour in zip(self.faces, ("tab:red", "tab:blue"), strict=True):
-            ax.plot(p1[nodes, 0], p1[nodes, 1], ".", color=colour, ms=4)
-        ax.set_aspect("equal")
-        ax.set_xlabel("x (mm)")
-        ax.set_ylabel("y (mm)")
-        ax.set_title(f"opening angle {self.degrees:.1f}°")
-        return ax
 
 
 def _face_direction(points: FloatArray, centre: FloatArray) -> FloatArray:
@@ -398,7 +186,8 @@ def opening_angle(
         if u_ref.shape != (body.ndof,):
             raise ValueError(f"u_reference has shape {u_ref.shape!r}; expected ({body.ndof},)")
         F_ref = body.deformation_gradient(u_ref)[keep]
-        Fg = np.linalg.inv(F_ref) if Fg is None else np.matmul(Fg, np.linalg.inv(F_ref))
+        inv_ref = np.asarray(np.linalg.inv(F_ref), dtype=np.float64)
+        Fg = inv_ref if Fg is None else np.matmul(Fg, inv_ref)
         nodes = nodes + u_ref.reshape(-1, 3)[: len(nodes)]
         if fibers is not None:
             fibers = np.einsum("eqij,eqj->eqi", F_ref, fibers)

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 import skfem
@@ -47,6 +47,9 @@ from scipy import sparse
 from harpx._typing import FloatArray, IntArray
 from harpx.mechanics import kinematics
 from harpx.mechanics.assembly import sparsity
+
+if TYPE_CHECKING:
+    from harpx.mechanics.body import Body
 
 __all__ = [
     "BodyForce",
@@ -67,7 +70,7 @@ class ResidualTerm(Protocol):
     """Protocol of an additional residual term (pressure, body force, tracking, ...)."""
 
     def residual_tangent(
-        self, body: Any, u: FloatArray, s: float
+        self, body: Body, u: FloatArray, s: float
     ) -> tuple[FloatArray, sparse.spmatrix | None]:
         """Contribution ``r`` (ndof,) to ``R = f_int - f_ext`` (mN) and ``K = ∂r/∂u``."""
         ...
@@ -77,11 +80,11 @@ class ResidualTerm(Protocol):
 class Dirichlet(Protocol):
     """Protocol of a Dirichlet condition."""
 
-    def dofs(self, body: Any) -> IntArray:
+    def dofs(self, body: Body) -> IntArray:
         """Constrained dof ids."""
         ...
 
-    def values(self, body: Any, s: float) -> FloatArray:
+    def values(self, body: Body, s: float) -> FloatArray:
         """Prescribed displacement (mm) of ``dofs(body)`` at load factor ``s``."""
         ...
 
@@ -111,11 +114,11 @@ class Fixed:
     def __post_init__(self) -> None:
         object.__setattr__(self, "components", _components(self.components))
 
-    def dofs(self, body: Any) -> IntArray:
+    def dofs(self, body: Body) -> IntArray:
         """Constrained dof ids."""
         return body.facet_dofs(self.facet, self.components)
 
-    def values(self, body: Any, s: float) -> FloatArray:
+    def values(self, body: Body, s: float) -> FloatArray:
         """Zeros (mm)."""
         return np.zeros(self.dofs(body).size)
 
@@ -148,11 +151,11 @@ class Prescribed:
     def __post_init__(self) -> None:
         object.__setattr__(self, "components", _components(self.components))
 
-    def dofs(self, body: Any) -> IntArray:
+    def dofs(self, body: Body) -> IntArray:
         """Constrained dof ids."""
         return body.facet_dofs(self.facet, self.components)
 
-    def values(self, body: Any, s: float) -> FloatArray:
+    def values(self, body: Body, s: float) -> FloatArray:
         """Prescribed values (mm) of ``dofs(body)``."""
         dofs = self.dofs(body)
         nodes = dofs // 3
@@ -175,7 +178,7 @@ class _FacetQuadrature:
     positions: IntArray  # (nf, nb, 3, 3, nb) CSR positions in the body pattern
 
 
-def _facet_quadrature(body: Any, facet: Any) -> _FacetQuadrature:
+def _facet_quadrature(body: Body, facet: Any) -> _FacetQuadrature:
     cache = body.__dict__.setdefault("_facet_quadrature", {})
     facets = body.facets(facet)
     key = facets.tobytes()
@@ -183,7 +186,7 @@ def _facet_quadrature(body: Any, facet: Any) -> _FacetQuadrature:
         return cache[key]
     order = body.kind.facet_intorder
     fb = skfem.FacetBasis(
-        body.mesh, body._scalar_element, facets=facets.astype(np.int32), intorder=order
+        body.mesh, body.scalar_element, facets=facets.astype(np.int32), intorder=order
     )
     nb = body.nbasis
     phi = np.stack([np.asarray(fb.basis[j][0]) for j in range(nb)], axis=-1)
@@ -229,7 +232,7 @@ class Pressure:
         return float(s) * float(self.pressure)
 
     def residual_tangent(
-        self, body: Any, u: FloatArray, s: float
+        self, body: Body, u: FloatArray, s: float
     ) -> tuple[FloatArray, sparse.csr_matrix]:
         """Residual contribution (mN) and consistent (non-symmetric) tangent."""
         q = _facet_quadrature(body, self.facet)
@@ -239,13 +242,18 @@ class Pressure:
         cof = kinematics.cofactor(F)
         t = np.einsum("fqiJ,fqJ->fqi", cof, q.normal) * (p * q.dA)[..., None]
         re = np.einsum("fqa,fqi->fai", q.phi, t)
-        r = np.bincount(q.dofs.ravel(), weights=re.ravel(), minlength=body.ndof)
+        r = np.asarray(
+            np.bincount(q.dofs.ravel(), weights=re.ravel(), minlength=body.ndof), dtype=np.float64
+        )
         w = np.cross(F, q.normal[:, :, None, :])  # (nf, nq, m, L) = F_m x N
         T = np.einsum("ikm,fqmL->fqikL", _EPS, w)
         C = np.einsum("fqikL,fqbL->fqikb", T, q.grad)
         Ke = np.einsum("fqa,fqikb->faikb", q.phi * (p * q.dA)[..., None], C)
         pat = sparsity(body)
-        data = np.bincount(q.positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz)
+        data = np.asarray(
+            np.bincount(q.positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz),
+            dtype=np.float64,
+        )
         return r, pat.matrix(data)
 
 
@@ -262,7 +270,7 @@ class BodyForce:
 
     force: Any = field(default_factory=lambda: np.zeros(3))
 
-    def residual_tangent(self, body: Any, u: FloatArray, s: float) -> tuple[FloatArray, None]:
+    def residual_tangent(self, body: Body, u: FloatArray, s: float) -> tuple[FloatArray, None]:
         """Residual contribution ``-∫ N_a b dV`` (mN); the tangent is zero (None)."""
         cache = body.__dict__.setdefault("_body_force_quadrature", {})
         if "X" not in cache:
@@ -273,6 +281,9 @@ class BodyForce:
             b = b.reshape(X.shape)
         else:
             b = float(s) * np.broadcast_to(np.asarray(self.force, dtype=np.float64), X.shape)
-        re = np.einsum("qa,eqi,eq->eai", body._N_values.T, b, body.dV)
-        r = -np.bincount(body.element_dofs.ravel(), weights=re.ravel(), minlength=body.ndof)
+        re = np.einsum("qa,eqi,eq->eai", body.basis_values.T, b, body.dV)
+        r = -np.asarray(
+            np.bincount(body.element_dofs.ravel(), weights=re.ravel(), minlength=body.ndof),
+            dtype=np.float64,
+        )
         return r, None

@@ -44,7 +44,7 @@ from __future__ import annotations
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -54,6 +54,9 @@ from harpx._typing import FloatArray, IntArray
 from harpx.errors import ConvergenceError, ElementInversionError
 from harpx.mechanics.assembly import Pattern, internal_forces, sparsity
 from harpx.mechanics.linsolve import LinearSolver, rigid_body_modes
+
+if TYPE_CHECKING:
+    from harpx.mechanics.body import Body
 
 __all__ = ["SolveResult", "equilibrate", "solve", "split_loads"]
 
@@ -157,7 +160,7 @@ class _Newton:
 
     def __init__(
         self,
-        body: Any,
+        body: Body,
         loads: Iterable[Any],
         *,
         tol: float,
@@ -373,7 +376,7 @@ class _Newton:
         raise AssertionError("unreachable")  # pragma: no cover
 
 
-def _activation_target(body: Any, t_max: Any) -> FloatArray | None:
+def _activation_target(body: Body, t_max: Any) -> FloatArray | None:
     """Per-cell activation (kPa) that ``t_max`` names, or None (the body's level stays)."""
     if t_max is None:
         return None
@@ -386,7 +389,7 @@ def _activation_target(body: Any, t_max: Any) -> FloatArray | None:
     return np.asarray(body.t_max, dtype=np.float64).copy()
 
 
-def _check_u0(body: Any, u0: ArrayLike | None) -> FloatArray:
+def _check_u0(body: Body, u0: ArrayLike | None) -> FloatArray:
     if u0 is None:
         return np.zeros(body.ndof)
     u = np.asarray(u0, dtype=np.float64)
@@ -414,7 +417,7 @@ def _failure(reason: str, cells: IntArray, s: float, history: list[float], tries
 
 
 def equilibrate(
-    body: Any,
+    body: Body,
     loads: Iterable[Any],
     u0: ArrayLike | None = None,
     s: float = 1.0,
@@ -488,7 +491,7 @@ def equilibrate(
 
 
 def solve(
-    body: Any,
+    body: Body,
     loads: Iterable[Any],
     *,
     steps: int = 10,

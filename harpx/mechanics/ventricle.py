@@ -63,6 +63,7 @@ References
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import skfem
@@ -70,6 +71,9 @@ from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
 from harpx.mechanics.mesh import MeshSpec, facets_where, hex_mesh, labelled_spec
+
+if TYPE_CHECKING:
+    from harpx.mechanics.body import Body
 
 __all__ = ["VentricleGeometry", "cavity_volume", "ventricle"]
 
@@ -145,10 +149,6 @@ class VentricleGeometry:
         arc = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(nu))])
         nu_base = float(np.arccos(np.clip(-self.truncation / c, -1.0, 1.0)))
         return nu, arc, float(np.interp(nu_base, nu, arc))
-
-    def meridian_length(self, t: float) -> float:
-        """Arc length (mm) of layer ``t``'s meridian from the apex to the base plane."""
-        return self._meridian_table(t)[2]
 
     def _project(self, sigma: FloatArray, t: float) -> FloatArray:
         """Arc position (mm) on layer ``t`` of the mid-wall normal through arc fraction σ."""
@@ -481,7 +481,8 @@ def ventricle(
         raise ValueError(
             f"n_longitudinal={n_longitudinal!r} and n_transmural={n_transmural!r} must be >= 1"
         )
-    geom = VentricleGeometry(inner=tuple(inner), outer=tuple(outer), truncation=truncation)
+    (a_in, c_in), (a_out, c_out) = inner, outer
+    geom = VentricleGeometry(inner=(a_in, c_in), outer=(a_out, c_out), truncation=truncation)
     m = nc // 4
     kappa = 0.75
     sigma_cap = kappa * m / (nl + kappa * m)
@@ -547,7 +548,7 @@ def ventricle(
     return labelled_spec(mesh, regions, boundaries, fibers)
 
 
-def cavity_volume(body: object, u: ArrayLike | None = None, *, base: float | None = None) -> float:
+def cavity_volume(body: Body, u: ArrayLike | None = None, *, base: float | None = None) -> float:
     """Volume enclosed by the (deformed) endocardium and the base plane, mm³.
 
     Parameters
@@ -570,13 +571,13 @@ def cavity_volume(body: object, u: ArrayLike | None = None, *, base: float | Non
     """
     from harpx.mechanics.kinematics import cofactor
 
-    facets = body.facets("endo")  # type: ignore[attr-defined]
-    mesh = body.mesh  # type: ignore[attr-defined]
-    element = body._scalar_element  # type: ignore[attr-defined]
+    facets = body.facets("endo")
+    mesh = body.mesh
+    element = body.scalar_element
     fb = skfem.FacetBasis(mesh, element, facets=facets.astype(np.int32), intorder=4)
     nb = len(fb.basis)
     if u is None:
-        u = np.zeros(body.ndof)  # type: ignore[attr-defined]
+        u = np.zeros(body.ndof)
     u = np.asarray(u, dtype=np.float64)
     ue = u[3 * fb.element_dofs.T[:, :, None] + np.arange(3)]  # (nf, nb, 3)
     phi = np.stack([np.asarray(fb.basis[a][0]) for a in range(nb)], axis=-1)  # (nf, nq, nb)
@@ -585,6 +586,6 @@ def cavity_volume(body: object, u: ArrayLike | None = None, *, base: float | Non
     nda = np.einsum("fqiJ,fqJ->fqi", cofactor(F), np.asarray(fb.normals).transpose(1, 2, 0))
     x = np.asarray(fb.global_coordinates()).transpose(1, 2, 0) + np.einsum("fqa,fai->fqi", phi, ue)
     if base is None:
-        base_facets = body.facets("base")  # type: ignore[attr-defined]
+        base_facets = body.facets("base")
         base = float(mesh.p[2, np.unique(mesh.facets[:, base_facets])].mean())
     return float(-np.sum((x[..., 2] - base) * nda[..., 2] * np.asarray(fb.dx)))

@@ -12,13 +12,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray
 
 
-def smooth_step(s: FloatArray) -> FloatArray:
+def smooth_step(s: ArrayLike) -> FloatArray:
     """C¹ ramp from 0 (s ≤ 0) to 1 (s ≥ 1): ½(1 − cos πs) in between (dimensionless)."""
-    s = np.clip(s, 0.0, 1.0)
+    s = np.clip(np.asarray(s, dtype=np.float64), 0.0, 1.0)
     return 0.5 * (1.0 - np.cos(np.pi * s))
 
 
@@ -40,8 +41,9 @@ class RotationalImpact:
         w = w_{max}\\,\\frac{R^2}{R_0^2}\\Bigl(1 − \\frac{R^2}{R_0^2}\\Bigr)\\,S(t).
 
     The second term of θ is the gel's elastic rebound (amplitude a = ``rebound``, period
-    T_b = ``rebound_period``) about the container's final angle. The map keeps R, shifts ϑ by a function of (R, Z, t) and Z by a function of (R, t): its
-    Jacobian in cylindrical coordinates is triangular with unit diagonal, so det F = 1
+    T_b = ``rebound_period``) about the container's final angle. The map keeps R, shifts ϑ
+    by a function of (R, Z, t) and Z by a function of (R, t): its Jacobian in cylindrical
+    coordinates is triangular with unit diagonal, so det F = 1
     exactly (volume preserving). The wall and the base follow the container (τ = 0, w = 0
     there) while the free top surface lags most; the FE model, which knows none of this,
     sees only the images.

@@ -20,8 +20,9 @@ tracker never shares the truth's discretisation (no inverse crime):
 The activation level :math:`a` (active tension :math:`a\,t_{max}`, cavity pressure
 :math:`a\,p_{es}`) is continued from 0 to 1 by Newton's method on the fine mesh; the frame
 levels are then chosen so that the ejected volume follows a smooth ejection curve
-:math:`(1 - \cos \pi s)/2` over equally spaced frames (:func:`simulate_systole`). Frame 0
-is the stress-free, unloaded reference (the images' reference geometry).
+:math:`(1 - \cos \pi s)/2` over equally spaced frames
+(:func:`~harpx.scenes._lv_truth.simulate_systole`). Frame 0 is the stress-free, unloaded
+reference (the images' reference geometry).
 
 Images
 ------
@@ -51,7 +52,8 @@ drive it). Two references:
 
 * ``"stress-free"`` (SFR): the image geometry at frame 0 is stress free.
 * ``"prestretched"`` (PSR): the same geometry carries residual stress from a growth field
-  (:func:`prestretch_growth`): fibres are *compressed in situ* by a mean of 5 %
+  (:func:`~harpx.mechanics.growth.prestretch_growth`): fibres are *compressed in situ* by a
+  mean of 5 %
   (``mean=-0.05``: in-situ fibre length / stress-free fibre length − 1, averaged over the
   wall), more at the endocardium than at the epicardium (``gradient``), as residual-strain
   measurements show (Omens & Fung 1990). The growth field is equilibrated with the base
@@ -83,33 +85,27 @@ from typing import Any, Literal
 
 import numpy as np
 import xarray as xr
-from numpy.typing import ArrayLike
 
-from harpx._typing import FloatArray, IntArray
-from harpx.errors import ConvergenceError
+from harpx._typing import FloatArray
 from harpx.imaging.stacks import resample_stacks, tagged_dataset
 from harpx.imaging.synth import synthesize_tagged
 from harpx.mechanics.body import Body
-from harpx.mechanics.cut import GrowthField, NodeFixed, release, set_growth
-from harpx.mechanics.kinematics import growth_tensor
-from harpx.mechanics.linsolve import LinearSolver
-from harpx.mechanics.loads import Fixed, Pressure
-from harpx.mechanics.locate import HexLocator, trilinear
+from harpx.mechanics.cut import NodeFixed
+from harpx.mechanics.growth import GrowthField, fiber_prestretch, prestretch_growth
+from harpx.mechanics.loads import Fixed
 from harpx.mechanics.materials import ActiveContraction, Guccione
 from harpx.mechanics.mesh import MeshSpec
-from harpx.mechanics.newton import equilibrate
 from harpx.mechanics.ventricle import VentricleGeometry, ventricle
+from harpx.scenes._lv_truth import FEMotion, Systole, simulate_systole
 
 __all__ = [
     "FEMotion",
     "LVScene",
     "SIZES",
     "Systole",
-    "fiber_prestretch",
     "fiber_shortening",
     "lv",
     "myocardium",
-    "prestretch_growth",
     "simulate_systole",
 ]
 
@@ -151,28 +147,6 @@ def myocardium(kappa: float = 350.0) -> Guccione:
     (0.88, 18.5)
     """
     return Guccione(c=0.88, bf=18.5, bt=3.58, bfs=1.63, kappa=kappa)
-
-
-@dataclass(frozen=True)
-class Systole:
-    """Quasi-static systolic loading (see the module docstring).
-
-    Attributes
-    ----------
-    t_max : float
-        Active tension parameter at end systole, kPa (calcium law).
-    pressure : float
-        End-systolic cavity pressure, kPa.
-    """
-
-    t_max: float = 60.0
-    pressure: float = 8.0
-
-    @staticmethod
-    def ejection_profile(frames: int) -> FloatArray:
-        """Fraction of the end-systolic ejected volume at every frame: ``(1 - cos πs)/2``."""
-        s = np.arange(frames) / max(frames - 1, 1)
-        return 0.5 * (1.0 - np.cos(np.pi * s))
 
 
 @dataclass(frozen=True)
@@ -221,286 +195,6 @@ def base_conditions(geometry: VentricleGeometry = GEOMETRY) -> list[Any]:
         np.array([[r, 0.0, zb], [0.0, r, zb], [-r, 0.0, zb], [0.0, -r, zb]]), (1, 0, 1, 0)
     )
     return [Fixed("base", (2,)), pins]
-
-
-# ------------------------------------------------------------------------------ forward
-
-
-def _advance(
-    body: Body,
-    systole: Systole,
-    dirichlet: list[Any],
-    u: FloatArray,
-    a_from: float,
-    a_to: float,
-    solver: LinearSolver,
-    info: dict[str, Any],
-    *,
-    tol: float,
-    max_iterations: int,
-    step: float | None = None,
-) -> list[tuple[float, FloatArray]]:
-    """Newton continuation in the activation level from ``a_from`` to ``a_to``."""
-    done = a_from
-    step = a_to - a_from if step is None else step
-    accepted: list[tuple[float, FloatArray]] = []
-    while done < a_to - 1e-12:
-        # the level grows at most geometrically: the response is strongly nonlinear early on
-        a = min(a_to, done + step, 2.0 * done) if done > 0 else min(a_to, step)
-        body.set_t_max(systole.t_max * a)
-        loads = [*dirichlet, Pressure("endo", systole.pressure * a)]
-        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            r = equilibrate(
-                body,
-                loads,
-                u,
-                1.0,
-                tol=tol,
-                max_iterations=max_iterations,
-                linear_solver=solver,
-                raise_on_failure=False,
-            )
-        info["iterations"] += r.iterations
-        if r.converged:
-            u, done = r.u, a
-            accepted.append((a, u))
-            info["steps"] += 1
-            step = 2.0 * (a - (accepted[-2][0] if len(accepted) > 1 else a_from))
-        else:
-            info["cutbacks"] += 1
-            step = 0.5 * (a - done)
-            if step < 1e-7:
-                raise ConvergenceError(
-                    f"the systolic simulation stalled at activation level {done:.4g}; lower "
-                    "Systole.t_max or Systole.pressure",
-                    [],
-                )
-    return accepted
-
-
-def simulate_systole(
-    body: Body,
-    frames: int,
-    systole: Systole,
-    dirichlet: list[Any],
-    *,
-    tol: float = 1e-7,
-    max_iterations: int = 10,
-    linear_solver: str = "auto",
-) -> tuple[FloatArray, dict[str, Any]]:
-    """Quasi-static systole whose cavity volume follows an ejection curve over the frames.
-
-    The activation level ``a`` (active tension ``a t_max``, cavity pressure
-    ``a pressure``) is continued from 0 to 1 by Newton's method, recording the cavity
-    volume :math:`V(a)`. The frame levels :math:`a_n` are then chosen so that the ejected
-    volume :math:`V_0 - V(a_n)` is the fraction ``Systole.ejection_profile`` (a smooth step
-    in time) of the end-systolic one, and each frame is solved at its level starting from
-    the nearest recorded state below it.
-
-    Parameters
-    ----------
-    body : Body
-        Ventricle body (``"endo"`` and ``"base"`` boundaries) with an active contraction
-        law (``body.active``).
-    frames : int
-        Number of frames including the reference (>= 2).
-    systole : Systole
-        Peak active tension and pressure.
-    dirichlet : list
-        Dirichlet conditions.
-    tol : float, default 1e-7
-        Newton tolerance (relative residual).
-    max_iterations : int, default 10
-        Newton iterations before a continuation step is halved.
-    linear_solver : str, default "auto"
-        See :mod:`harpx.mechanics.linsolve`.
-
-    Returns
-    -------
-    U : ndarray, shape (frames, ndof)
-        Displacement of every frame, mm (``U[0] = 0``).
-    info : dict
-        ``levels`` (activation per frame), ``ejection_fraction`` (per frame,
-        :math:`1 - V/V_0`), ``iterations``, ``steps``, ``cutbacks``, ``wall_time`` (s).
-
-    Raises
-    ------
-    ConvergenceError
-        If the continuation stalls.
-    """
-    from harpx.mechanics.ventricle import cavity_volume
-
-    if int(frames) < 2:
-        raise ValueError(f"frames={frames!r} must be >= 2")
-    start = _time.perf_counter()
-    solver = LinearSolver(linear_solver)
-    info: dict[str, Any] = {"iterations": 0, "steps": 0, "cutbacks": 0}
-    v0 = cavity_volume(body)
-    path = [(0.0, np.zeros(body.ndof))]
-    path += _advance(
-        body,
-        systole,
-        dirichlet,
-        path[0][1],
-        0.0,
-        1.0,
-        solver,
-        info,
-        tol=tol,
-        max_iterations=max_iterations,
-        step=1.0 / 64.0,
-    )
-    levels = np.array([a for a, _ in path])
-    ejected = np.maximum.accumulate(np.array([v0 - cavity_volume(body, u) for _, u in path]))
-    if not ejected[-1] > 0:
-        raise ConvergenceError(
-            "the simulated systole does not eject (end-systolic volume >= reference); raise "
-            "Systole.t_max or lower Systole.pressure",
-            [],
-        )
-    target = Systole.ejection_profile(int(frames)) * ejected[-1]
-    frame_levels = np.interp(target, ejected, levels)
-    frame_levels[0], frame_levels[-1] = 0.0, 1.0
-    U = np.zeros((int(frames), body.ndof))
-    for n in range(1, int(frames)):
-        k = int(np.searchsorted(levels, frame_levels[n], side="right")) - 1
-        a_k, u_k = path[k]
-        if frame_levels[n] - a_k < 1e-12:
-            U[n] = u_k
-            continue
-        U[n] = _advance(
-            body,
-            systole,
-            dirichlet,
-            u_k,
-            a_k,
-            float(frame_levels[n]),
-            solver,
-            info,
-            tol=tol,
-            max_iterations=max_iterations,
-        )[-1][1]
-    body.set_t_max(systole.t_max)
-    info["levels"] = frame_levels
-    info["ejection_fraction"] = np.array([1.0 - cavity_volume(body, u) / v0 for u in U])
-    info["wall_time"] = _time.perf_counter() - start
-    return U, info
-
-
-# ------------------------------------------------------------------------ FE motion
-
-
-class FEMotion:
-    """A hex8 finite-element displacement history as a motion ``u(X, t)`` with its inverse.
-
-    Parameters
-    ----------
-    body : Body
-        hex8 body whose dofs ``U`` refer to (reference configuration, mm).
-    U : ndarray, shape (ntime, ndof)
-        Displacement per frame (mm); ``U[0]`` is the reference (zero).
-    times : array_like, shape (ntime,)
-        Frame times, ms. The motion is defined at these times only.
-
-    Notes
-    -----
-    ``u(X, t)`` interpolates the displacement at reference points (NaN outside the mesh).
-    ``inverse(x, t)`` is the reference position of the material at spatial points: the
-    points are located in the deformed mesh (trilinear cells, exact for hex8) and mapped
-    back; points outside the deformed body are sent 10 m away, where
-    :meth:`density` is 0. Used as ``synthesize_tagged(motion, inverse=motion.inverse,
-    body=motion.density)``.
-    """
-
-    FAR = np.array([0.0, 0.0, 1.0e4])
-
-    def __init__(self, body: Body, U: ArrayLike, times: ArrayLike) -> None:
-        if body.element != "hex8":
-            raise ValueError(f"FEMotion needs a hex8 body, got {body.element!r}")
-        self.body = body
-        self.U = np.asarray(U, dtype=np.float64)
-        self.times = np.asarray(times, dtype=np.float64)
-        if self.U.shape != (self.times.size, body.ndof):
-            raise ValueError(
-                f"U has shape {self.U.shape!r}; expected ({self.times.size}, {body.ndof})"
-            )
-        self._reference = HexLocator(body.nodes, body.cells)
-        self._deformed: dict[int, HexLocator] = {}
-        # synthesize_tagged asks for density(inverse(x)) and for u at the same voxel centres
-        # every frame: remember the last located arrays instead of locating them again
-        self._last_inverse: tuple[FloatArray, np.ndarray] | None = None
-        self._located: dict[tuple, tuple[IntArray, FloatArray]] = {}
-
-    @staticmethod
-    def _key(X: FloatArray) -> tuple:
-        return (X.shape, X.ctypes.data, float(X[0, 0]), float(X[-1, -1]), float(X.sum()))
-
-    def _locate_reference(self, X: FloatArray) -> tuple[IntArray, FloatArray]:
-        if X.size == 0:
-            return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-        key = self._key(X)
-        if key not in self._located:
-            if len(self._located) >= 4:
-                self._located.pop(next(iter(self._located)))
-            self._located[key] = self._reference.locate(X)
-        return self._located[key]
-
-    def frame(self, t: float) -> int:
-        """Index of the frame at time ``t`` (ms)."""
-        n = int(np.argmin(np.abs(self.times - float(t))))
-        if abs(self.times[n] - float(t)) > 1e-6 * max(1.0, float(np.abs(self.times).max())):
-            raise ValueError(
-                f"t={t!r} ms is not a frame time of this motion {self.times.tolist()!r}"
-            )
-        return n
-
-    def _nodal(self, n: int) -> FloatArray:
-        return self.U[n].reshape(-1, 3)[: len(self.body.nodes)]
-
-    def displacement(self, points: ArrayLike) -> FloatArray:
-        """Displacement of every frame at reference points, (ntime, n, 3) mm, NaN outside."""
-        cells, xi = self._reference.locate(np.asarray(points, dtype=np.float64))
-        out = np.full((self.times.size, len(cells), 3), np.nan)
-        inside = cells >= 0
-        if inside.any():
-            N = trilinear(xi[inside])
-            vert = self.body.cells[cells[inside]]  # (m, 8)
-            nodal = self.U.reshape(self.times.size, -1, 3)  # (ntime, nnode, 3)
-            out[:, inside] = np.einsum("ma,tmai->tmi", N, nodal[:, vert])
-        return out
-
-    def __call__(self, X: ArrayLike, t: float) -> FloatArray:
-        """Displacement (n, 3) mm at reference points ``X`` (n, 3) mm; NaN outside."""
-        n = self.frame(t)
-        cells, xi = self._locate_reference(np.asarray(X, dtype=np.float64).reshape(-1, 3))
-        out = np.full((len(cells), 3), np.nan)
-        inside = cells >= 0
-        N = trilinear(xi[inside])
-        out[inside] = np.einsum("ma,mai->mi", N, self._nodal(n)[self.body.cells[cells[inside]]])
-        return out
-
-    def inverse(self, x: ArrayLike, t: float) -> FloatArray:
-        """Reference positions (n, 3) mm of the material at spatial points ``x`` (n, 3) mm."""
-        n = self.frame(t)
-        x = np.asarray(x, dtype=np.float64)
-        if n == 0:
-            return x.copy()
-        if n not in self._deformed:
-            self._deformed[n] = HexLocator(self.body.nodes + self._nodal(n), self.body.cells)
-        cells, xi = self._deformed[n].locate(x)
-        X = x + self.FAR
-        inside = cells >= 0
-        N = trilinear(xi[inside])
-        X[inside] = np.einsum("ma,mai->mi", N, self.body.nodes[self.body.cells[cells[inside]]])
-        self._last_inverse = (X, inside)
-        return X
-
-    def density(self, X: ArrayLike) -> FloatArray:
-        """1 inside the reference mesh, 0 outside (n,)."""
-        if self._last_inverse is not None and self._last_inverse[0] is X:
-            return self._last_inverse[1].astype(np.float64)
-        cells, _ = self._reference.locate(np.asarray(X, dtype=np.float64))
-        return (cells >= 0).astype(np.float64)
 
 
 # ------------------------------------------------------------------------------ images
@@ -595,149 +289,7 @@ def _acquire(
     )
 
 
-# ------------------------------------------------------------------------- prestretch
-
-
-def prestretch_growth(
-    spec: MeshSpec,
-    material: Any,
-    dirichlet: list[Any],
-    *,
-    geometry: VentricleGeometry = GEOMETRY,
-    mean: float = -0.05,
-    gradient: float = 0.10,
-    tol: float = 1e-3,
-    max_updates: int = 10,
-    in_situ: bool = True,
-    linear_solver: str = "auto",
-) -> tuple[GrowthField, dict[str, Any]]:
-    r"""Growth field whose equilibrium with the base held is the mesh's own geometry.
-
-    Parameters
-    ----------
-    spec : MeshSpec
-        Ventricle mesh with fibres (the image geometry at frame 0).
-    material : object
-        Passive material.
-    dirichlet : list
-        Boundary conditions held while equilibrating (e.g. :func:`base_conditions`).
-    geometry : VentricleGeometry
-        Supplies the transmural coordinate ``t`` of the Gauss points.
-    mean : float, default -0.05
-        Mean in-situ fibre prestretch :math:`\lambda_p - 1` over the wall volume
-        (dimensionless; :math:`\lambda_p = 1/|F_g f_0|` is the in-situ fibre length over
-        the stress-free length, so -0.05 means compressed by 5 %).
-    gradient : float, default 0.10
-        Transmural change of the initial prestretch from endo- to epicardium: the growth
-        starts from :math:`\lambda_p(t) = 1 + \text{mean} + \text{gradient}\,(t - 1/2)`
-        (compressed endocardium, unstrained epicardium for the defaults).
-    tol : float, default 1e-3
-        Largest displacement (mm) of the equilibrium that counts as "geometry kept".
-    max_updates : int, default 10
-        Prestrain updates before giving up.
-    in_situ : bool, default True
-        Keep the *in-situ* mean fibre prestretch at ``mean`` (rescaling the fibre part of
-        the growth after every update). With False, ``mean`` and ``gradient`` only set the
-        initial growth and the equilibrium relaxes most of its uniform part (measured: an
-        in-situ mean of -0.7 %, endocardium -2.9 %, epicardium +0.9 % on the small mesh).
-    linear_solver : str, default "auto"
-        See :mod:`harpx.mechanics.linsolve`.
-
-    Returns
-    -------
-    GrowthField
-        :math:`F_g` at the Gauss points of a hex8 body on ``spec``.
-    info : dict
-        ``updates``, ``displacement`` (max ``|u|`` of each equilibrium, mm), ``prestretch``
-        (mean, endocardial and epicardial mean :math:`\lambda_p - 1`) and ``wall_time``.
-
-    Raises
-    ------
-    ConvergenceError
-        If the geometry is not kept to ``tol`` after ``max_updates`` updates.
-
-    Notes
-    -----
-    Fibre growth :math:`F_g = I + (1/\lambda_p - 1) f_0 \otimes f_0` is incompatible
-    (:math:`\lambda_p` and :math:`f_0` vary through the wall), so the grown body deforms
-    when it equilibrates, by :math:`F`. The update :math:`F_g \leftarrow F_g F^{-1}` makes
-    the equilibrium elastic strain the in-situ strain of the *reference* geometry (Maas et
-    al. 2016); the fibre part is then rescaled, :math:`F_g \leftarrow F_g (I + (c - 1) f_0
-    \otimes f_0)`, to keep the mean prestretch. Repeating drives the equilibrium
-    displacement to zero (the rescale is over-relaxed, :math:`c` cubed, since most of a
-    uniform fibre compression relaxes again in the next equilibrium). The converged field
-    is a fibre compression with cross-fibre extension, nearly isochoric. The material's
-    fibre axis stays :math:`f_0` (the small rotation of :math:`F_g f_0` away from it is
-    neglected).
-    """
-    start = _time.perf_counter()
-    body = Body(spec, material)
-    fibers = body.fibers_qp
-    assert fibers is not None
-    weights = body.dV / body.dV.sum()
-    t = geometry.transmural(body.quadrature_points.reshape(-1, 3)).reshape(body.ncell, body.nqp)
-    t = np.clip(t, 0.0, 1.0)
-    target = 1.0 + mean
-    Fg = growth_tensor(fibers, 1.0 / (target + gradient * (t - 0.5)))
-    body = Body(spec, material, growth=GrowthField(Fg))
-    solver = LinearSolver(linear_solver)
-    moved: list[float] = []
-    for _ in range(max_updates):
-        res = release(body, dirichlet, linear_solver=solver)
-        moved.append(float(np.abs(res.u).max()))
-        if moved[-1] < tol:
-            break
-        F = body.deformation_gradient(res.u)
-        Fg = np.matmul(Fg, np.linalg.inv(F))
-        lam = GrowthField(Fg).fiber_prestretch(fibers)
-        # over-relaxed (cubed) rescale: most of a uniform fibre compression relaxes again in
-        # the next equilibrium, so undershooting would make the updates crawl (measured: 6
-        # instead of 17 updates to 1e-3 mm on the small mesh)
-        c = (float((weights * lam).sum()) / target) ** 3 if in_situ else 1.0
-        grown = np.einsum("eqij,eqj->eqi", Fg, fibers)
-        Fg = Fg + (c - 1.0) * np.einsum("eqi,eqj->eqij", grown, fibers)
-        set_growth(body, Fg)
-    else:
-        raise ConvergenceError(
-            f"the prestretched reference moved {moved[-1]:.3g} mm after {max_updates} "
-            f"prestrain updates (> tol={tol!r} mm); lower |mean| or |gradient|",
-            moved,
-        )
-    field_ = GrowthField(Fg)
-    lam = field_.fiber_prestretch(fibers)
-    endo, epi = t < 0.25, t > 0.75
-    info = {
-        "updates": len(moved),
-        "displacement": moved,
-        "prestretch": {
-            "mean": float((weights * lam).sum()) - 1.0,
-            "endo": float(np.average(lam[endo], weights=weights[endo])) - 1.0,
-            "epi": float(np.average(lam[epi], weights=weights[epi])) - 1.0,
-        },
-        "wall_time": _time.perf_counter() - start,
-    }
-    return field_, info
-
-
-def fiber_prestretch(body: Body) -> FloatArray:
-    r"""In-situ fibre prestretch per cell, :math:`1/|F_g f_0|` volume-averaged (dimensionless).
-
-    Parameters
-    ----------
-    body : Body
-        Body with fibres; 1 everywhere without growth.
-
-    Returns
-    -------
-    ndarray, shape (ncell,)
-        Reference fibre length over stress-free fibre length (< 1: compressed in situ).
-        Multiply a fibre stretch relative to the reference by it to refer the stretch to
-        the stress-free fibre length.
-    """
-    if body.growth_tensor is None or body.fibers_qp is None:
-        return np.ones(body.ncell)
-    lam = GrowthField(body.growth_tensor).fiber_prestretch(body.fibers_qp)
-    return (lam * body.dV).sum(axis=1) / body.cell_volume
+# ---------------------------------------------------------------------------- analysis
 
 
 def fiber_shortening(tracked: xr.Dataset, body: Body, *, frame: int = -1) -> dict[str, float]:
@@ -799,7 +351,7 @@ class LVScene:
     tagged: xr.Dataset
     mesh: MeshSpec
     material: Any
-    reference: str
+    reference: Reference
     truth: FEMotion
     geometry: VentricleGeometry = GEOMETRY
     info: dict = field(default_factory=dict)
@@ -810,13 +362,14 @@ class LVScene:
         return base_conditions(self.geometry)
 
     def growth(self) -> GrowthField:
-        """The prestretch growth field of the PSR (computed once, :func:`prestretch_growth`)."""
+        """The prestretch growth field of the PSR (computed once by
+        :func:`~harpx.mechanics.growth.prestretch_growth`)."""
         if self._growth is None:
             self._growth, info = prestretch_growth(
                 self.mesh,
                 self.material,
                 self.dirichlet(),
-                geometry=self.geometry,
+                transmural=self.geometry.transmural,
                 **self.info.get("prestretch_settings", {}),
             )
             self.info["prestretch"] = info
@@ -896,7 +449,7 @@ def lv(
         segments=False,
     )
     truth_body = Body(fine, material, active=ActiveContraction(t_max=0.0))
-    times = g.frame_interval * np.arange(g.frames)
+    times = g.frame_interval * np.arange(g.frames, dtype=np.float64)
     U, forward = simulate_systole(
         truth_body, g.frames, systole, base_conditions(geometry), linear_solver=linear_solver
     )

@@ -5,7 +5,7 @@ superior longitudinal, transverse and verticalis, each with its fibre directions
 and hyoid/base attachments fixed) made of the paper's neo-Hookean solid (C1 = 1.0 kPa,
 κ = 120 kPa) plus a Guccione--McCulloch active fibre stress whose level ``t_max`` is known
 per muscle. The ground truth is a *forward* simulation
-(:func:`harpx.inverse.activation.simulate_activation`, Newton with cut-back) of the
+(:func:`harpx.mechanics.active.simulate_activation`, Newton with cut-back) of the
 activation rising linearly over the frames, run on a **finer** mesh than the 280-cell
 tracking model (no inverse crime: other discretisation, other boundary polygon).
 
@@ -38,7 +38,7 @@ from harpx._typing import FloatArray
 from harpx.imaging.harp import extract_phase
 from harpx.imaging.stacks import resample_stacks, tagged_dataset
 from harpx.imaging.synth import synthesize_tagged, voxel_density
-from harpx.inverse.activation import simulate_activation
+from harpx.mechanics.active import simulate_activation
 from harpx.mechanics.body import Body
 from harpx.mechanics.loads import Fixed
 from harpx.mechanics.materials import ActiveContraction, NeoHookean
@@ -241,7 +241,7 @@ class TongueScene:
     def measure(self, body: Body, displacement: FloatArray, *, seed: int = 1) -> xr.Dataset:
         """Image a motion of ``body`` like the scene's data and track it the same way.
 
-        The measurement chain for :func:`harpx.inverse.activation.calibrate_activation`:
+        The measurement chain for :func:`harpx.inverse.calibration.calibrate_activation`:
         ``self.track(body, self.acquire(body, displacement, seed=seed))``.
         """
         return self.track(body, self.acquire(body, displacement, seed=seed))

@@ -234,7 +234,7 @@ class PhaseConstraint:
                 abs(float(phase[d][1] - phase[d][0])) for d in ("z", "y", "x") if phase.sizes[d] > 1
             )
         )
-        element = body._scalar_element  # type: ignore[attr-defined]
+        element = body.scalar_element  # type: ignore[attr-defined]
         if intorder is None:
             basis = skfem.CellBasis(
                 body.mesh,

@@ -7,18 +7,17 @@ cell are reported as outside (NaN displacement), never extrapolated.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from harpx._typing import FloatArray
+from harpx.mechanics.body import Body
 from harpx.mechanics.locate import displacement_at, locate
 
 __all__ = ["interpolate_displacement", "locate"]
 
 
 def interpolate_displacement(
-    body: Any, displacements: FloatArray, points: FloatArray
+    body: Body, displacements: FloatArray, points: FloatArray
 ) -> tuple[FloatArray, np.ndarray]:
     """Displacement of material points given by reference positions.
 

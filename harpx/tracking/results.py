@@ -166,7 +166,7 @@ def tracked_dataset(
         strain, dims=("time", "cell", "i", "j"), attrs=standard_attrs("green_strain")
     )
     if getattr(body, "fibers_qp", None) is not None:
-        fib = body._cell_average(body.fibers_qp)
+        fib = body.cell_average(body.fibers_qp)
         fib /= np.linalg.norm(fib, axis=1, keepdims=True)
         ds["fiber"] = xr.DataArray(fib, dims=("cell", "axis"), attrs=standard_attrs("fiber"))
         ds["fiber_stretch"] = xr.DataArray(

@@ -57,7 +57,8 @@ def test_mean_dilatation_does_not_lock(element, volumetric, n_radial):
     res, a = _inflate(element, volumetric, n_radial, p)
     rel = closed_form_pressure(a) / p - 1.0
     print(
-        f"{element} {volumetric}: a = {a:.5f}, P(a)/p - 1 = {rel:+.2e}, iterations {res.step_iterations}"
+        f"{element} {volumetric}: a = {a:.5f}, P(a)/p - 1 = {rel:+.2e}, "
+        f"iterations {res.step_iterations}"
     )
     assert res.converged
     # 2 % (issue 3); measured -0.38 % (hex8) and -0.17 % (hex20), mostly the straight-chord

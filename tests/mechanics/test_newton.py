@@ -111,8 +111,8 @@ def test_uniaxial_stretch_free_lateral_faces(element, lam):
 def test_simple_shear(element):
     gamma = 0.5
     body = Body(box((1.0, 1.0, 1.0), (1, 1, 1)), NEO, element=element)
-    shear = Prescribed(_all_boundary(body),
-                       lambda X, s: s * gamma * X[:, [1]] * np.array([[1.0, 0.0, 0.0]]))  # fmt: skip
+    ex = np.array([[1.0, 0.0, 0.0]])
+    shear = Prescribed(_all_boundary(body), lambda X, s: s * gamma * X[:, [1]] * ex)
     res = solve(body, [shear], steps=2, tol=1e-12)
     sigma = cauchy_stress(body, res.u)
     # REFERENCES §2.3: J = 1, σ_xy = 2C1γ, σ_xx = 4/3 C1γ², σ_yy = σ_zz = −2/3 C1γ² (exact)

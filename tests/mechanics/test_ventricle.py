@@ -155,7 +155,8 @@ def test_bad_arguments_are_clear_errors(kwargs, match):
 
 
 # ------------------------------------------------------------------ growth release and cut
-from harpx.mechanics.cut import GrowthField, NodeFixed, opening_angle, set_growth  # noqa: E402
+from harpx.mechanics.cut import NodeFixed, opening_angle  # noqa: E402
+from harpx.mechanics.growth import GrowthField, set_growth  # noqa: E402
 from harpx.mechanics.kinematics import growth_tensor  # noqa: E402
 from harpx.mechanics.mesh import tube  # noqa: E402
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from harpx.inverse.activation import (
+from harpx.inverse import (
     calibrate_activation,
     correct_activation,
     estimate_activation,

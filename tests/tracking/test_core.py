@@ -62,7 +62,8 @@ def test_tangent_is_the_derivative_of_the_force_on_a_linear_phase(ideal, rng):
     h = 1e-3
     _, K = constraint.assemble(constraint.state(u))
     numeric = (
-        constraint.force(constraint.state(u + h * v)) - constraint.force(constraint.state(u - h * v))
+        constraint.force(constraint.state(u + h * v))
+        - constraint.force(constraint.state(u - h * v))
     ) / (2 * h)
     np.testing.assert_allclose(K @ v, numeric, rtol=1e-7, atol=1e-9 * np.abs(numeric).max())
 
