@@ -397,7 +397,7 @@ def displacement_at(body: Any, u: ArrayLike, points: ArrayLike) -> FloatArray:
     Ut = U.reshape(-1, body.ndof)
     out = np.full((Ut.shape[0], cells.size, 3), np.nan)
     if inside.any():
-        vals, _ = _shape_values(body._scalar_element, xi[inside].T, body.nbasis)
+        vals, _ = _shape_values(body.scalar_element, xi[inside].T, body.nbasis)
         dofs = body.element_dofs[cells[inside]]  # (m, nb, 3)
         out[:, inside] = np.einsum("ma,tmai->tmi", vals, Ut[:, dofs])
     if U.ndim == 1:
