@@ -213,7 +213,7 @@ def _build_sparsity(body: Body) -> Pattern:
     keys = (sd[:, :, None].astype(np.int64) * ns + sd[:, None, :]).ravel()  # (e, a, b)
     if getattr(body, "volumetric", None) == "nodal-dilatation":
         # dofs of all cells around a vertex are coupled through its nodal dilatation
-        inc = _vertex_incidence(sd, ns)
+        inc = _vertex_incidence(sd, ns, body.vertex_weights.shape[1])
         S = (inc.T @ inc).tocoo()
         uniq = np.unique(np.concatenate([keys, S.row.astype(np.int64) * ns + S.col]))
         inv = np.searchsorted(uniq, keys)
@@ -255,11 +255,14 @@ def _build_sparsity(body: Body) -> Pattern:
     return dataclasses.replace(pat, diagonal=pat.positions(d, d))
 
 
-def _vertex_incidence(sd: IntArray, ns: int) -> sparse.csr_matrix:
-    """(ns, ns) 0/1 matrix: row ``a`` marks the scalar dofs of every cell containing ``a``."""
+def _vertex_incidence(sd: IntArray, ns: int, nv: int) -> sparse.csr_matrix:
+    """(ns, ns) 0/1 matrix: row ``a`` marks the scalar dofs of every cell containing ``a``.
+
+    Only the cells' first ``nv`` dofs (their vertices, the pressure nodes) have rows.
+    """
     nel, nb = sd.shape
-    rows = np.repeat(sd, nb, axis=1).ravel()
-    cols = np.tile(sd, (1, nb)).ravel()
+    rows = np.repeat(sd[:, :nv], nb, axis=1).ravel()
+    cols = np.tile(sd, (1, nv)).ravel()
     inc = sparse.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(ns, ns))
     inc.data[:] = 1.0
     return inc
@@ -367,25 +370,27 @@ def _volumetric(body: Body, F: FloatArray) -> tuple[FloatArray, FloatArray, Floa
         p = np.asarray(dU, dtype=np.float64)
         extra["d2U"] = np.asarray(d2U, dtype=np.float64) / jg
         return p, cof, J, extra
-    if body.volumetric == "nodal-dilatation":  # type: ignore[attr-defined]
-        # (ncell, 4): the vertices
-        sd = body.cell_scalar_dofs  # type: ignore[attr-defined]
-        ns = int(body.n_dof_nodes)  # type: ignore[attr-defined]
-        dV = body.dV  # type: ignore[attr-defined]
-        nv = sd.shape[1]
-        grown = body.cell_volume * (1.0 if Jg is None else Jg) / nv  # type: ignore[attr-defined]
-        G = np.bincount(sd.ravel(), weights=np.repeat(grown, nv), minlength=ns)
-        v = np.bincount(sd.ravel(), weights=np.repeat((J * dV).sum(axis=1) / nv, nv), minlength=ns)
+    if body.volumetric == "nodal-dilatation":
+        # vertex a of cell e weighs its Gauss points by the linear (P1) shape function λ_a:
+        # tet4 1/4 at the centroid; tet10 a continuous linear pressure (Taylor–Hood P2/P1)
+        wdV = body.dV[:, :, None] * body.vertex_weights  # (ncell, nqp, nv)
+        nv = wdV.shape[2]
+        sd = body.cell_scalar_dofs[:, :nv]  # the vertices
+        ns = int(body.n_dof_nodes)
+        grown = wdV.sum(axis=1) * (1.0 if Jg is None else Jg[:, None])  # (ncell, nv)
+        G = np.bincount(sd.ravel(), weights=grown.ravel(), minlength=ns)
+        vol = np.einsum("eq,eqa->ea", J, wdV)
+        v = np.bincount(sd.ravel(), weights=vol.ravel(), minlength=ns)
         used = G > 0
         Jn = np.ones(ns)
         Jn[used] = v[used] / G[used]
         _, dU, d2U = mat.volumetric(Jn)
         dU = np.broadcast_to(np.asarray(dU, dtype=np.float64), (ns,))
-        pe = dU[sd].mean(axis=1)
-        p = np.broadcast_to(pe[:, None], J.shape).copy()
+        p = np.ascontiguousarray(dU[sd] @ body.vertex_weights.T)  # (ncell, nqp)
         c = np.zeros(ns)
         c[used] = np.broadcast_to(np.asarray(d2U, dtype=np.float64), (ns,))[used] / G[used]
         extra["nodal"] = c
+        extra["nodal_weights"] = wdV
         return p, cof, J, extra
     psi, psiW, Minv, proj = _pressure_space(body)
     theta = np.matmul(proj, J[..., None])[..., 0]  # L2 projection of J per element
@@ -516,19 +521,22 @@ def internal_forces(
     pat = sparsity(body)
     data = np.bincount(pat.element_positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz)
     if nodal is not None:
-        data += _nodal_tangent(body, pat, (Bq * dV[..., None]).sum(axis=1), nodal)
+        beta = np.matmul(np.swapaxes(extra["nodal_weights"], 1, 2), Bq)  # (e, nv, 3 nb)
+        data += _nodal_tangent(body, pat, beta, nodal)
     return Internal(r, pat.matrix(data), min_j, bad)
 
 
 def _nodal_tangent(body: object, pat: Pattern, b: FloatArray, c: FloatArray) -> FloatArray:
-    """Pattern data of ``Σ_a c_a β_a β_aᵀ``, ``β_a = Σ_{e∋a} b_e / nv`` (nodal dilatation).
+    """Pattern data of ``Σ_a c_a β_a β_aᵀ``, ``β_a = Σ_{e∋a} b_{e,a}`` (nodal dilatation).
 
-    ``b`` (ncell, 3 nb) are the cell volume gradients ``∂v_e/∂u`` in element-dof order.
+    ``b`` (ncell, nv, 3 nb) are the gradients ``∂v_{e,a}/∂u`` of each cell's share of the
+    volume of its vertices ``a`` (the cell's first ``nv`` dofs), in element-dof order.
     """
-    sd = body.cell_scalar_dofs  # type: ignore[attr-defined]
+    nv = b.shape[1]
+    sd = body.cell_scalar_dofs[:, :nv]  # type: ignore[attr-defined]
     ed = body.element_dofs.reshape(sd.shape[0], -1)  # type: ignore[attr-defined]
     ns = int(body.n_dof_nodes)  # type: ignore[attr-defined]
-    nel, nv = sd.shape
+    nel = sd.shape[0]
     cache = getattr(body, "_nodal_cache", None)
     if cache is None:
         rows = np.broadcast_to(sd[:, :, None], (nel, nv, ed.shape[1]))
@@ -537,7 +545,7 @@ def _nodal_tangent(body: object, pat: Pattern, b: FloatArray, c: FloatArray) -> 
         uniq, inv = np.unique(keys, return_inverse=True)
         cache = {"inv": inv, "rows": uniq // pat.ndof, "cols": uniq % pat.ndof, "pos": None}
         body._nodal_cache = cache  # type: ignore[attr-defined]
-    vals = np.broadcast_to(b[:, None, :] / nv, (nel, nv, ed.shape[1])).ravel()
+    vals = b.ravel()
     beta = sparse.csr_matrix(
         (np.bincount(cache["inv"], weights=vals), (cache["rows"], cache["cols"])),
         shape=(ns, pat.ndof),

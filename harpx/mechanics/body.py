@@ -105,7 +105,8 @@ ELEMENTS: dict[str, ElementKind] = {
         _NO_EDGES,
     ),
     "tet10": ElementKind(
-        skfem.ElementTetP2, 5, 14, 4, _TET_MESHES, ("mean-dilatation", "pointwise"),
+        skfem.ElementTetP2, 5, 14, 4, _TET_MESHES,
+        ("nodal-dilatation", "mean-dilatation", "pointwise"),
         _VTK_TET_EDGES,
     ),
 }  # fmt: skip
@@ -611,6 +612,12 @@ class Body:
         self.dof_points: FloatArray = np.ascontiguousarray(sb.doflocs.T)
         self.node_dofs: IntArray = 3 * np.arange(self.n_dof_nodes)[:, None] + np.arange(3)
         self.cells: IntArray = self._vtk_cells()
+        # linear (P1) shape functions of the cell's vertices at the Gauss points: the
+        # weights of the nodal dilatation (tetrahedra; skfem's reference vertices 0, e1, e2, e3)
+        Xr = np.asarray(sb.X)  # (3, nqp) reference coordinates
+        self.vertex_weights: FloatArray = np.ascontiguousarray(
+            np.vstack([1.0 - Xr.sum(axis=0), Xr]).T
+        )
 
         # regions and boundaries
         if regions is None:
