@@ -26,7 +26,7 @@ place). Two volumetric treatments are offered (``Body.volumetric``):
   itself; only the volumetric energy sees :math:`\theta_e`. Condensing the element pressure
   :math:`p_e = U'(\theta_e/J_{g,e})` gives exactly the formulas below. The same treatment
   serves hex8 (Q1/P0) and hex20 (Q2/P0, inf--sup stable).
-* ``"nodal-dilatation"`` (tet4; average nodal pressure, Bonet & Burton 1998): a linear
+* ``"nodal-dilatation"`` (tet4 and tet10; average nodal pressure, Bonet & Burton 1998): a linear
   tetrahedron has one dilatation per cell, so the mean dilatation is the pointwise one and
   locks. Instead the volume is averaged over the cells around each vertex :math:`a`:
   :math:`v_a = \sum_{e \ni a} v_e/4` with :math:`v_e = \int_e J\, dV`, grown reference
@@ -37,7 +37,12 @@ place). Two volumetric treatments are offered (``Body.volumetric``):
   an element pressure :math:`\bar p_e = \tfrac14\sum_{a \in e} U'(v_a/G_a)`; the tangent
   adds :math:`\sum_a \frac{U''(v_a/G_a)}{G_a}\, \beta_a \beta_a^T` with
   :math:`\beta_a = \sum_{e \ni a} b_e/4`, which couples the dofs of all cells around
-  a vertex (the stiffness pattern is widened accordingly, :func:`sparsity`).
+  a vertex (the stiffness pattern is widened accordingly, :func:`sparsity`). For tet10 the
+  vertex shares are weighted by the linear shape functions, :math:`v_a = \sum_{e \ni a}
+  \int_e \lambda_a J\, dV`, :math:`G_a = \sum_{e \ni a} J_{g,e}\int_e \lambda_a dV`,
+  and the pressure :math:`p = \sum_a \lambda_a U'(v_a/G_a)` is continuous and linear:
+  Taylor--Hood P2/P1 with a lumped pressure mass (tet4 is the case of one Gauss point,
+  :math:`\lambda_a = 1/4`).
 * ``"linear-dilatation"`` (Q2/P1-disc for hex20): the same with the dilatation and pressure
   linear in each element, :math:`\theta = \Pi_e J` the element-wise :math:`L^2` projection
   onto :math:`\psi = (1, X - X_c, Y - Y_c, Z - Z_c)`, energy

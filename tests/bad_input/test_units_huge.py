@@ -64,6 +64,19 @@ def test_the_acquired_voxel_sets_the_point_budget() -> None:
     check_fits_image(coarse, GRID.assign_attrs(upsample=2), max_points=2000)
 
 
+def test_tetrahedral_point_budget_names_points_per_edge() -> None:
+    # the 40 mm box split into 6 tetrahedra: longest edge sqrt(40² + 40² + 12²) = 57.83 mm,
+    # ceil(57.8 / 3) = 20 points per edge, 20³ per cell, 6 cells: 4.8e4 points
+    from harpx.mechanics.mesh import tetrahedralize
+
+    spec = tetrahedralize(box((40.0, 40.0, 12.0), (1, 1, 1), origin=(-20.0, -20.0, -6.0)))
+    with pytest.raises(ValueError, match=r"4.8e\+04 constraint points") as info:
+        check_fits_image(Body(spec, MAT), GRID, max_points=2000)
+    message = str(info.value)
+    assert "longest tetrahedron edge is 57.83 mm, 20 points per edge" in message
+    assert "voxels" not in message.split("):")[1].replace("1.5 voxels", "")
+
+
 def test_cohort_completeness_check_streams_a_huge_archive(tmp_path) -> None:
     # an archive declaring 2e9 float64 (15 GiB) is judged incomplete without loading it
     import netCDF4
