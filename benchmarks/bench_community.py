@@ -29,7 +29,8 @@ re-implementations of the benchmark, e.g. the torchcor benchmark scripts):
 The paper's material is incompressible; here the uncoupled Guccione law with
 κ = 1000 C (modelling error ~C/κ ~ 1e-3) and the locking-free volumetric treatment of each
 element (mean dilatation for hex8, Q2/P1 linear dilatation for hex20, P2/P1 nodal dilatation
-for tet10; hex20 Q2/P0 and tet10 P2/P0 are shown too). tet10 meshes are the conforming split of the same hexahedral meshes
+for tet10; hex20 Q2/P0 and tet10 P2/P0 are shown too). tet10 meshes are the conforming split
+of the same hexahedral meshes
 (:func:`harpx.mechanics.mesh.tetrahedralize`), straight-edged like the hexahedra (see
 ``CURVED_TETS``). Points are evaluated with ``Body.displacement_at``.
 
@@ -79,7 +80,6 @@ ELEMENTS = [
 #: problem 3: finest hex20 Q2/P1 values of this script (level (16, 8, 2), see the results
 #: file) standing in for the unavailable consensus: endo apex z, epi apex z, endo equator r
 P3_REF: dict[str, float] = {}
-
 
 
 def _row(problem, label, quantity, value, ref, cells, dofs, seconds, res):

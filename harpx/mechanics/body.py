@@ -50,6 +50,7 @@ __all__ = [
 
 _T = TypeVar("_T")
 
+
 @dataclass(frozen=True)
 class ElementKind:
     """What a :class:`Body` needs to know about one element type.

@@ -74,7 +74,9 @@ CASES = [
     pytest.param("tet10", "plain", "mean-dilatation", id="tet10-P2P0"),
     pytest.param("tet10", "plain", "pointwise", id="tet10-pointwise"),
     pytest.param("tet10", "active+growth", None, id="tet10-P2P1-guccione-active-growth"),
-    pytest.param("tet10", "active+growth", "mean-dilatation", id="tet10-P2P0-guccione-active-growth"),
+    pytest.param(
+        "tet10", "active+growth", "mean-dilatation", id="tet10-P2P0-guccione-active-growth"
+    ),
 ]
 
 
@@ -197,8 +199,9 @@ def _inflate(element, volumetric, n_radial, n_circumferential, curved=False):
         pytest.param("tet10", None, 2, 8, True, 0.003, id="tet10-P2P1-curved"),
     ],
 )
-def test_nearly_incompressible_cylinder_does_not_lock(element, volumetric, n_radial,
-                                                      n_circumferential, curved, bound):  # fmt: skip
+def test_nearly_incompressible_cylinder_does_not_lock(
+    element, volumetric, n_radial, n_circumferential, curved, bound
+):
     res, a, rel = _inflate(element, volumetric, n_radial, n_circumferential, curved)
     print(f"{element} {volumetric} curved={curved}: a = {a:.5f}, P(a)/p - 1 = {rel:+.2e}")
     assert res.converged
