@@ -25,7 +25,7 @@ import os
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal, TypeVar, cast
+from typing import TYPE_CHECKING, Any, Literal, TypeAlias, TypeVar, cast
 
 import meshio
 import numpy as np
@@ -48,7 +48,17 @@ __all__ = [
     "default_element",
 ]
 
+if TYPE_CHECKING:
+    from harpx.mechanics.segmentation import MeshQuality
+
 _T = TypeVar("_T")
+#: Element names a :class:`Body` accepts.
+ElementName: TypeAlias = Literal["hex8", "hex20", "tet4", "tet10"]
+#: Volumetric (incompressibility) formulations.
+Volumetric: TypeAlias = Literal[
+    "mean-dilatation", "linear-dilatation", "nodal-dilatation", "pointwise"
+]
+
 
 @dataclass(frozen=True)
 class ElementKind:
@@ -77,7 +87,7 @@ class ElementKind:
     nqp: int
     facet_intorder: int
     meshes: tuple[type, ...]
-    volumetric: tuple[str, ...]
+    volumetric: tuple[Volumetric, ...]
     vtk_edges: IntArray
 
 
@@ -113,7 +123,7 @@ ELEMENTS: dict[str, ElementKind] = {
 _VOLUMETRIC = ("mean-dilatation", "linear-dilatation", "nodal-dilatation", "pointwise")
 
 
-def default_element(mesh: Any) -> str:
+def default_element(mesh: Any) -> ElementName:
     """The element a mesh implies: hex8 for hexahedra, tet4 / tet10 for linear / quadratic
     tetrahedra."""
     if isinstance(mesh, skfem.MeshTet2):
@@ -494,6 +504,9 @@ class Body:
         ``Fg`` at the quadrature points.
     growth_jacobian : ndarray, shape (ncell,) or None
         Volume average of ``det Fg`` per cell.
+    mesh_quality : MeshQuality or None
+        Quality report of a mesh made from a segmentation
+        (:func:`~harpx.mechanics.segmentation.body_from_segmentation`), else None.
 
     Examples
     --------
@@ -512,13 +525,12 @@ class Body:
         *,
         fibers: ArrayLike | Callable[[FloatArray], ArrayLike] | None = None,
         regions: Mapping[str, ArrayLike] | None = None,
-        element: Literal["hex8", "hex20", "tet4", "tet10"] | None = None,
+        element: ElementName | None = None,
         active: Any = None,
         t_max: float | Mapping[str, float] | None = None,
         growth: Any = None,
         boundaries: Mapping[str, ArrayLike] | None = None,
-        volumetric: Literal["mean-dilatation", "linear-dilatation", "nodal-dilatation", "pointwise"]
-        | None = None,
+        volumetric: Volumetric | None = None,
     ) -> None:
         spec_regions: Mapping[str, ArrayLike] = {}
         spec_boundaries: Mapping[str, ArrayLike] = {}
@@ -540,7 +552,7 @@ class Body:
                 "harpx.mechanics.mesh.box/cylinder (and tetrahedralize for tetrahedra)"
             )
         if element is None:
-            element = default_element(mesh)  # type: ignore[assignment]
+            element = default_element(mesh)
         if element not in ELEMENTS:
             raise ValueError(f"element={element!r} is not one of {sorted(ELEMENTS)!r}")
         kind = ELEMENTS[element]
@@ -551,7 +563,7 @@ class Body:
                 f"(or omit element= to use {default_element(mesh)!r})"
             )
         if volumetric is None:
-            volumetric = kind.volumetric[0]  # type: ignore[assignment]
+            volumetric = kind.volumetric[0]
         if volumetric not in _VOLUMETRIC:
             raise ValueError(f"volumetric={volumetric!r} must be one of {list(_VOLUMETRIC)!r}")
         if volumetric not in kind.volumetric:
@@ -562,6 +574,7 @@ class Body:
             )
         mesh = cast(Any, mesh)  # skfem meshes are untyped
         self._caches: dict[str, Any] = {}
+        self.mesh_quality: MeshQuality | None = None
         self.mesh = mesh
         self.material = material
         self.element = element

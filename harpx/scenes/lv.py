@@ -88,7 +88,7 @@ import xarray as xr
 
 from harpx._typing import FloatArray
 from harpx.imaging.stacks import resample_stacks, tagged_dataset
-from harpx.imaging.synth import synthesize_tagged
+from harpx.imaging.synth import AcquisitionOptions, synthesize_tagged
 from harpx.mechanics.body import Body
 from harpx.mechanics.cut import NodeFixed
 from harpx.mechanics.growth import GrowthField, fiber_prestretch, prestretch_growth
@@ -224,7 +224,7 @@ def _acquire(
     z_sa = -c_endo + h_sa * (np.arange(size.sa_slices) + 0.5)
     h_la = 2.0 * a_epi / size.la_slices
     y_la = -a_epi + h_la * (np.arange(size.la_slices) + 0.5)
-    common = dict(
+    common = AcquisitionOptions(
         times=times,
         tag_period=size.tag_period,
         sequence="CSPAMM",

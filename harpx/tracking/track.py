@@ -14,12 +14,13 @@ from __future__ import annotations
 import time as _time
 import warnings
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
 from tqdm.auto import tqdm
 
+from harpx._typing import BoolArray
 from harpx.errors import HarpxWarning, SchemaError
 from harpx.imaging.coverage import explain_missing_data, phase_direction_mismatch
 from harpx.mechanics.assembly import internal_forces
@@ -82,8 +83,8 @@ def _check_data(phase: xr.Dataset, constraint: PhaseConstraint) -> None:
             "no constraint point of the body lies inside the image data in frame 0: "
             + explain_missing_data(phase, constraint.points)
         )
-    blind = [str(t) for t, seen in zip(phase["tag"].values, constraint.reference_valid.any(axis=0),
-                                       strict=True) if not seen]  # fmt: skip
+    seen_by_tag = cast(BoolArray, constraint.reference_valid.any(axis=0))
+    blind = [str(t) for t, seen in zip(phase["tag"].values, seen_by_tag, strict=True) if not seen]
     if blind:
         raise SchemaError(
             f"tag {blind!r} has no data at any constraint point of the body in frame 0 (its "
