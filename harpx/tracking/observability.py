@@ -159,15 +159,31 @@ class Observability:
         return self.unseen_modes @ (self.mode_weights * u)
 
 
+def describe_direction(v: FloatArray, unnamed: str = "") -> str:
+    """A unit 3-vector as text, e.g. ``"z (0, 0, 1)"``, for messages.
+
+    The sign is chosen so that the largest component is positive; the axis name is given
+    when ``v`` lies within 0.999 of a coordinate axis, else ``unnamed`` (nothing if empty).
+
+    Examples
+    --------
+    >>> describe_direction(np.array([0.0, 0.0, 1.0]))
+    'z (0, 0, 1)'
+    >>> describe_direction(np.array([0.6, 0.8, 0.0]), unnamed="the axis")
+    'the axis (0.6, 0.8, 0)'
+    """
+    v = v * np.sign(v[np.argmax(np.abs(v))])
+    name = "xyz"[int(np.argmax(np.abs(v)))] if np.abs(v).max() > 0.999 else unnamed
+    prefix = f"{name} " if name else ""
+    return f"{prefix}({v[0]:.2g}, {v[1]:.2g}, {v[2]:.2g})"
+
+
 def _describe(mode: FloatArray) -> str:
     """Name of a rigid mode given as 6 coefficients (3 translations, 3 rotations)."""
     t, w = mode[:3], mode[3:]
     kind, vec = ("translation along", t) if np.linalg.norm(t) >= np.linalg.norm(w) else (
         "rotation about", w)  # fmt: skip
-    vec = vec / np.linalg.norm(vec)
-    vec = vec * np.sign(vec[np.argmax(np.abs(vec))])
-    axis = "xyz"[int(np.argmax(np.abs(vec)))] if np.abs(vec).max() > 0.999 else "the axis"
-    return f"{kind} {axis} ({vec[0]:.2g}, {vec[1]:.2g}, {vec[2]:.2g})"
+    return f"{kind} {describe_direction(vec / np.linalg.norm(vec), unnamed='the axis')}"
 
 
 def observability(

@@ -31,6 +31,7 @@ from harpx.tracking.augmented import track_frame_augmented
 from harpx.tracking.constraint import PhaseConstraint
 from harpx.tracking.equilibrium import Timings, split_dirichlet
 from harpx.tracking.frame import FrameOutcome, FrameProblem
+from harpx.tracking.observability import describe_direction
 from harpx.tracking.penalty import track_frame_penalty
 from harpx.tracking.results import tracked_dataset
 from harpx.tracking.settings import Method, Predictor, Regularization, TrackingSettings
@@ -93,12 +94,6 @@ def _check_data(phase: xr.Dataset, constraint: PhaseConstraint) -> None:
         )
 
 
-def _vector(v: np.ndarray) -> str:
-    v = v * np.sign(v[np.argmax(np.abs(v))])
-    name = "xyz"[int(np.argmax(np.abs(v)))] + " " if np.abs(v).max() > 0.999 else ""
-    return f"{name}({v[0]:.2g}, {v[1]:.2g}, {v[2]:.2g})"
-
-
 def _warn_unseen(constraint: PhaseConstraint) -> None:
     seen = constraint.observability
     assert seen is not None
@@ -108,7 +103,7 @@ def _warn_unseen(constraint: PhaseConstraint) -> None:
         f"{label} ({d[0]:.2g}, {d[1]:.2g}, {d[2]:.2g})"
         for label, d in zip(constraint.phase["tag"].values, constraint.directions, strict=True)
     )
-    unseen = " and ".join(_vector(a) for a in seen.unseen_axes)
+    unseen = " and ".join(describe_direction(a) for a in seen.unseen_axes)
     removed = (
         f"the rigid-body motion the tags cannot see ({'; '.join(seen.unseen_directions)}) was "
         "removed (held at zero mean)"
