@@ -133,23 +133,20 @@ def default_element(mesh: Any) -> ElementName:
     return "hex8"
 
 
-def _read_mesh(path: str | os.PathLike[str]) -> tuple[Any, FloatArray | None]:
-    """Read a hexahedral or tetrahedral mesh file and its cell fibres.
+def _skfem_mesh(m: meshio.Mesh, source: str) -> tuple[Any, FloatArray | None]:
+    """The scikit-fem mesh and cell fibres of a hexahedral or tetrahedral meshio mesh.
 
     ``hexahedron``, ``hexahedron20`` (straight-edged geometry from the corners; the edge
     nodes become element dofs again), ``tetra`` and ``tetra10`` (curved: the edge nodes
     are kept as geometry, a ``skfem.MeshTet2``) cells are accepted; cell data ``fiber``
-    (one vector per cell) becomes the fibres.
+    (one vector per cell) becomes the fibres. ``source`` names the mesh in errors.
     """
-    from harpx.io.mesh import read_meshio  # io builds on mechanics: import on use
-
-    m = read_meshio(path)
     kinds = m.cells_dict
     known = ("hexahedron", "hexahedron20", "tetra", "tetra10")
     present = [k for k in known if len(kinds.get(k, ()))]
     if not present:
         raise ValueError(
-            f"mesh file {os.fspath(path)!r} has no hexahedra or tetrahedra (cell blocks "
+            f"{source} has no hexahedra or tetrahedra (cell blocks "
             f"{ {k: len(v) for k, v in kinds.items()}!r}); expected 'hexahedron', "
             "'hexahedron20', 'tetra' or 'tetra10' cells"
         )
@@ -422,13 +419,12 @@ class Body:
 
     Parameters
     ----------
-    mesh : skfem.MeshHex1, skfem.MeshTet1, skfem.MeshTet2, MeshSpec or path
+    mesh : skfem.MeshHex1, skfem.MeshTet1, skfem.MeshTet2 or MeshSpec
         The reference configuration (mm): a scikit-fem hexahedral or tetrahedral mesh
-        (``MeshTet2``: curved quadratic tetrahedra), a
+        (``MeshTet2``: curved quadratic tetrahedra) or a
         :class:`~harpx.mechanics.mesh.MeshSpec` from the builders in
-        :mod:`harpx.mechanics.mesh`, or a file meshio can read (``hexahedron``,
-        ``hexahedron20``, ``tetra`` or ``tetra10`` cells; cell data ``fiber`` becomes the
-        fibres).
+        :mod:`harpx.mechanics.mesh`. A :class:`meshio.Mesh` goes through
+        :meth:`from_meshio`; a mesh file through :func:`harpx.io.mesh.read_body`.
     material : object
         Material with ``isochoric_response(F, fiber)``, ``volumetric(J)``, ``kappa`` and
         ``needs_fibers`` (e.g. :class:`~harpx.mechanics.materials.NeoHookean`).
@@ -540,16 +536,20 @@ class Body:
                 fibers = mesh.fibers
             mesh = mesh.mesh
         elif isinstance(mesh, str | os.PathLike):
-            mesh, file_fibers = _read_mesh(mesh)
-            if fibers is None:
-                fibers = file_fibers
+            raise TypeError(
+                f"mesh is a file path ({os.fspath(mesh)!r}); read it with "
+                "harpx.io.mesh.read_body(path, material, ...), which returns the Body"
+            )
+        elif isinstance(mesh, meshio.Mesh):
+            raise TypeError("mesh is a meshio.Mesh; build the body with Body.from_meshio(mesh)")
         if isinstance(mesh, skfem.MeshTet1):
             mesh = _orient_tets(mesh)
         if type(mesh) is skfem.MeshHex2 or not isinstance(mesh, (skfem.MeshHex1, skfem.MeshTet1)):
             raise TypeError(
-                f"mesh must be a skfem.MeshHex1, MeshTet1 or MeshTet2, a MeshSpec or a mesh "
-                f"file path, got {type(mesh).__name__!r}; build one with "
-                "harpx.mechanics.mesh.box/cylinder (and tetrahedralize for tetrahedra)"
+                f"mesh must be a skfem.MeshHex1, MeshTet1 or MeshTet2 or a MeshSpec, got "
+                f"{type(mesh).__name__!r}; build one with harpx.mechanics.mesh.box/cylinder "
+                "(and tetrahedralize for tetrahedra), or read a mesh file with "
+                "harpx.io.mesh.read_body"
             )
         if element is None:
             element = default_element(mesh)
@@ -993,9 +993,53 @@ class Body:
         return skfem.io.meshio.to_meshio(mesh, point_data=pdata or None, cell_data=cdata)
 
     @classmethod
-    def from_meshio(cls, path: str | os.PathLike[str], material: Any, **kwargs: Any) -> Body:
-        """Build a body from a mesh file (see the ``mesh`` parameter of :class:`Body`)."""
-        return cls(path, material, **kwargs)
+    def from_meshio(
+        cls, mesh: meshio.Mesh, material: Any, *, source: str = "the meshio mesh", **kwargs: Any
+    ) -> Body:
+        """Build a body from a :class:`meshio.Mesh` (the inverse of :meth:`to_meshio`).
+
+        Parameters
+        ----------
+        mesh : meshio.Mesh
+            Reference configuration (mm) with one block of ``hexahedron``,
+            ``hexahedron20`` (reduced to its corners: straight edges), ``tetra`` or
+            ``tetra10`` (curved edges kept) cells; the first such block is used, other
+            blocks and points no cell uses are dropped. Cell data ``fiber`` (one vector per
+            cell) becomes the fibres unless ``fibers=`` is given; named boundaries and
+            regions written by :meth:`to_meshio` are kept.
+        material : object
+            The material (see :class:`Body`).
+        source : str, default "the meshio mesh"
+            What the mesh is called in error messages (e.g. its file name).
+        **kwargs
+            Further :class:`Body` parameters (``element``, ``fibers``, ...).
+
+        Returns
+        -------
+        Body
+
+        Raises
+        ------
+        ValueError
+            If the mesh has no hexahedra or tetrahedra.
+
+        See Also
+        --------
+        harpx.io.mesh.read_body : reads a mesh file into a Body.
+
+        Examples
+        --------
+        >>> from harpx.mechanics.mesh import box
+        >>> from harpx.mechanics.materials import NeoHookean
+        >>> body = Body(box((1.0, 1.0, 1.0), (2, 2, 2)), NeoHookean(c1=1.0, kappa=120.0))
+        >>> back = Body.from_meshio(body.to_meshio(), body.material)
+        >>> bool((back.nodes == body.nodes).all()), back.ncell
+        (True, 8)
+        """
+        skmesh, fibers = _skfem_mesh(mesh, source)
+        if kwargs.get("fibers") is None:
+            kwargs["fibers"] = fibers
+        return cls(skmesh, material, **kwargs)
 
     def __repr__(self) -> str:
         return (
