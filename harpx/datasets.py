@@ -158,7 +158,7 @@ def _recipes() -> dict[str, Recipe]:
                 size,
                 "left ventricle in systole (CSPAMM, SA + LA)",
                 phase={"upsample": 1, "radius": 0.7},
-                track={"epsilon": 0.2, "penalty": 4.0},
+                track={"epsilon": 0.2},
             ),
             Recipe(
                 "tongue",
@@ -166,7 +166,7 @@ def _recipes() -> dict[str, Recipe]:
                 "tongue, five active muscles (CSPAMM)",
                 element="hex20",
                 phase={"upsample": 1},
-                track={"epsilon": 0.05, "penalty": 16.0, "ramp": 1},
+                track={},  # the tracker's defaults
             ),
         ):
             out[recipe.name] = recipe

@@ -117,16 +117,6 @@ Size = Literal["small", "paper"]
 GEOMETRY = VentricleGeometry(inner=(25.0, 70.0), outer=(35.0, 78.0), truncation=10.0)
 
 
-#: tracking settings of the scene (pass to ``track`` with the paper's ε = 0.2 or a tighter
-#: one): the penalty ramp starts at 4 (relative) instead of 1. The ε criterion stops each
-#: frame at the first penalty stage that meets it; started softer, the data barely pull
-#: (λ 0.5–1), the apical cap — imaged by the long-axis slices only — drifts from frame to
-#: frame and the prestretched model slips a tag there at end systole. Measured at paper
-#: size (``benchmarks/lv_scene.py``), mean error SFR/PSR at ε = 0.2: 0.48/0.62 mm with the
-#: default start, 0.40/0.40 mm with this one.
-TRACKING: dict[str, Any] = {"penalty": 4.0}
-
-
 def myocardium(kappa: float = 350.0) -> Guccione:
     """Passive canine myocardium of Guccione et al. (1991, 1995).
 

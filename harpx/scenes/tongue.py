@@ -49,13 +49,9 @@ from harpx.schema import standard_attrs
 from harpx.tracking.resample import interpolate_displacement
 from harpx.tracking.track import track
 
-__all__ = ["ACTIVATIONS", "GEOMETRIES", "TRACKING", "TongueGeometry", "TongueScene", "tongue"]
+__all__ = ["ACTIVATIONS", "GEOMETRIES", "TongueGeometry", "TongueScene", "tongue"]
 
 Size = Literal["small", "paper"]
-
-#: tracking settings of the scene: the paper's ε = 0.05 rad, with the penalty started at the
-#: level the automatic raise reaches on this scene (one stage per frame, for speed)
-TRACKING: dict[str, Any] = {"epsilon": 0.05, "penalty": 16.0, "ramp": 1}
 
 #: ground-truth activation per muscle, kPa: a retraction with dorsum grooving that moves the
 #: tip by ~8 mm and shortens every muscle by 3-10 % (fibre stretch 0.90-0.97)
@@ -219,7 +215,7 @@ class TongueScene:
         )
 
     def track(self, body: Body, tagged: xr.Dataset | None = None, **settings: Any) -> xr.Dataset:
-        """Phase extraction and tracking with the scene's settings (:data:`TRACKING`).
+        """Phase extraction and tracking under the scene's boundary conditions.
 
         Parameters
         ----------
@@ -228,7 +224,8 @@ class TongueScene:
         tagged : xarray.Dataset, optional
             Images to track; default the scene's.
         **settings
-            Overrides of :data:`TRACKING` passed to :func:`harpx.tracking.track.track`.
+            Tracking settings passed to :func:`harpx.tracking.track.track` (default: the
+            tracker's defaults, as for every scene).
 
         Returns
         -------
@@ -236,7 +233,7 @@ class TongueScene:
             ``tracked/1``.
         """
         phase = extract_phase(self.tagged if tagged is None else tagged)
-        return track(phase, body, dirichlet=list(self.dirichlet), **(TRACKING | settings))
+        return track(phase, body, dirichlet=list(self.dirichlet), **settings)
 
     def measure(self, body: Body, displacement: FloatArray, *, seed: int = 1) -> xr.Dataset:
         """Image a motion of ``body`` like the scene's data and track it the same way.
