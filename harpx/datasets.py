@@ -122,11 +122,12 @@ class Recipe:
             "tongue": f"scene.body({self.element!r})",
         }[self.scene]
         extra = {"lv": ", dirichlet=scene.dirichlet()", "tongue": ", dirichlet=scene.dirichlet"}
+        track_args = f", {_kwargs(self.track)}" if self.track else ""
         lines += [
             "tagged = shorten(scene.tagged)",
             f"phase = shorten(extract_phase(tagged, {_kwargs(self.phase)}))",
             'phase = phase.drop_vars("displacement_true")',
-            f"tracked = track(phase, {body}{extra.get(self.scene, '')}, {_kwargs(self.track)})",
+            f"tracked = track(phase, {body}{extra.get(self.scene, '')}{track_args})",
             'tracked = shorten(tracked.drop_vars("wall_time"))  # and no time_* attributes',
         ]
         return "\n".join(lines)
