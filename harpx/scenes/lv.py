@@ -386,6 +386,22 @@ class LVScene:
         raise ValueError(f"reference={reference!r}; expected 'stress-free' or 'prestretched'")
 
 
+def _ventricle_mesh(
+    geometry: VentricleGeometry, divisions: tuple[int, int, int], *, segments: bool = True
+) -> MeshSpec:
+    """The scene's ventricle meshed with (circumferential, longitudinal, transmural) cells."""
+    nc, nl, nt = divisions
+    return ventricle(
+        inner=geometry.inner,
+        outer=geometry.outer,
+        truncation=geometry.truncation,
+        n_circumferential=nc,
+        n_longitudinal=nl,
+        n_transmural=nt,
+        segments=segments,
+    )
+
+
 def lv(
     reference: Reference = "stress-free",
     size: Size = "paper",
@@ -428,16 +444,7 @@ def lv(
     systole = Systole() if systole is None else systole
     material = myocardium()
     geometry = GEOMETRY
-    nc, nl, nt = g.truth
-    fine = ventricle(
-        inner=geometry.inner,
-        outer=geometry.outer,
-        truncation=geometry.truncation,
-        n_circumferential=nc,
-        n_longitudinal=nl,
-        n_transmural=nt,
-        segments=False,
-    )
+    fine = _ventricle_mesh(geometry, g.truth, segments=False)
     truth_body = Body(fine, material, active=ActiveContraction(t_max=0.0))
     times = g.frame_interval * np.arange(g.frames, dtype=np.float64)
     U, forward = simulate_systole(
@@ -448,15 +455,7 @@ def lv(
     tagged = _acquire(motion, g, geometry, times, snr, np.random.default_rng(seed))
     tagged.attrs["scene"] = f"lv/{size}"
     imaging_time = _time.perf_counter() - start
-    nc, nl, nt = g.tracking
-    mesh = ventricle(
-        inner=geometry.inner,
-        outer=geometry.outer,
-        truncation=geometry.truncation,
-        n_circumferential=nc,
-        n_longitudinal=nl,
-        n_transmural=nt,
-    )
+    mesh = _ventricle_mesh(geometry, g.tracking)
     info = {
         "size": size,
         "settings": g,
