@@ -38,7 +38,7 @@ from harpx.imaging.harptrack import track_harp
 from harpx.mechanics.body import Body
 from harpx.mechanics.segmentation import mesh_from_labels
 from harpx.mechanics.ventricle_fit import fit_ventricle_to_mask
-from harpx.scenes.lv import TRACKING, lv
+from harpx.scenes.lv import lv
 from harpx.tracking.results import tracking_error
 from harpx.tracking.track import track
 
@@ -92,7 +92,7 @@ def main() -> None:
     phase = extract_phase(tagged, upsample=1, radius=0.7)
     start = time.perf_counter()
     tracked = track(phase, scene.body("stress-free"), epsilon=args.epsilon,
-                    dirichlet=scene.dirichlet(), **TRACKING)  # fmt: skip
+                    dirichlet=scene.dirichlet())  # fmt: skip
     t_fe = time.perf_counter() - start
     start = time.perf_counter()
     segmented = mesh_from_labels(
@@ -101,7 +101,7 @@ def main() -> None:
     )  # fmt: skip
     seg_body = Body(segmented.spec, scene.material)
     seg_tracked = track(phase, seg_body, epsilon=args.epsilon,
-                        dirichlet=template.base_conditions(), **TRACKING)  # fmt: skip
+                        dirichlet=template.base_conditions())  # fmt: skip
     t_seg = time.perf_counter() - start
     start = time.perf_counter()
     harp = track_harp(phase)
@@ -173,7 +173,7 @@ def main() -> None:
     err = tracked.attrs
     q = segmented.quality
     note = (
-        f"FE tracking: ε target {args.epsilon} rad, settings {TRACKING}; "
+        f"FE tracking: ε target {args.epsilon} rad, the tracker's other defaults; "
         f"{len(tracked.time)} frames; template mesh {tracked.sizes['cell']} cells; "
         f"segmentation mesh {q.cells} cells (min scaled Jacobian "
         f"{q.min_scaled_jacobian:.2f}, {q.inverted} inverted); "

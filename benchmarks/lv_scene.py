@@ -34,8 +34,9 @@ from pathlib import Path
 from harpx.errors import HarpxError
 from harpx.imaging.harp import extract_phase
 from harpx.mechanics.cut import opening_angle
-from harpx.scenes.lv import TRACKING, fiber_shortening, lv
+from harpx.scenes.lv import fiber_shortening, lv
 from harpx.tracking.results import tracking_error
+from harpx.tracking.settings import TrackingSettings
 from harpx.tracking.track import track
 
 OUT = Path(__file__).resolve().parent / "results"
@@ -51,9 +52,9 @@ def main() -> None:
     parser.add_argument(
         "--penalty",
         type=float,
-        default=TRACKING["penalty"],
-        help="relative penalty at the top of the first frame's ramp "
-        "(harpx.scenes.lv.TRACKING; the tracker's own default is 1)",
+        default=TrackingSettings().penalty,
+        help="relative penalty at the top of the first frame's ramp (default: the "
+        "tracker's; the recorded paper-size table used 4)",
     )
     parser.add_argument(
         "--tolerance",

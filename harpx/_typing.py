@@ -11,3 +11,4 @@ from numpy.typing import NDArray
 PathLike: TypeAlias = str | os.PathLike[str]
 FloatArray: TypeAlias = NDArray[np.float64]
 IntArray: TypeAlias = NDArray[np.int64]
+BoolArray: TypeAlias = NDArray[np.bool_]

@@ -130,14 +130,14 @@ def _phase(args: argparse.Namespace) -> int:
 
 
 def _track(args: argparse.Namespace) -> int:
+    from harpx.io.mesh import read_body
     from harpx.io.netcdf import open_dataset, to_netcdf
-    from harpx.mechanics.body import Body
     from harpx.mechanics.materials import NeoHookean
     from harpx.tracking.track import track
 
     _refuse_overwriting_input(args.output, [args.input, args.mesh])
     ds = open_dataset(args.input)
-    body = Body(args.mesh, NeoHookean(c1=args.c1, kappa=args.kappa), element=args.element)
+    body = read_body(args.mesh, NeoHookean(c1=args.c1, kappa=args.kappa), element=args.element)
     options: dict[str, Any] = {"dirichlet": [_fixed(item, body) for item in args.fix]}
     if args.penalty is not None:
         options["penalty"] = args.penalty

@@ -122,11 +122,12 @@ class Recipe:
             "tongue": f"scene.body({self.element!r})",
         }[self.scene]
         extra = {"lv": ", dirichlet=scene.dirichlet()", "tongue": ", dirichlet=scene.dirichlet"}
+        track_args = f", {_kwargs(self.track)}" if self.track else ""
         lines += [
             "tagged = shorten(scene.tagged)",
             f"phase = shorten(extract_phase(tagged, {_kwargs(self.phase)}))",
             'phase = phase.drop_vars("displacement_true")',
-            f"tracked = track(phase, {body}{extra.get(self.scene, '')}, {_kwargs(self.track)})",
+            f"tracked = track(phase, {body}{extra.get(self.scene, '')}{track_args})",
             'tracked = shorten(tracked.drop_vars("wall_time"))  # and no time_* attributes',
         ]
         return "\n".join(lines)
@@ -158,7 +159,7 @@ def _recipes() -> dict[str, Recipe]:
                 size,
                 "left ventricle in systole (CSPAMM, SA + LA)",
                 phase={"upsample": 1, "radius": 0.7},
-                track={"epsilon": 0.2, "penalty": 4.0},
+                track={"epsilon": 0.2},
             ),
             Recipe(
                 "tongue",
@@ -166,7 +167,7 @@ def _recipes() -> dict[str, Recipe]:
                 "tongue, five active muscles (CSPAMM)",
                 element="hex20",
                 phase={"upsample": 1},
-                track={"epsilon": 0.05, "penalty": 16.0, "ramp": 1},
+                track={},  # the tracker's defaults
             ),
         ):
             out[recipe.name] = recipe

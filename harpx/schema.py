@@ -772,7 +772,7 @@ def _check_phase_values(ds: xr.Dataset, problems: list[str]) -> None:
     if "magnitude" in ds.variables:
         data = _numpy_data(ds.variables["magnitude"])
         extremes = _finite_extremes(data)
-        if extremes is not None:
+        if data is not None and extremes is not None:
             low = extremes[0]
             if low < 0:
                 count = int(np.sum(data < 0))

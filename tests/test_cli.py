@@ -182,8 +182,8 @@ def test_track_names_the_boundaries_for_an_unknown_face(tmp_path, capsys):
 
 
 def test_scene_exports_an_input_archive_and_mesh(tmp_path, capsys):
+    from harpx.io.mesh import read_body
     from harpx.io.netcdf import open_dataset
-    from harpx.mechanics.body import Body
     from harpx.mechanics.materials import NeoHookean
 
     assert main(["scene", "phantom-small", "--output", str(tmp_path / "try")]) == 0
@@ -191,6 +191,6 @@ def test_scene_exports_an_input_archive_and_mesh(tmp_path, capsys):
     tagged = open_dataset(tmp_path / "try" / "tagged.nc")
     assert tagged.attrs["harpx_schema"] == "tagged/1" and "displacement_true" in tagged
     # what `harpx track --mesh` reads: cells and the named faces that --fix takes
-    body = Body(tmp_path / "try" / "mesh.vtu", NeoHookean(c1=1.0, kappa=120.0))
+    body = read_body(tmp_path / "try" / "mesh.vtu", NeoHookean(c1=1.0, kappa=120.0))
     assert body.ncell == 432 and sorted(body.boundaries) == ["bottom", "outer", "top"]
     assert f"harpx track {tmp_path / 'try' / 'phase.nc'}" in text and "--mesh" in text

@@ -48,7 +48,7 @@ from harpx.mechanics.body import Body
 from harpx.mechanics.segmentation import mesh_from_labels, read_labels
 from harpx.mechanics.ventricle_fit import fit_ventricle_to_mask
 from harpx.plotting import bullseye
-from harpx.scenes.lv import TRACKING, lv, myocardium
+from harpx.scenes.lv import lv, myocardium
 
 start = time.perf_counter()
 scene = lv(size="small")  # scale up: lv(size="paper")
@@ -118,7 +118,7 @@ dirichlet = template.base_conditions()
 # %%
 phase = tagged.harp.phase(upsample=1, radius=0.7)
 start = time.perf_counter()
-tracked = phase.harp.track(body, epsilon=0.2, dirichlet=dirichlet, **TRACKING)
+tracked = phase.harp.track(body, epsilon=0.2, dirichlet=dirichlet)
 print(f"tracked {body.ncell} cells in {time.perf_counter() - start:.0f} s")
 tracking_error = tracked.harp.error(scene.tagged)
 print(f"displacement error {float(tracking_error.mean_all):.2f} mm mean")

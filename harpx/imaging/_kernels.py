@@ -171,7 +171,7 @@ def _pair(value: int | Sequence[int], name: str) -> tuple[int, int]:
 # --------------------------------------------------------------------------------------------
 # cubic B-spline pieces
 # --------------------------------------------------------------------------------------------
-def _bspline3(t: NDArray[np.float64]) -> NDArray[np.float64]:
+def _bspline3(t: ArrayLike) -> NDArray[np.float64]:
     """Centred cubic B-spline β³(t), support (-2, 2)."""
     t = np.abs(np.asarray(t, dtype=np.float64))
     inner = 2.0 / 3.0 - t**2 + 0.5 * t**3

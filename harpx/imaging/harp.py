@@ -86,9 +86,10 @@ def refinement_factors(ds: xr.Dataset, upsample: int) -> tuple[int, int, int]:
             )
         spacing[dim] = step
     dmin = min(spacing.values())
-    return tuple(  # type: ignore[return-value]
+    fz, fy, fx = (
         int(upsample) * max(1, round(spacing[d] / dmin)) if d in spacing else 1 for d in GRID_DIMS
     )
+    return fz, fy, fx
 
 
 def _check_chunks(ds: xr.Dataset, names: list[str]) -> bool:

@@ -172,7 +172,7 @@ def track_harp(
             stacklevel=2,
         )
     if grid_points:
-        assert flat_index is not None
+        assert grid is not None and flat_index is not None
         out["displacement_grid"] = _on_grid(grid, displacement, flat_index)
     return out
 

@@ -31,7 +31,7 @@ chunks of a few thousand points, sorted by voxel for memory locality.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
@@ -68,7 +68,7 @@ def _demodulated_taps(
     keep = [a for a in range(3) if a + 1 not in squeeze]
     shape = tuple(phase.shape[a + 1] for a in keep)
     out = np.empty(tuple(n + 2 for n in shape) + (2 * ntag,))
-    inner = (slice(1, -1),) * len(shape)
+    inner: tuple[slice | int, ...] = (slice(1, -1),) * len(shape)
     _write_demodulated(phase, magnitude, carrier, squeeze, lambda c: out[(*inner, c)])
     _reflect_border(out, shape)
     return out
@@ -96,8 +96,8 @@ def _write_demodulated(
 def _reflect_border(out: NDArray[np.float64], shape: tuple[int, ...]) -> None:
     """Fill the one-voxel border of ``out`` (inner ``shape``) by reflection, axis by axis."""
     for axis, n in enumerate(shape):
-        lead = [slice(None)] * out.ndim
-        src = [slice(None)] * out.ndim
+        lead: list[slice | int] = [slice(None)] * out.ndim
+        src: list[slice | int] = [slice(None)] * out.ndim
         lead[axis], src[axis] = 0, 2 if n > 1 else 1
         out[tuple(lead)] = out[tuple(src)]
         lead[axis], src[axis] = -1, -3 if n > 1 else -2
@@ -347,7 +347,7 @@ class PhaseSampler:
         """
         pts = _as_points(points)
         demod, deriv, valid_tags = self._evaluate(pts, derivatives=True)
-        valid = valid_tags if per_tag else valid_tags.all(axis=1)
+        valid = valid_tags if per_tag else cast(NDArray[np.bool_], valid_tags.all(axis=1))
         phi = self._remodulate(pts, demod)
         grad = np.zeros((pts.shape[0], self._ntag, 3))
         power = np.abs(demod) ** 2
@@ -370,7 +370,7 @@ class PhaseSampler:
         """
         pts = _as_points(points)
         demod, _, valid_tags = self._evaluate(pts, derivatives=False)
-        valid = valid_tags if per_tag else valid_tags.all(axis=1)
+        valid = valid_tags if per_tag else cast(NDArray[np.bool_], valid_tags.all(axis=1))
         phi = self._remodulate(pts, demod)
         invalid = ~(valid_tags if per_tag else valid_tags.all(axis=1, keepdims=True))
         phi[np.broadcast_to(invalid, phi.shape)] = 0.0
@@ -384,7 +384,7 @@ class PhaseSampler:
         """
         pts = _as_points(points)
         demod, _, valid_tags = self._evaluate(pts, derivatives=False)
-        return np.abs(demod), valid_tags.all(axis=1)
+        return np.abs(demod), cast(NDArray[np.bool_], valid_tags.all(axis=1))
 
     def acquired(self, points: ArrayLike) -> NDArray[np.bool_]:
         """Which tags have data at points: inside the field of view and the tag's ``mask``.

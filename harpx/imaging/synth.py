@@ -33,7 +33,7 @@ says when the motion cannot be inverted (e.g. it folds).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any, Literal
+from typing import Any, Literal, Required, TypedDict
 
 import numpy as np
 import xarray as xr
@@ -45,10 +45,40 @@ from harpx.imaging.fft import fft2, ifft2
 from harpx.imaging.stacks import tagged_dataset
 from harpx.schema import AXES, GRID_DIMS
 
-__all__ = ["gridded_displacement", "invert_motion", "synthesize_tagged", "voxel_density"]
+__all__ = [
+    "AcquisitionOptions",
+    "gridded_displacement",
+    "invert_motion",
+    "synthesize_tagged",
+    "voxel_density",
+]
 
 Motion = Callable[[NDArray[np.float64], float], NDArray[np.float64]]
 Density = Callable[[NDArray[np.float64]], NDArray[np.float64]]
+
+
+class AcquisitionOptions(TypedDict, total=False):
+    """Keyword arguments of :func:`synthesize_tagged` that the stacks of one protocol share.
+
+    A protocol of several stacks (e.g. short-axis slices with x, y tags and long-axis slices
+    with a z tag) images each stack with its own geometry but the same timing, contrast
+    and noise: collect those in one ``AcquisitionOptions`` and pass it to every call as
+    ``**options``. The keys, their units and defaults are those of
+    :func:`synthesize_tagged`; only ``times`` is required.
+    """
+
+    times: Required[ArrayLike]
+    tag_period: float | Sequence[float]
+    sequence: Literal["SPAMM", "CSPAMM"]
+    snr: float | None
+    t1: float
+    flip_angle: float | None
+    body: Density | None
+    inverse: Motion | None
+    oversample: int
+    kspace_fraction: float
+    rng: np.random.Generator | int | None
+
 
 #: Points processed per block (bounds memory: ~ 30 doubles per point are alive at once).
 BLOCK_POINTS = 1 << 20
@@ -71,7 +101,7 @@ def _jacobian_inverse(
     det = np.linalg.det(jac)
     singular = ~(np.abs(det) > 1e-8)
     jac[singular] = np.eye(3)
-    return np.linalg.inv(jac)
+    return np.linalg.inv(jac)  # type: ignore[return-value]  # numpy stub: float64 in, out
 
 
 def invert_motion(
@@ -596,8 +626,8 @@ def synthesize_tagged(
 
     if kspace_fraction < 1.0:
         for j, s in enumerate(slice_axes):
-            plane = tuple(1 + k for k, d in enumerate(GRID_DIMS) if d != s)
-            image[j] = _crop_kspace(image[j], plane, kspace_fraction)  # type: ignore[arg-type]
+            first, second = (1 + k for k, d in enumerate(GRID_DIMS) if d != s)
+            image[j] = _crop_kspace(image[j], (first, second), kspace_fraction)
 
     peak = 2.0 * np.sin(beta) ** 2 if sequence == "CSPAMM" else 1.0
     sigma = 0.0 if snr is None else peak / float(snr)

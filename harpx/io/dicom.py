@@ -391,19 +391,21 @@ def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
     for im in images:
         im.require("position")
         im.require("time")
-        if np.max(np.abs(im.require("orientation") - orientation)) > ORIENTATION_TOL:
+        im_orientation = im.require("orientation")
+        if np.max(np.abs(im_orientation - orientation)) > ORIENTATION_TOL:
             raise HarpxError(
                 f"slices of {label} are not parallel: {im.where()} has ImageOrientationPatient "
-                f"{np.round(im.orientation, 4).tolist()} but {first.where()} has "
+                f"{np.round(im_orientation, 4).tolist()} but {first.where()} has "
                 f"{np.round(orientation, 4).tolist()}; a series must be one stack of parallel "
                 "slices (split it, e.g. by passing the files of each orientation separately)"
             )
+        im_spacing = im.require("pixel_spacing")
         if (im.rows, im.columns) != (first.rows, first.columns) or np.max(
-            np.abs(im.require("pixel_spacing") - spacing)
+            np.abs(im_spacing - spacing)
         ) > 1e-6 * max(spacing):
             raise HarpxError(
                 f"images of {label} differ in matrix size or PixelSpacing: {im.where()} has "
-                f"{im.rows}x{im.columns} at {im.pixel_spacing.tolist()} mm, {first.where()} "
+                f"{im.rows}x{im.columns} at {im_spacing.tolist()} mm, {first.where()} "
                 f"{first.rows}x{first.columns} at {spacing.tolist()} mm"
             )
     _check_geometry(first, orientation, spacing, label)
@@ -743,14 +745,14 @@ def _sequence(sequence: str | None, stacks: list[_Stack]) -> str:
         if sequence not in SEQUENCES:
             raise HarpxError(f"sequence is {sequence!r}; expected one of {sorted(SEQUENCES)}")
         return sequence
-    found = set()
+    found: set[str | None] = set()
     for stack in stacks:
         im = stack.images[0][0]
         text = (im.sequence_name + " " + im.description).upper()
         text = text.replace("-", "").replace("_", "").replace(" ", "")
         found.add("CSPAMM" if "CSPAMM" in text else "SPAMM" if "SPAMM" in text else None)
-    if len(found) == 1 and None not in found:
-        return found.pop()
+    if len(found) == 1 and (only := found.pop()) is not None:
+        return only
     raise HarpxError(
         "sequence is required: the DICOM headers (SequenceName, ProtocolName, "
         "SeriesDescription) do not say whether the images are SPAMM magnitude or CSPAMM "

@@ -31,6 +31,10 @@ file meshio reads) as a :class:`~harpx.mechanics.mesh.MeshSpec` with its regions
 so ``Body(read_body_mesh(path), material, element=...)`` rebuilds the tracked body with the
 same nodes and cells. It rejects inverted or degenerate hexahedra, naming them.
 
+:func:`read_body` reads a model from a mesh file (hexahedra or tetrahedra, e.g. a mesh made
+elsewhere, or one :meth:`~harpx.mechanics.body.Body.to_meshio` wrote) straight into a
+:class:`~harpx.mechanics.body.Body`.
+
 Writes are atomic per file: everything is written into a temporary directory beside the
 target, flushed to disk, then moved into place with :func:`os.replace`, data files first and
 the index file (``.xdmf`` / ``.pvd``) last. An error leaves the previous files untouched.
@@ -64,10 +68,11 @@ from harpx.io.netcdf import (
     remove_stale_temporaries,
     temporary_prefix,
 )
+from harpx.mechanics.body import Body
 from harpx.mechanics.mesh import MeshSpec, hex_mesh
 from harpx.schema import validate
 
-__all__ = ["MESHIO_CELL_TYPES", "read_body_mesh", "read_meshio", "to_meshio"]
+__all__ = ["MESHIO_CELL_TYPES", "read_body", "read_body_mesh", "read_meshio", "to_meshio"]
 
 #: harpx element name (``cells.attrs["element"]``) → meshio cell type (same node order).
 MESHIO_CELL_TYPES: dict[str, str] = {
@@ -431,6 +436,60 @@ def read_body_mesh(path: PathLike) -> MeshSpec:
             if key.startswith(_REGION_FIELD)
         }
     return _mesh_spec(mesh, names, path)
+
+
+def read_body(path: PathLike, material: Any, **kwargs: Any) -> Body:
+    """Read a finite-element body from a mesh file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A file meshio reads (format from its suffix), in mm, with ``hexahedron``,
+        ``hexahedron20`` (reduced to its corners), ``tetra`` or ``tetra10`` (curved edges
+        kept) cells; cell data ``fiber`` (one vector per cell) becomes the fibres, and
+        named boundaries and regions written by
+        :meth:`~harpx.mechanics.body.Body.to_meshio` are kept.
+    material : object
+        The material, e.g. :class:`~harpx.mechanics.materials.NeoHookean`.
+    **kwargs
+        Further :class:`~harpx.mechanics.body.Body` parameters (``element``, ``fibers``,
+        ``regions``, ...).
+
+    Returns
+    -------
+    Body
+        As :meth:`Body.from_meshio <harpx.mechanics.body.Body.from_meshio>` builds it from
+        the file's mesh.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` is not an existing file.
+    ArchiveError
+        If meshio cannot parse the file; names the path.
+    ValueError
+        If the file has no hexahedra or tetrahedra (names the path and its cell blocks).
+
+    See Also
+    --------
+    read_body_mesh : the reference mesh of a tracked export, with its named regions.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> from harpx.mechanics.materials import NeoHookean
+    >>> from harpx.mechanics.mesh import box
+    >>> body = Body(box((1.0, 1.0, 1.0), (2, 2, 2)), NeoHookean(c1=1.0, kappa=120.0))
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pathlib.Path(tmp) / "box.vtu"
+    ...     meshio.write(path, body.to_meshio())
+    ...     back = read_body(path, body.material)
+    >>> back.ncell, back.ndof == body.ndof
+    (8, True)
+    """
+    return Body.from_meshio(
+        read_meshio(path), material, source=f"mesh file {os.fspath(path)!r}", **kwargs
+    )
 
 
 def read_meshio(path: PathLike) -> meshio.Mesh:

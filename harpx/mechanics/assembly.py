@@ -104,7 +104,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -524,32 +524,36 @@ def internal_forces(
         B = np.matmul(Ap.reshape(n, nq, 27, 3), G[sl].transpose(0, 1, 3, 2))  # (e,q,(J,i,k),b)
         Ke[sl] += np.matmul(Gt[sl], B.reshape(n, nq * 3, 9 * nb)).reshape(n, nb, 3, 3, nb)
     pat = sparsity(body)
-    data = np.bincount(pat.element_positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz)
+    # numpy's stub types every bincount as int; with float weights it is float64
+    data: FloatArray = np.bincount(  # type: ignore[assignment]
+        pat.element_positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz
+    )
     if nodal is not None:
         beta = np.matmul(np.swapaxes(extra["nodal_weights"], 1, 2), Bq)  # (e, nv, 3 nb)
         data += _nodal_tangent(body, pat, beta, nodal)
     return Internal(r, pat.matrix(data), min_j, bad)
 
 
-def _nodal_tangent(body: object, pat: Pattern, b: FloatArray, c: FloatArray) -> FloatArray:
+def _nodal_tangent(body: Body, pat: Pattern, b: FloatArray, c: FloatArray) -> FloatArray:
     """Pattern data of ``Σ_a c_a β_a β_aᵀ``, ``β_a = Σ_{e∋a} b_{e,a}`` (nodal dilatation).
 
     ``b`` (ncell, nv, 3 nb) are the gradients ``∂v_{e,a}/∂u`` of each cell's share of the
     volume of its vertices ``a`` (the cell's first ``nv`` dofs), in element-dof order.
     """
     nv = b.shape[1]
-    sd = body.cell_scalar_dofs[:, :nv]  # type: ignore[attr-defined]
-    ed = body.element_dofs.reshape(sd.shape[0], -1)  # type: ignore[attr-defined]
-    ns = int(body.n_dof_nodes)  # type: ignore[attr-defined]
+    sd = body.cell_scalar_dofs[:, :nv]
+    ed = body.element_dofs.reshape(sd.shape[0], -1)
+    ns = int(body.n_dof_nodes)
     nel = sd.shape[0]
-    cache = getattr(body, "_nodal_cache", None)
-    if cache is None:
+
+    def build() -> dict[str, Any]:
         rows = np.broadcast_to(sd[:, :, None], (nel, nv, ed.shape[1]))
         cols = np.broadcast_to(ed[:, None, :], rows.shape)
         keys = rows.astype(np.int64).ravel() * pat.ndof + cols.ravel()
         uniq, inv = np.unique(keys, return_inverse=True)
-        cache = {"inv": inv, "rows": uniq // pat.ndof, "cols": uniq % pat.ndof, "pos": None}
-        body._nodal_cache = cache  # type: ignore[attr-defined]
+        return {"inv": inv, "rows": uniq // pat.ndof, "cols": uniq % pat.ndof, "pos": None}
+
+    cache = body.cached("nodal_tangent", build)
     vals = b.ravel()
     beta = sparse.csr_matrix(
         (np.bincount(cache["inv"], weights=vals), (cache["rows"], cache["cols"])),
@@ -564,4 +568,5 @@ def _nodal_tangent(body: object, pat: Pattern, b: FloatArray, c: FloatArray) -> 
     ):
         pos = (K.row.copy(), K.col.copy(), pat.positions(K.row, K.col))
         cache["pos"] = pos
-    return np.bincount(pos[2], weights=K.data, minlength=pat.nnz)
+    # numpy's stub types every bincount as int; with float weights it is float64
+    return np.bincount(pos[2], weights=K.data, minlength=pat.nnz)  # type: ignore[return-value]

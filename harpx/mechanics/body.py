@@ -25,7 +25,7 @@ import os
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal, TypeVar, cast
+from typing import TYPE_CHECKING, Any, Literal, TypeAlias, TypeVar, cast
 
 import meshio
 import numpy as np
@@ -48,7 +48,16 @@ __all__ = [
     "default_element",
 ]
 
+if TYPE_CHECKING:
+    from harpx.mechanics.segmentation import MeshQuality
+
 _T = TypeVar("_T")
+#: Element names a :class:`Body` accepts.
+ElementName: TypeAlias = Literal["hex8", "hex20", "tet4", "tet10"]
+#: Volumetric (incompressibility) formulations.
+Volumetric: TypeAlias = Literal[
+    "mean-dilatation", "linear-dilatation", "nodal-dilatation", "pointwise"
+]
 
 
 @dataclass(frozen=True)
@@ -78,7 +87,7 @@ class ElementKind:
     nqp: int
     facet_intorder: int
     meshes: tuple[type, ...]
-    volumetric: tuple[str, ...]
+    volumetric: tuple[Volumetric, ...]
     vtk_edges: IntArray
 
 
@@ -115,7 +124,7 @@ ELEMENTS: dict[str, ElementKind] = {
 _VOLUMETRIC = ("mean-dilatation", "linear-dilatation", "nodal-dilatation", "pointwise")
 
 
-def default_element(mesh: Any) -> str:
+def default_element(mesh: Any) -> ElementName:
     """The element a mesh implies: hex8 for hexahedra, tet4 / tet10 for linear / quadratic
     tetrahedra."""
     if isinstance(mesh, skfem.MeshTet2):
@@ -125,23 +134,20 @@ def default_element(mesh: Any) -> str:
     return "hex8"
 
 
-def _read_mesh(path: str | os.PathLike[str]) -> tuple[Any, FloatArray | None]:
-    """Read a hexahedral or tetrahedral mesh file and its cell fibres.
+def _skfem_mesh(m: meshio.Mesh, source: str) -> tuple[Any, FloatArray | None]:
+    """The scikit-fem mesh and cell fibres of a hexahedral or tetrahedral meshio mesh.
 
     ``hexahedron``, ``hexahedron20`` (straight-edged geometry from the corners; the edge
     nodes become element dofs again), ``tetra`` and ``tetra10`` (curved: the edge nodes
     are kept as geometry, a ``skfem.MeshTet2``) cells are accepted; cell data ``fiber``
-    (one vector per cell) becomes the fibres.
+    (one vector per cell) becomes the fibres. ``source`` names the mesh in errors.
     """
-    from harpx.io.mesh import read_meshio  # io builds on mechanics: import on use
-
-    m = read_meshio(path)
     kinds = m.cells_dict
     known = ("hexahedron", "hexahedron20", "tetra", "tetra10")
     present = [k for k in known if len(kinds.get(k, ()))]
     if not present:
         raise ValueError(
-            f"mesh file {os.fspath(path)!r} has no hexahedra or tetrahedra (cell blocks "
+            f"{source} has no hexahedra or tetrahedra (cell blocks "
             f"{ {k: len(v) for k, v in kinds.items()}!r}); expected 'hexahedron', "
             "'hexahedron20', 'tetra' or 'tetra10' cells"
         )
@@ -419,13 +425,12 @@ class Body:
 
     Parameters
     ----------
-    mesh : skfem.MeshHex1, skfem.MeshTet1, skfem.MeshTet2, MeshSpec or path
+    mesh : skfem.MeshHex1, skfem.MeshTet1, skfem.MeshTet2 or MeshSpec
         The reference configuration (mm): a scikit-fem hexahedral or tetrahedral mesh
-        (``MeshTet2``: curved quadratic tetrahedra), a
+        (``MeshTet2``: curved quadratic tetrahedra) or a
         :class:`~harpx.mechanics.mesh.MeshSpec` from the builders in
-        :mod:`harpx.mechanics.mesh`, or a file meshio can read (``hexahedron``,
-        ``hexahedron20``, ``tetra`` or ``tetra10`` cells; cell data ``fiber`` becomes the
-        fibres).
+        :mod:`harpx.mechanics.mesh`. A :class:`meshio.Mesh` goes through
+        :meth:`from_meshio`; a mesh file through :func:`harpx.io.mesh.read_body`.
     material : object
         Material with ``isochoric_response(F, fiber)``, ``volumetric(J)``, ``kappa`` and
         ``needs_fibers`` (e.g. :class:`~harpx.mechanics.materials.NeoHookean`).
@@ -509,6 +514,9 @@ class Body:
         ``Fg`` at the quadrature points.
     growth_jacobian : ndarray, shape (ncell,) or None
         Volume average of ``det Fg`` per cell.
+    mesh_quality : MeshQuality or None
+        Quality report of a mesh made from a segmentation
+        (:func:`~harpx.mechanics.segmentation.body_from_segmentation`), else None.
 
     Examples
     --------
@@ -527,13 +535,12 @@ class Body:
         *,
         fibers: ArrayLike | Callable[[FloatArray], ArrayLike] | None = None,
         regions: Mapping[str, ArrayLike] | None = None,
-        element: Literal["hex8", "hex20", "tet4", "tet10"] | None = None,
+        element: ElementName | None = None,
         active: Any = None,
         t_max: float | Mapping[str, float] | None = None,
         growth: Any = None,
         boundaries: Mapping[str, ArrayLike] | None = None,
-        volumetric: Literal["mean-dilatation", "linear-dilatation", "nodal-dilatation", "pointwise"]
-        | None = None,
+        volumetric: Volumetric | None = None,
     ) -> None:
         spec_regions: Mapping[str, ArrayLike] = {}
         spec_boundaries: Mapping[str, ArrayLike] = {}
@@ -543,19 +550,23 @@ class Body:
                 fibers = mesh.fibers
             mesh = mesh.mesh
         elif isinstance(mesh, str | os.PathLike):
-            mesh, file_fibers = _read_mesh(mesh)
-            if fibers is None:
-                fibers = file_fibers
+            raise TypeError(
+                f"mesh is a file path ({os.fspath(mesh)!r}); read it with "
+                "harpx.io.mesh.read_body(path, material, ...), which returns the Body"
+            )
+        elif isinstance(mesh, meshio.Mesh):
+            raise TypeError("mesh is a meshio.Mesh; build the body with Body.from_meshio(mesh)")
         if isinstance(mesh, skfem.MeshTet1):
             mesh = _orient_tets(mesh)
         if type(mesh) is skfem.MeshHex2 or not isinstance(mesh, (skfem.MeshHex1, skfem.MeshTet1)):
             raise TypeError(
-                f"mesh must be a skfem.MeshHex1, MeshTet1 or MeshTet2, a MeshSpec or a mesh "
-                f"file path, got {type(mesh).__name__!r}; build one with "
-                "harpx.mechanics.mesh.box/cylinder (and tetrahedralize for tetrahedra)"
+                f"mesh must be a skfem.MeshHex1, MeshTet1 or MeshTet2 or a MeshSpec, got "
+                f"{type(mesh).__name__!r}; build one with harpx.mechanics.mesh.box/cylinder "
+                "(and tetrahedralize for tetrahedra), or read a mesh file with "
+                "harpx.io.mesh.read_body"
             )
         if element is None:
-            element = default_element(mesh)  # type: ignore[assignment]
+            element = default_element(mesh)
         if element not in ELEMENTS:
             raise ValueError(f"element={element!r} is not one of {sorted(ELEMENTS)!r}")
         kind = ELEMENTS[element]
@@ -566,7 +577,7 @@ class Body:
                 f"(or omit element= to use {default_element(mesh)!r})"
             )
         if volumetric is None:
-            volumetric = kind.volumetric[0]  # type: ignore[assignment]
+            volumetric = kind.volumetric[0]
         if volumetric not in _VOLUMETRIC:
             raise ValueError(f"volumetric={volumetric!r} must be one of {list(_VOLUMETRIC)!r}")
         if volumetric not in kind.volumetric:
@@ -578,6 +589,7 @@ class Body:
             )
         mesh = cast(Any, mesh)  # skfem meshes are untyped
         self._caches: dict[str, Any] = {}
+        self.mesh_quality: MeshQuality | None = None
         self.mesh = mesh
         self.material = material
         self.element = element
@@ -1002,9 +1014,53 @@ class Body:
         return skfem.io.meshio.to_meshio(mesh, point_data=pdata or None, cell_data=cdata)
 
     @classmethod
-    def from_meshio(cls, path: str | os.PathLike[str], material: Any, **kwargs: Any) -> Body:
-        """Build a body from a mesh file (see the ``mesh`` parameter of :class:`Body`)."""
-        return cls(path, material, **kwargs)
+    def from_meshio(
+        cls, mesh: meshio.Mesh, material: Any, *, source: str = "the meshio mesh", **kwargs: Any
+    ) -> Body:
+        """Build a body from a :class:`meshio.Mesh` (the inverse of :meth:`to_meshio`).
+
+        Parameters
+        ----------
+        mesh : meshio.Mesh
+            Reference configuration (mm) with one block of ``hexahedron``,
+            ``hexahedron20`` (reduced to its corners: straight edges), ``tetra`` or
+            ``tetra10`` (curved edges kept) cells; the first such block is used, other
+            blocks and points no cell uses are dropped. Cell data ``fiber`` (one vector per
+            cell) becomes the fibres unless ``fibers=`` is given; named boundaries and
+            regions written by :meth:`to_meshio` are kept.
+        material : object
+            The material (see :class:`Body`).
+        source : str, default "the meshio mesh"
+            What the mesh is called in error messages (e.g. its file name).
+        **kwargs
+            Further :class:`Body` parameters (``element``, ``fibers``, ...).
+
+        Returns
+        -------
+        Body
+
+        Raises
+        ------
+        ValueError
+            If the mesh has no hexahedra or tetrahedra.
+
+        See Also
+        --------
+        harpx.io.mesh.read_body : reads a mesh file into a Body.
+
+        Examples
+        --------
+        >>> from harpx.mechanics.mesh import box
+        >>> from harpx.mechanics.materials import NeoHookean
+        >>> body = Body(box((1.0, 1.0, 1.0), (2, 2, 2)), NeoHookean(c1=1.0, kappa=120.0))
+        >>> back = Body.from_meshio(body.to_meshio(), body.material)
+        >>> bool((back.nodes == body.nodes).all()), back.ncell
+        (True, 8)
+        """
+        skmesh, fibers = _skfem_mesh(mesh, source)
+        if kwargs.get("fibers") is None:
+            kwargs["fibers"] = fibers
+        return cls(skmesh, material, **kwargs)
 
     def __repr__(self) -> str:
         return (

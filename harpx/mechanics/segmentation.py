@@ -568,5 +568,5 @@ def body_from_segmentation(
     body_options = {k: v for k, v in options.items() if k not in mesh_keys}
     result = mesh_from_labels(labels, element_size=element_size, **mesh_options)
     body = Body(result.spec, material, **body_options)
-    body.mesh_quality = result.quality  # type: ignore[attr-defined]
+    body.mesh_quality = result.quality
     return body

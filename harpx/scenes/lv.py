@@ -88,7 +88,7 @@ import xarray as xr
 
 from harpx._typing import FloatArray
 from harpx.imaging.stacks import resample_stacks, tagged_dataset
-from harpx.imaging.synth import synthesize_tagged
+from harpx.imaging.synth import AcquisitionOptions, synthesize_tagged
 from harpx.mechanics.body import Body
 from harpx.mechanics.cut import NodeFixed
 from harpx.mechanics.growth import GrowthField, fiber_prestretch, prestretch_growth
@@ -115,16 +115,6 @@ Size = Literal["small", "paper"]
 #: the ventricle of both sizes (mm): cavity 50 mm wide, wall 8--10 mm, base 10 mm above
 #: the equator
 GEOMETRY = VentricleGeometry(inner=(25.0, 70.0), outer=(35.0, 78.0), truncation=10.0)
-
-
-#: tracking settings of the scene (pass to ``track`` with the paper's ε = 0.2 or a tighter
-#: one): the penalty ramp starts at 4 (relative) instead of 1. The ε criterion stops each
-#: frame at the first penalty stage that meets it; started softer, the data barely pull
-#: (λ 0.5–1), the apical cap — imaged by the long-axis slices only — drifts from frame to
-#: frame and the prestretched model slips a tag there at end systole. Measured at paper
-#: size (``benchmarks/lv_scene.py``), mean error SFR/PSR at ε = 0.2: 0.48/0.62 mm with the
-#: default start, 0.40/0.40 mm with this one.
-TRACKING: dict[str, Any] = {"penalty": 4.0}
 
 
 def myocardium(kappa: float = 350.0) -> Guccione:
@@ -224,7 +214,7 @@ def _acquire(
     z_sa = -c_endo + h_sa * (np.arange(size.sa_slices) + 0.5)
     h_la = 2.0 * a_epi / size.la_slices
     y_la = -a_epi + h_la * (np.arange(size.la_slices) + 0.5)
-    common = dict(
+    common = AcquisitionOptions(
         times=times,
         tag_period=size.tag_period,
         sequence="CSPAMM",
@@ -396,6 +386,22 @@ class LVScene:
         raise ValueError(f"reference={reference!r}; expected 'stress-free' or 'prestretched'")
 
 
+def _ventricle_mesh(
+    geometry: VentricleGeometry, divisions: tuple[int, int, int], *, segments: bool = True
+) -> MeshSpec:
+    """The scene's ventricle meshed with (circumferential, longitudinal, transmural) cells."""
+    nc, nl, nt = divisions
+    return ventricle(
+        inner=geometry.inner,
+        outer=geometry.outer,
+        truncation=geometry.truncation,
+        n_circumferential=nc,
+        n_longitudinal=nl,
+        n_transmural=nt,
+        segments=segments,
+    )
+
+
 def lv(
     reference: Reference = "stress-free",
     size: Size = "paper",
@@ -438,16 +444,7 @@ def lv(
     systole = Systole() if systole is None else systole
     material = myocardium()
     geometry = GEOMETRY
-    nc, nl, nt = g.truth
-    fine = ventricle(
-        inner=geometry.inner,
-        outer=geometry.outer,
-        truncation=geometry.truncation,
-        n_circumferential=nc,
-        n_longitudinal=nl,
-        n_transmural=nt,
-        segments=False,
-    )
+    fine = _ventricle_mesh(geometry, g.truth, segments=False)
     truth_body = Body(fine, material, active=ActiveContraction(t_max=0.0))
     times = g.frame_interval * np.arange(g.frames, dtype=np.float64)
     U, forward = simulate_systole(
@@ -458,15 +455,7 @@ def lv(
     tagged = _acquire(motion, g, geometry, times, snr, np.random.default_rng(seed))
     tagged.attrs["scene"] = f"lv/{size}"
     imaging_time = _time.perf_counter() - start
-    nc, nl, nt = g.tracking
-    mesh = ventricle(
-        inner=geometry.inner,
-        outer=geometry.outer,
-        truncation=geometry.truncation,
-        n_circumferential=nc,
-        n_longitudinal=nl,
-        n_transmural=nt,
-    )
+    mesh = _ventricle_mesh(geometry, g.tracking)
     info = {
         "size": size,
         "settings": g,

@@ -37,9 +37,9 @@ import xarray as xr
 from harpx._typing import FloatArray
 from harpx.imaging.harp import extract_phase
 from harpx.imaging.stacks import resample_stacks, tagged_dataset
-from harpx.imaging.synth import synthesize_tagged, voxel_density
+from harpx.imaging.synth import AcquisitionOptions, synthesize_tagged, voxel_density
 from harpx.mechanics.active import simulate_activation
-from harpx.mechanics.body import Body
+from harpx.mechanics.body import Body, ElementName
 from harpx.mechanics.loads import Fixed
 from harpx.mechanics.materials import ActiveContraction, NeoHookean
 from harpx.mechanics.mesh import MeshSpec
@@ -49,13 +49,9 @@ from harpx.schema import standard_attrs
 from harpx.tracking.resample import interpolate_displacement
 from harpx.tracking.track import track
 
-__all__ = ["ACTIVATIONS", "GEOMETRIES", "TRACKING", "TongueGeometry", "TongueScene", "tongue"]
+__all__ = ["ACTIVATIONS", "GEOMETRIES", "TongueGeometry", "TongueScene", "tongue"]
 
 Size = Literal["small", "paper"]
-
-#: tracking settings of the scene: the paper's ε = 0.05 rad, with the penalty started at the
-#: level the automatic raise reaches on this scene (one stage per frame, for speed)
-TRACKING: dict[str, Any] = {"epsilon": 0.05, "penalty": 16.0, "ramp": 1}
 
 #: ground-truth activation per muscle, kPa: a retraction with dorsum grooving that moves the
 #: tip by ~8 mm and shortens every muscle by 3-10 % (fibre stretch 0.90-0.97)
@@ -103,7 +99,7 @@ class TongueGeometry:
     height: float
     divisions: tuple[int, int, int]
     truth_divisions: tuple[int, int, int]
-    truth_element: str
+    truth_element: ElementName
     frames: int
     frame_interval: float
     coronal_slices: int
@@ -189,7 +185,7 @@ class TongueScene:
         body: Body,
         displacement: FloatArray,
         *,
-        snr: float | None | str = "same",
+        snr: float | None | Literal["same"] = "same",
         seed: int = 1,
     ) -> xr.Dataset:
         """Image any motion of a tongue model with this scene's CSPAMM protocol.
@@ -219,7 +215,7 @@ class TongueScene:
         )
 
     def track(self, body: Body, tagged: xr.Dataset | None = None, **settings: Any) -> xr.Dataset:
-        """Phase extraction and tracking with the scene's settings (:data:`TRACKING`).
+        """Phase extraction and tracking under the scene's boundary conditions.
 
         Parameters
         ----------
@@ -228,7 +224,8 @@ class TongueScene:
         tagged : xarray.Dataset, optional
             Images to track; default the scene's.
         **settings
-            Overrides of :data:`TRACKING` passed to :func:`harpx.tracking.track.track`.
+            Tracking settings passed to :func:`harpx.tracking.track.track` (default: the
+            tracker's defaults, as for every scene).
 
         Returns
         -------
@@ -236,7 +233,7 @@ class TongueScene:
             ``tracked/1``.
         """
         phase = extract_phase(self.tagged if tagged is None else tagged)
-        return track(phase, body, dirichlet=list(self.dirichlet), **(TRACKING | settings))
+        return track(phase, body, dirichlet=list(self.dirichlet), **settings)
 
     def measure(self, body: Body, displacement: FloatArray, *, seed: int = 1) -> xr.Dataset:
         """Image a motion of ``body`` like the scene's data and track it the same way.
@@ -308,7 +305,7 @@ def _ground_truth_cached(
     dirichlet: tuple[Any, ...],
 ) -> tuple[Body, FloatArray]:
     spec = tongue_mesh(length=g.length, width=g.width, height=g.height, divisions=g.truth_divisions)
-    body = Body(spec, material, element=g.truth_element, active=law, t_max=0.0)  # type: ignore[arg-type]
+    body = Body(spec, material, element=g.truth_element, active=law, t_max=0.0)
     U = np.zeros((g.frames, body.ndof))
     target = dict(t_max)
     for n in range(1, g.frames):  # each frame continues from the previous one
@@ -358,12 +355,12 @@ def _axis_lattice(lo: float, hi: float, step: float) -> FloatArray:
     """Voxel centres with spacing ``step`` covering [lo, hi] symmetrically, mm."""
     n = int(np.ceil((hi - lo) / step)) + 1
     mid = 0.5 * (lo + hi)
-    return mid + step * (np.arange(n) - 0.5 * (n - 1))
+    return mid + step * (np.arange(n, dtype=np.float64) - 0.5 * (n - 1))
 
 
 def _slice_centres(lo: float, hi: float, count: int) -> tuple[FloatArray, float]:
     spacing = (hi - lo) / count
-    return lo + spacing * (np.arange(count) + 0.5), spacing
+    return lo + spacing * (np.arange(count, dtype=np.float64) + 0.5), spacing
 
 
 def _acquire(
@@ -408,7 +405,7 @@ def _acquire(
     def density(X: FloatArray) -> FloatArray:
         return tongue_inside(X, g.length, g.width, g.height).astype(np.float64)
 
-    common = dict(
+    common = AcquisitionOptions(
         times=times,
         tag_period=g.tag_period,
         sequence="CSPAMM",
@@ -521,7 +518,7 @@ def tongue(
     law = ActiveContraction(t_max=0.0)
     dirichlet = (Fixed("mandible"), Fixed("base"))
     truth_body, U = _ground_truth(g, t_max, material, law, dirichlet)
-    times = np.arange(g.frames) * g.frame_interval
+    times = np.arange(g.frames, dtype=np.float64) * g.frame_interval
 
     tagged = _acquire(g, truth_body, U, times, snr, np.random.default_rng(seed), size)
     mesh = tongue_mesh(length=g.length, width=g.width, height=g.height, divisions=g.divisions)

@@ -48,6 +48,7 @@ def track_frame_augmented(
             outcome.add(problem.solve(outcome.u, settings.max_iterations), lam, True)
             if outcome.epsilon <= target:
                 return outcome.finish(reached=True)
+            assert outcome.state is not None  # set by add()
             change = constraint.update_multipliers(outcome.state)
             if change < settings.multiplier_tolerance:
                 break

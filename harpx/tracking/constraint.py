@@ -42,10 +42,12 @@ relative penalty therefore serves stiffer or softer materials and other tag spac
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import skfem
 import xarray as xr
+from scipy import sparse
 
 from harpx._typing import FloatArray
 from harpx.imaging.sample import PhaseSampler, wrap
@@ -53,13 +55,16 @@ from harpx.mechanics.assembly import sparsity
 from harpx.tracking.noise import epsilon_floor, reference_residual
 from harpx.tracking.observability import Observability, observability
 
+if TYPE_CHECKING:
+    from harpx.mechanics.body import Body
+
 # floats per temporary block when forming element matrices (bounds memory to ~64 MB)
 _BLOCK_FLOATS = 8_000_000
 
 
-def shear_modulus(body: object) -> float:
+def shear_modulus(body: Body) -> float:
     """Small-strain shear modulus μ (kPa) of the body's material, from its tangent at F = I."""
-    material = body.material  # type: ignore[attr-defined]
+    material = body.material
     fiber = None
     if getattr(material, "needs_fibers", False):
         fiber = np.array([[1.0, 0.0, 0.0]])
@@ -68,7 +73,7 @@ def shear_modulus(body: object) -> float:
     return float(A[0, 0, 1, 0, 1])
 
 
-def constraint_quadrature(body: object, spacing: float) -> tuple[FloatArray, FloatArray]:
+def constraint_quadrature(body: Body, spacing: float) -> tuple[FloatArray, FloatArray]:
     """Tensor Gauss rule whose points are at most about ``spacing`` mm apart in every cell.
 
     The number of points along each reference direction of the hexahedron is set by the
@@ -95,7 +100,7 @@ def constraint_quadrature(body: object, spacing: float) -> tuple[FloatArray, Flo
     tetrahedra, equal weights (exact for linear integrands), ``m`` set by the longest cell
     edge so that neighbouring points are at most about ``spacing`` apart.
     """
-    mesh = body.mesh  # type: ignore[attr-defined]
+    mesh = body.mesh
     if isinstance(mesh, skfem.MeshTet1):
         return _tet_quadrature(mesh, spacing)
     ref = skfem.ElementHex1().doflocs  # (8, 3) reference coordinates of the local vertices
@@ -219,7 +224,7 @@ class PhaseConstraint:
 
     def __init__(
         self,
-        body: object,
+        body: Body,
         phase: xr.Dataset,
         *,
         intorder: int | None = None,
@@ -234,15 +239,15 @@ class PhaseConstraint:
                 abs(float(phase[d][1] - phase[d][0])) for d in ("z", "y", "x") if phase.sizes[d] > 1
             )
         )
-        element = body.scalar_element  # type: ignore[attr-defined]
+        element = body.scalar_element
         if intorder is None:
             basis = skfem.CellBasis(
                 body.mesh,
                 element,
-                quadrature=constraint_quadrature(body, spacing),  # type: ignore[attr-defined]
+                quadrature=constraint_quadrature(body, spacing),
             )
         else:
-            basis = skfem.CellBasis(body.mesh, element, intorder=int(intorder))  # type: ignore[attr-defined]
+            basis = skfem.CellBasis(body.mesh, element, intorder=int(intorder))
         self.intorder = intorder
         nb = len(basis.basis)
         self.shape_values = np.stack([np.asarray(basis.basis[a][0]) for a in range(nb)], axis=-1)
@@ -252,7 +257,7 @@ class PhaseConstraint:
             np.asarray(basis.global_coordinates()).transpose(1, 2, 0).reshape(-1, 3)
         )
         self.volume = np.asarray(basis.dx, dtype=np.float64).ravel()
-        self._cell_dofs = body.element_dofs  # type: ignore[attr-defined]  (ncell, nb, 3)
+        self._cell_dofs = body.element_dofs  # (ncell, nb, 3)
         self.spline_order = int(spline_order)
         reference = PhaseSampler(phase, 0, order=self.spline_order)
         phi0, _, valid0 = reference.sample(self.points, per_tag=True)
@@ -277,7 +282,7 @@ class PhaseConstraint:
         k = 2.0 * np.pi * np.asarray(phase["tag_frequency"], dtype=float)
         self.wavenumber = float(np.sqrt(np.mean(k**2)))
         self.max_wavenumber = float(np.max(k))
-        self.element_size = float(np.cbrt(np.mean(body.cell_volume)))  # type: ignore[attr-defined]
+        self.element_size = float(np.cbrt(np.mean(body.cell_volume)))
         self.shear_modulus = shear_modulus(body)
 
     # ------------------------------------------------------------------ set-up
@@ -362,8 +367,8 @@ class PhaseConstraint:
         return _epsilon(self.volume, ok, np.where(ok, wrap(phi - self.reference_phase), 0.0))
 
     def residual_tangent(
-        self, body: object, u: FloatArray, s: float = 1.0
-    ) -> tuple[FloatArray, object]:
+        self, body: Body, u: FloatArray, s: float = 1.0
+    ) -> tuple[FloatArray, sparse.csr_matrix]:
         """Contribution to the residual R(u) = f_int − f_ext and its Gauss–Newton tangent.
 
         Parameters
@@ -392,10 +397,11 @@ class PhaseConstraint:
         drive = s * self.penalty * st.residual + s * self.multipliers * st.tag_valid
         force = np.einsum("qt,qti->qi", drive, st.gradient) * st.weight[:, None]
         fe = np.matmul(N.transpose(0, 2, 1), force.reshape(ncell, npc, 3))  # (c, a, i)
-        ndof = int(self.body.ndof)  # type: ignore[attr-defined]
-        return np.bincount(self._cell_dofs.ravel(), weights=fe.ravel(), minlength=ndof)
+        ndof = int(self.body.ndof)
+        # numpy's stub types every bincount as int; with float weights it is float64
+        return np.bincount(self._cell_dofs.ravel(), weights=fe.ravel(), minlength=ndof)  # type: ignore[return-value]
 
-    def assemble(self, st: ConstraintState, s: float = 1.0) -> tuple[FloatArray, object]:
+    def assemble(self, st: ConstraintState, s: float = 1.0) -> tuple[FloatArray, sparse.csr_matrix]:
         """Residual and tangent from an evaluated :class:`ConstraintState`."""
         N = self.shape_values  # (c, q, a)
         ncell, npc, nb = N.shape
@@ -413,7 +419,10 @@ class PhaseConstraint:
             K = np.matmul(NN.transpose(0, 2, 1), M[sl])  # (c, ab, ik)
             Ke[sl] = K.reshape(-1, nb, nb, 3, 3).transpose(0, 1, 3, 4, 2)
         pat = sparsity(self.body)
-        data = np.bincount(pat.element_positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz)
+        # numpy's stub types every bincount as int; with float weights it is float64
+        data: FloatArray = np.bincount(  # type: ignore[assignment]
+            pat.element_positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz
+        )
         return r, pat.matrix(data)
 
     def update_multipliers(self, st: ConstraintState) -> float:

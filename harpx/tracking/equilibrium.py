@@ -221,6 +221,7 @@ def equilibrate(
         R = internal.r + rc
         if offset is not None:
             R = R + offset
+        assert internal.K is not None  # assembled with the tangent
         K = internal.K.copy()
         K.data += Kc.data
         for term in terms:

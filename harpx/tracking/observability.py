@@ -28,10 +28,14 @@ translations along y and z and the rotation about x.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
-from harpx._typing import FloatArray, IntArray
+from harpx._typing import BoolArray, FloatArray, IntArray
+
+if TYPE_CHECKING:
+    from harpx.mechanics.body import Body
 
 #: Eigenvalues of the normalised rigid-mode Gram matrix below this count as unseen.
 UNSEEN_TOLERANCE = 1e-8
@@ -155,19 +159,35 @@ class Observability:
         return self.unseen_modes @ (self.mode_weights * u)
 
 
+def describe_direction(v: FloatArray, unnamed: str = "") -> str:
+    """A unit 3-vector as text, e.g. ``"z (0, 0, 1)"``, for messages.
+
+    The sign is chosen so that the largest component is positive; the axis name is given
+    when ``v`` lies within 0.999 of a coordinate axis, else ``unnamed`` (nothing if empty).
+
+    Examples
+    --------
+    >>> describe_direction(np.array([0.0, 0.0, 1.0]))
+    'z (0, 0, 1)'
+    >>> describe_direction(np.array([0.6, 0.8, 0.0]), unnamed="the axis")
+    'the axis (0.6, 0.8, 0)'
+    """
+    v = v * np.sign(v[np.argmax(np.abs(v))])
+    name = "xyz"[int(np.argmax(np.abs(v)))] if np.abs(v).max() > 0.999 else unnamed
+    prefix = f"{name} " if name else ""
+    return f"{prefix}({v[0]:.2g}, {v[1]:.2g}, {v[2]:.2g})"
+
+
 def _describe(mode: FloatArray) -> str:
     """Name of a rigid mode given as 6 coefficients (3 translations, 3 rotations)."""
     t, w = mode[:3], mode[3:]
     kind, vec = ("translation along", t) if np.linalg.norm(t) >= np.linalg.norm(w) else (
         "rotation about", w)  # fmt: skip
-    vec = vec / np.linalg.norm(vec)
-    vec = vec * np.sign(vec[np.argmax(np.abs(vec))])
-    axis = "xyz"[int(np.argmax(np.abs(vec)))] if np.abs(vec).max() > 0.999 else "the axis"
-    return f"{kind} {axis} ({vec[0]:.2g}, {vec[1]:.2g}, {vec[2]:.2g})"
+    return f"{kind} {describe_direction(vec / np.linalg.norm(vec), unnamed='the axis')}"
 
 
 def observability(
-    body: object,
+    body: Body,
     points: FloatArray,
     volume: FloatArray,
     shape_values: FloatArray,
@@ -201,14 +221,15 @@ def observability(
     -------
     Observability
     """
-    ndof = int(body.ndof)  # type: ignore[attr-defined]
+    ndof = int(body.ndof)
     ncell, npc, nb = shape_values.shape
     projectors, point_rank = seen_projectors(directions, valid)
-    cell_valid = valid.reshape(ncell, npc, -1).any(axis=1)
+    cell_valid = cast(BoolArray, valid.reshape(ncell, npc, -1).any(axis=1))
     cell_projectors, cell_rank = seen_projectors(directions, cell_valid)
     cell_seen = np.einsum("caa->ca", cell_projectors)
     # lumped nodal volumes (row sums of N² weighted: positive for serendipity elements too)
-    weights = np.bincount(
+    # numpy's stub types every bincount as int; with float weights it is float64
+    weights: FloatArray = np.bincount(  # type: ignore[assignment]
         cell_dofs[:, :, 0].ravel() // 3,
         weights=np.einsum("cqa,cq->ca", shape_values**2, volume.reshape(ncell, npc)).ravel(),
         minlength=ndof // 3,
@@ -219,7 +240,7 @@ def observability(
     projected = np.einsum("qij,mqj->mqi", projectors, modes_q)
     gram = np.einsum("mqi,nqi,q->mn", projected, projected, volume) / volume.sum()
     # … and under the Dirichlet conditions (a held dof holds every mode it moves)
-    dof_points = np.asarray(body.dof_points, dtype=np.float64)  # type: ignore[attr-defined]
+    dof_points = np.asarray(body.dof_points, dtype=np.float64)
     centroid = points.mean(axis=0)
     modes_dof = _rigid_about(dof_points, centroid, radius)
     if fixed_dofs.size:
@@ -234,7 +255,9 @@ def observability(
         L = np.linalg.cholesky(gram_m)
         modes = np.linalg.solve(L, modes)
     pinned = _pin_dofs(modes) if modes.shape[0] else np.zeros(0, dtype=np.int64)
-    body_projector, body_seen = seen_projectors(directions, valid.any(axis=0)[None])
+    body_projector, body_seen = seen_projectors(
+        directions, cast(BoolArray, valid.any(axis=0))[None]
+    )
     w_axes, v_axes = np.linalg.eigh(np.eye(3) - body_projector[0])
     unseen_axes = v_axes[:, w_axes > 0.5].T
     return Observability(

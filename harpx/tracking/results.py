@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
@@ -255,13 +255,14 @@ def tracking_error(
     est = est.isel(time=np.flatnonzero(match))
     true = true.isel(time=nearest_true[match])
     est = est.assign_coords(time=true.time.values)
-    err = np.sqrt(((est - true) ** 2).sum("axis", skipna=False))
-    body = np.isfinite(true).all("axis")
+    # numpy ufuncs on DataArrays return DataArrays (__array_ufunc__); numpy's stubs say ndarray
+    err = cast(xr.DataArray, np.sqrt(((est - true) ** 2).sum("axis", skipna=False)))
+    body = cast(xr.DataArray, np.isfinite(true)).all("axis")
     if where is not None:
         where = where.broadcast_like(body).astype(bool)
         body = body & where
         err = err.where(where)
-    covered = np.isfinite(err)
+    covered = cast(xr.DataArray, np.isfinite(err))
     values = err.values.reshape(err.sizes["time"], -1)
     ok = covered.values.reshape(err.sizes["time"], -1)
 

@@ -14,12 +14,13 @@ from __future__ import annotations
 import time as _time
 import warnings
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
 from tqdm.auto import tqdm
 
+from harpx._typing import BoolArray
 from harpx.errors import HarpxWarning, SchemaError
 from harpx.imaging.coverage import explain_missing_data, phase_direction_mismatch
 from harpx.mechanics.assembly import internal_forces
@@ -30,6 +31,7 @@ from harpx.tracking.augmented import track_frame_augmented
 from harpx.tracking.constraint import PhaseConstraint
 from harpx.tracking.equilibrium import Timings, split_dirichlet
 from harpx.tracking.frame import FrameOutcome, FrameProblem
+from harpx.tracking.observability import describe_direction
 from harpx.tracking.penalty import track_frame_penalty
 from harpx.tracking.results import tracked_dataset
 from harpx.tracking.settings import Method, Predictor, Regularization, TrackingSettings
@@ -82,20 +84,14 @@ def _check_data(phase: xr.Dataset, constraint: PhaseConstraint) -> None:
             "no constraint point of the body lies inside the image data in frame 0: "
             + explain_missing_data(phase, constraint.points)
         )
-    blind = [str(t) for t, seen in zip(phase["tag"].values, constraint.reference_valid.any(axis=0),
-                                       strict=True) if not seen]  # fmt: skip
+    seen_by_tag = cast(BoolArray, constraint.reference_valid.any(axis=0))
+    blind = [str(t) for t, seen in zip(phase["tag"].values, seen_by_tag, strict=True) if not seen]
     if blind:
         raise SchemaError(
             f"tag {blind!r} has no data at any constraint point of the body in frame 0 (its "
             "mask or field of view misses the mesh), so the body could not be tracked along "
             f"it; fix the tag's mask or drop it (ds.drop_sel(tag={blind!r}))"
         )
-
-
-def _vector(v: np.ndarray) -> str:
-    v = v * np.sign(v[np.argmax(np.abs(v))])
-    name = "xyz"[int(np.argmax(np.abs(v)))] + " " if np.abs(v).max() > 0.999 else ""
-    return f"{name}({v[0]:.2g}, {v[1]:.2g}, {v[2]:.2g})"
 
 
 def _warn_unseen(constraint: PhaseConstraint) -> None:
@@ -107,7 +103,7 @@ def _warn_unseen(constraint: PhaseConstraint) -> None:
         f"{label} ({d[0]:.2g}, {d[1]:.2g}, {d[2]:.2g})"
         for label, d in zip(constraint.phase["tag"].values, constraint.directions, strict=True)
     )
-    unseen = " and ".join(_vector(a) for a in seen.unseen_axes)
+    unseen = " and ".join(describe_direction(a) for a in seen.unseen_axes)
     removed = (
         f"the rigid-body motion the tags cannot see ({'; '.join(seen.unseen_directions)}) was "
         "removed (held at zero mean)"

@@ -11,6 +11,7 @@ import pytest
 import skfem
 
 from harpx.errors import ArchiveError, CoincidentNodesWarning
+from harpx.io.mesh import read_body
 from harpx.mechanics.body import Body
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import box, hex_mesh
@@ -35,7 +36,7 @@ def test_unused_node_of_a_mesh_file_is_dropped(tmp_path: Path) -> None:
         [("hexahedron", Body(_box(), MAT).cells + 1)],
     )
     meshio.write(tmp_path / "stray.vtu", m)
-    body = Body(tmp_path / "stray.vtu", MAT)
+    body = read_body(tmp_path / "stray.vtu", MAT)
     assert body.nodes.shape == (48, 3)  # 4 x 4 x 3 box nodes; the stray node is gone
     np.testing.assert_allclose(body.cell_volume.sum(), 18.0, rtol=1e-12)  # 3 x 3 x 2 mm
 
@@ -72,15 +73,15 @@ def test_garbage_mesh_file_is_an_archive_error_not_system_exit(
     path = tmp_path / "garbage.vtu"
     path.write_text("garbage")
     with pytest.raises(ArchiveError, match=rf"cannot read mesh '{path}' \(meshio cannot parse"):
-        Body(path, MAT)
+        read_body(path, MAT)
     assert capsys.readouterr().out == ""  # meshio's own print is swallowed
 
 
 def test_missing_mesh_file_is_named(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match=r"cannot read mesh '.*nothing\.vtu': no such file"):
-        Body(tmp_path / "nothing.vtu", MAT)
+        read_body(tmp_path / "nothing.vtu", MAT)
 
 
 def test_directory_as_mesh_is_named(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match="is a directory, not a file"):
-        Body(tmp_path, MAT)
+        read_body(tmp_path, MAT)

@@ -10,6 +10,7 @@ import pytest
 import skfem
 
 from harpx.errors import ArchiveError, SchemaError
+from harpx.io.mesh import read_body
 from harpx.mechanics.body import Body
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import hex_mesh
@@ -34,7 +35,7 @@ def test_empty_vtu_is_named(tmp_path: Path) -> None:
     path = tmp_path / "empty.vtu"
     meshio.write(path, meshio.Mesh(np.zeros((0, 3)), [("hexahedron", np.zeros((0, 8), int))]))
     with pytest.raises(ArchiveError, match=rf"cannot read mesh '{path}'"):
-        Body(path, MAT)
+        read_body(path, MAT)
 
 
 def test_mesh_file_without_hexahedra_is_named(tmp_path: Path) -> None:
@@ -43,7 +44,7 @@ def test_mesh_file_without_hexahedra_is_named(tmp_path: Path) -> None:
     with pytest.raises(
         ValueError, match=r"has no hexahedra or tetrahedra \(cell blocks \{'triangle': 1\}\)"
     ):
-        Body(path, MAT)
+        read_body(path, MAT)
 
 
 @pytest.mark.parametrize("dim", ["time", "x", "tag"])

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import skfem
 
+from harpx.io.mesh import read_body
 from harpx.mechanics import (
     ActiveContraction,
     Body,
@@ -141,7 +142,7 @@ def test_meshio_round_trip(tmp_path, element):
     body = Body(spec, MAT, fibers=fib, element=element)
     path = tmp_path / "body.vtu"
     meshio.write(path, body.to_meshio(np.zeros(body.ndof)))
-    back = Body.from_meshio(path, MAT, element=element)
+    back = read_body(path, MAT, element=element)
     # exact round trip of geometry, connectivity, names and fibres (binary VTU)
     np.testing.assert_array_equal(back.nodes, body.nodes)
     np.testing.assert_array_equal(back.cells, body.cells)
@@ -153,14 +154,27 @@ def test_meshio_round_trip(tmp_path, element):
     np.testing.assert_array_equal(back.fibers, body.fibers)
 
 
+def test_from_meshio_needs_no_file_and_paths_go_through_io(tmp_path):
+    body = Body(box((1.0, 1.0, 1.0), (2, 1, 1)), MAT, fibers=np.tile([1.0, 0.0, 0.0], (2, 1)))
+    back = Body.from_meshio(body.to_meshio(), MAT)
+    np.testing.assert_array_equal(back.nodes, body.nodes)
+    np.testing.assert_array_equal(back.cells, body.cells)
+    np.testing.assert_array_equal(back.fibers, body.fibers)
+    # mechanics reads no files: a path (or a meshio mesh) names the entry point to use
+    with pytest.raises(TypeError, match=r"read it with harpx\.io\.mesh\.read_body"):
+        Body(tmp_path / "body.vtu", MAT)
+    with pytest.raises(TypeError, match=r"Body\.from_meshio\(mesh\)"):
+        Body(body.to_meshio(), MAT)
+
+
 def test_read_hexahedron20_file(tmp_path):
     body = Body(box((1.0, 1.0, 1.0), (2, 1, 1)), MAT, element="hex20")
     m = meshio.Mesh(body.dof_points, [("hexahedron20", body.cells)])
     path = tmp_path / "q.vtu"
     meshio.write(path, m)
-    back = Body(path, MAT, element="hex20")
+    back = read_body(path, MAT, element="hex20")
     assert back.ndof == body.ndof and back.ncell == 2
     np.testing.assert_allclose(back.dof_points[back.cells], body.dof_points[body.cells])
     with pytest.raises(ValueError, match="expected 'hexahedron'"):
         meshio.write(tmp_path / "t.vtu", meshio.Mesh(np.eye(3), [("triangle", [[0, 1, 2]])]))
-        Body(tmp_path / "t.vtu", MAT)
+        read_body(tmp_path / "t.vtu", MAT)

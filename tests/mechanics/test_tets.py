@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import skfem
 
+from harpx.io.mesh import read_body
 from harpx.mechanics import (
     ActiveContraction,
     Body,
@@ -244,7 +245,7 @@ def test_meshio_files(tmp_path, element):
     path = tmp_path / "tets.vtu"
     meshio.write(path, meshio.Mesh(body.dof_points, [(kind, body.cells)],
                                    cell_data={"fiber": [fib]}))  # fmt: skip
-    back = Body(path, NEO)
+    back = read_body(path, NEO)
     assert back.element == element and back.ncell == body.ncell and back.ndof == body.ndof
     # same cells (file order), same nodes: exact round trip
     np.testing.assert_array_equal(back.dof_points[back.cells], body.dof_points[body.cells])
