@@ -132,6 +132,7 @@ class HarpAccessor:
         multiplier_tolerance: float = 0.1,
         max_updates: int = 10,
         predictor: Predictor = "linear",
+        robust_scale: float | None = 0.5,
         regularization: Regularization = "total",
         tolerance: float = 0.01,
         max_iterations: int = 20,
@@ -154,9 +155,9 @@ class HarpAccessor:
             self._ds, body, method=method, epsilon=epsilon, epsilon_factor=epsilon_factor,
             epsilon_min=epsilon_min, penalty=penalty, penalty_limit=penalty_limit, ramp=ramp,
             multiplier_tolerance=multiplier_tolerance, max_updates=max_updates,
-            predictor=predictor, regularization=regularization, tolerance=tolerance,
-            max_iterations=max_iterations, dirichlet=dirichlet, terms=terms, intorder=intorder,
-            linear_solver=linear_solver, progress=progress, settings=settings,
+            predictor=predictor, robust_scale=robust_scale, regularization=regularization,
+            tolerance=tolerance, max_iterations=max_iterations, dirichlet=dirichlet, terms=terms,
+            intorder=intorder, linear_solver=linear_solver, progress=progress, settings=settings,
         )  # fmt: skip
 
     def track_harp(

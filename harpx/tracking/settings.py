@@ -76,6 +76,13 @@ class TrackingSettings:
     predictor : {"none", "linear"}, default "linear"
         Start each frame from the previous displacement, or from the linear extrapolation
         u(n−1) + α (u(n−1) − u(n−2)) whose phase residual is smallest among α ∈ {0, ½, 1}.
+    robust_scale : float or None, default 0.5
+        Residual scale r0 (rad) of the Cauchy loss on each constraint point's phase
+        mismatch (:class:`harpx.tracking.constraint.PhaseConstraint`): a point pulls with
+        the weight 1/(1 + (r/r0)²) of its quadratic force, so the few points whose phase lies
+        in a neighbouring tag's basin (|r| near π: 2.5 % weight) cannot drag the body across
+        a wrap while the penalty rises, and the bulk (|r| ≲ 0.1 rad: ≥ 96 %) is fitted as by
+        least squares. None: the paper's quadratic penalty.
     regularization : {"total", "increment"}, default "total"
         What the tracking model resists. ``"total"`` (the paper's formulation): the stored
         energy of the whole deformation from frame 0. ``"increment"``: each frame starts
@@ -125,6 +132,7 @@ class TrackingSettings:
     multiplier_tolerance: float = 0.1
     max_updates: int = 10
     predictor: Predictor = "linear"
+    robust_scale: float | None = 0.5
     regularization: Regularization = "total"
     tolerance: float = 0.01
     max_iterations: int = 20
@@ -142,6 +150,7 @@ class TrackingSettings:
                 raise ValueError(f"{name}={getattr(self, name)!r}; expected one of {allowed!r}")
         set_ = object.__setattr__
         set_(self, "epsilon", _positive("epsilon", self.epsilon, allow_none=True))
+        set_(self, "robust_scale", _positive("robust_scale", self.robust_scale, allow_none=True))
         for name in ("epsilon_factor", "epsilon_min", "penalty", "penalty_limit",
                      "multiplier_tolerance", "tolerance"):  # fmt: skip
             set_(self, name, _positive(name, getattr(self, name)))
@@ -174,7 +183,7 @@ class TrackingSettings:
         out: dict[str, Any] = {}
         for key, value in asdict(self).items():
             if value is None:
-                value = "auto" if key == "epsilon" else -1
+                value = {"epsilon": "auto", "robust_scale": "none"}.get(key, -1)
             elif isinstance(value, bool):
                 value = int(value)
             out[f"setting_{key}"] = value
