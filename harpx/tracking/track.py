@@ -159,8 +159,8 @@ def track(
     *,
     method: Method = "penalty",
     epsilon: float | None = None,
-    epsilon_factor: float = 1.15,
-    epsilon_min: float = 0.05,
+    epsilon_factor: float = 1.0,
+    epsilon_min: float = 0.02,
     penalty: float = 1.0,
     penalty_limit: float = 1e4,
     ramp: int = 2,
@@ -190,8 +190,9 @@ def track(
 multiplier_tolerance, max_updates, predictor, robust_scale, regularization, tolerance, \
 max_iterations, intorder, linear_solver, progress
         The tracking settings, documented (with units and defaults) on
-        :class:`harpx.tracking.settings.TrackingSettings`. By default the target ε is 1.15
-        times the noise floor the images allow in each frame (never below 0.05 rad).
+        :class:`harpx.tracking.settings.TrackingSettings`. By default the target ε is the
+        noise floor the images allow in each frame (never below 0.02 rad), and each point's
+        pull is weighted robustly (``robust_scale``).
     dirichlet : sequence, optional
         Prescribed displacements (:class:`harpx.mechanics.loads.Fixed`, ``Prescribed``).
     terms : sequence, optional
