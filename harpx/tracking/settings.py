@@ -86,7 +86,10 @@ class TrackingSettings:
         the weight 1/(1 + (r/r0)²) of its quadratic force, so the few points whose phase lies
         in a neighbouring tag's basin (|r| near π: 2.5 % weight) cannot drag the body across
         a wrap while the penalty rises, and the bulk (|r| ≲ 0.1 rad: ≥ 96 %) is fitted as by
-        least squares. None: the paper's quadratic penalty.
+        least squares. None: the paper's quadratic penalty. Penalty method only: the
+        augmented-Lagrangian multiplier update Λ ← Λ + λ r assumes the quadratic form
+        (with the weight it diverged on the small phantom, ε 1.3 rad), so that method
+        keeps it.
     regularization : {"total", "increment"}, default "total"
         What the tracking model resists. ``"total"`` (the paper's formulation): the stored
         energy of the whole deformation from frame 0. ``"increment"``: each frame starts
@@ -175,6 +178,12 @@ class TrackingSettings:
         if not isinstance(self.linear_solver, str):
             raise TypeError(f"linear_solver={self.linear_solver!r} must be a string")
         set_(self, "progress", bool(self.progress))
+
+    @property
+    def effective_robust_scale(self) -> float | None:
+        """The Cauchy scale the constraint uses: ``robust_scale`` for the penalty method,
+        None (quadratic) for the augmented Lagrangian."""
+        return self.robust_scale if self.method == "penalty" else None
 
     def target(self, floor: float) -> float:
         """Tracking residual to reach in a frame whose noise floor is ``floor`` rad."""

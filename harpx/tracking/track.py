@@ -275,7 +275,7 @@ def track_with(
         raise SchemaError(swapped)
     check_fits_image(body, phase)  # units and size, before anything large is allocated
     constraint = PhaseConstraint(
-        body, phase, intorder=settings.intorder, robust_scale=settings.robust_scale
+        body, phase, intorder=settings.intorder, robust_scale=settings.effective_robust_scale
     )
     _check_data(phase, constraint)
     fixed, _ = split_dirichlet(body, dirichlet)

@@ -252,3 +252,10 @@ def test_settings_attributes_are_netcdf_safe():
     attrs = TrackingSettings().as_attrs()
     assert attrs["setting_epsilon"] == "auto" and attrs["setting_intorder"] == -1
     assert all(isinstance(v, str | int | float) for v in attrs.values())
+
+
+def test_robust_weight_is_for_the_penalty_method_only():
+    # the multiplier update assumes the quadratic penalty
+    assert TrackingSettings().effective_robust_scale == 0.5
+    assert TrackingSettings(method="augmented-lagrangian").effective_robust_scale is None
+    assert TrackingSettings(robust_scale=None).effective_robust_scale is None
