@@ -165,12 +165,20 @@ class ConstraintState:
     tag_valid : ndarray of bool, shape (nq, ntag)
         Which tags have data at each point (inside that tag's mask and field of view, in
         the reference and the current frame).
+    robust_weight : ndarray, shape (nq, ntag), optional
+        Weight :math:`w(r) = 1/(1 + (r/r_0)^2)` of each residual in the penalty force and
+        tangent (:attr:`PhaseConstraint.robust_scale`); None: 1 everywhere (quadratic).
     """
 
     residual: FloatArray
     gradient: FloatArray
     weight: FloatArray
     tag_valid: np.ndarray
+    robust_weight: FloatArray | None = None
+
+    def penalty_weight(self) -> FloatArray | float:
+        """Factor of λ per (point, tag) in the force and the tangent (1 when quadratic)."""
+        return 1.0 if self.robust_weight is None else self.robust_weight
 
     def epsilon(self) -> float:
         """Tracking residual ε: weighted mean of ``|W(φ − φ0)|`` over valid points and tags, rad."""
@@ -187,7 +195,7 @@ def _epsilon(weight: FloatArray, tag_valid: np.ndarray, residual: FloatArray) ->
 
 
 class PhaseConstraint:
-    """Phase-conservation body force and Gauss–Newton tangent for one body and phase series.
+    r"""Phase-conservation body force and Gauss–Newton tangent for one body and phase series.
 
     Parameters
     ----------
@@ -195,6 +203,15 @@ class PhaseConstraint:
         The finite-element body in its reference configuration (frame 0), mm.
     phase : xarray.Dataset
         A ``phase/1`` dataset.
+    robust_scale : float, optional
+        Residual scale :math:`r_0` (rad) of a Cauchy (Lorentzian) loss on each point's
+        phase mismatch: the penalty energy :math:`\tfrac12 \lambda r^2` becomes
+        :math:`\tfrac12 \lambda r_0^2 \ln(1 + r^2/r_0^2)`, so its force is
+        :math:`\lambda\, w(r)\, r\, \nabla\phi` with :math:`w = 1/(1 + r^2/r_0^2)` (and the
+        Gauss–Newton tangent uses the same :math:`w`, iteratively reweighted least squares).
+        A point whose phase sits in a neighbouring tag's basin (:math:`|r|` near π) then
+        pulls with a fraction :math:`(r_0/\pi)^2` of its quadratic force, so a high penalty
+        cannot drag the body across a wrap. None (the paper's formulation): quadratic.
     spline_order : {1, 3}, default 1
         Interpolation of the demodulated harmonic images between voxels. The demodulated
         image varies on the scale of the strain, not of the tags, so trilinear
@@ -229,8 +246,12 @@ class PhaseConstraint:
         *,
         intorder: int | None = None,
         spline_order: int = 1,
+        robust_scale: float | None = None,
     ) -> None:
         self.body = body
+        if robust_scale is not None and not (np.isfinite(robust_scale) and robust_scale > 0):
+            raise ValueError(f"robust_scale={robust_scale!r} must be a positive number of rad")
+        self.robust_scale = None if robust_scale is None else float(robust_scale)
         self.phase = phase
         # the acquired voxel: grid spacing times the upsampling factor of the phase images
         upsample = float(phase.attrs.get("upsample", 1))
@@ -356,7 +377,10 @@ class PhaseConstraint:
         if self.observability is not None and (self.observability.point_rank < 3).any():
             # the force acts along seen directions only (module notes of observability)
             grad = np.einsum("qtj,qij->qti", grad, self.observability.projectors)
-        return ConstraintState(residual, grad, self.volume * ok.any(axis=1), ok)
+        robust = None
+        if self.robust_scale is not None:
+            robust = 1.0 / (1.0 + (residual / self.robust_scale) ** 2)
+        return ConstraintState(residual, grad, self.volume * ok.any(axis=1), ok, robust)
 
     def epsilon_at(self, u: FloatArray) -> float:
         """Tracking residual ε at displacement ``u`` (phase only, no gradients), rad."""
@@ -394,7 +418,8 @@ class PhaseConstraint:
         """Residual contribution (paper eq. 5) from an evaluated state, mN (no tangent)."""
         N = self.shape_values  # (c, q, a)
         ncell, npc, nb = N.shape
-        drive = s * self.penalty * st.residual + s * self.multipliers * st.tag_valid
+        drive = s * self.penalty * st.penalty_weight() * st.residual
+        drive = drive + s * self.multipliers * st.tag_valid
         force = np.einsum("qt,qti->qi", drive, st.gradient) * st.weight[:, None]
         fe = np.matmul(N.transpose(0, 2, 1), force.reshape(ncell, npc, 3))  # (c, a, i)
         ndof = int(self.body.ndof)
@@ -408,7 +433,11 @@ class PhaseConstraint:
         lam = s * self.penalty
         r = self.force(st, s)
         G = st.gradient
-        M = np.matmul(G.transpose(0, 2, 1), G) * (lam * st.weight)[:, None, None]
+        if st.robust_weight is not None:  # λ w(r) per (point, tag): weight each tag's row
+            G_w = G * st.robust_weight[..., None]
+            M = np.matmul(G_w.transpose(0, 2, 1), G) * (lam * st.weight)[:, None, None]
+        else:
+            M = np.matmul(G.transpose(0, 2, 1), G) * (lam * st.weight)[:, None, None]
         M = M.reshape(ncell, npc, 9)
         # K_e[a, i, k, b] = Σ_q N_a N_b M_q[i, k], as (c, ab, q) @ (c, q, ik) in cell blocks
         Ke = np.empty((ncell, nb, 3, 3, nb))

@@ -155,14 +155,15 @@ def track(
     *,
     method: Method = "penalty",
     epsilon: float | None = None,
-    epsilon_factor: float = 1.15,
-    epsilon_min: float = 0.05,
+    epsilon_factor: float = 1.0,
+    epsilon_min: float = 0.02,
     penalty: float = 1.0,
     penalty_limit: float = 1e4,
     ramp: int = 2,
     multiplier_tolerance: float = 0.1,
     max_updates: int = 10,
     predictor: Predictor = "linear",
+    robust_scale: float | None = 0.5,
     regularization: Regularization = "total",
     tolerance: float = 0.01,
     max_iterations: int = 20,
@@ -182,11 +183,12 @@ def track(
     body : Body
         Finite-element model in the reference configuration of frame 0 (mm).
     method, epsilon, epsilon_factor, epsilon_min, penalty, penalty_limit, ramp, \
-multiplier_tolerance, max_updates, predictor, regularization, tolerance, max_iterations, \
-intorder, linear_solver, progress
+multiplier_tolerance, max_updates, predictor, robust_scale, regularization, tolerance, \
+max_iterations, intorder, linear_solver, progress
         The tracking settings, documented (with units and defaults) on
-        :class:`harpx.tracking.settings.TrackingSettings`. By default the target ε is 1.15
-        times the noise floor the images allow in each frame (never below 0.05 rad).
+        :class:`harpx.tracking.settings.TrackingSettings`. By default the target ε is the
+        noise floor the images allow in each frame (never below 0.02 rad), and each point's
+        pull is weighted robustly (``robust_scale``).
     dirichlet : sequence, optional
         Prescribed displacements (:class:`harpx.mechanics.loads.Fixed`, ``Prescribed``).
     terms : sequence, optional
@@ -233,7 +235,7 @@ intorder, linear_solver, progress
         method=method, epsilon=epsilon, epsilon_factor=epsilon_factor, epsilon_min=epsilon_min,
         penalty=penalty, penalty_limit=penalty_limit, ramp=ramp,
         multiplier_tolerance=multiplier_tolerance, max_updates=max_updates, predictor=predictor,
-        regularization=regularization,
+        robust_scale=robust_scale, regularization=regularization,
         tolerance=tolerance, max_iterations=max_iterations, intorder=intorder,
         linear_solver=linear_solver, progress=progress,
     )  # fmt: skip
@@ -268,7 +270,9 @@ def track_with(
     if swapped:
         raise SchemaError(swapped)
     check_fits_image(body, phase)  # units and size, before anything large is allocated
-    constraint = PhaseConstraint(body, phase, intorder=settings.intorder)
+    constraint = PhaseConstraint(
+        body, phase, intorder=settings.intorder, robust_scale=settings.effective_robust_scale
+    )
     _check_data(phase, constraint)
     fixed, _ = split_dirichlet(body, dirichlet)
     seen = constraint.observe(fixed)

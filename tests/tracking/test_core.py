@@ -68,6 +68,51 @@ def test_tangent_is_the_derivative_of_the_force_on_a_linear_phase(ideal, rng):
     np.testing.assert_allclose(K @ v, numeric, rtol=1e-7, atol=1e-9 * np.abs(numeric).max())
 
 
+def _cauchy_energy(constraint: PhaseConstraint, u: np.ndarray) -> float:
+    st = constraint.state(u)
+    r0 = constraint.robust_scale
+    w = st.weight[:, None] * st.tag_valid
+    return float((w * 0.5 * constraint.penalty * r0**2 * np.log1p((st.residual / r0) ** 2)).sum())
+
+
+@pytest.fixture(scope="module")
+def robust(ideal):
+    body, plain = ideal
+    constraint = PhaseConstraint(body, plain.phase, robust_scale=0.2)
+    constraint.set_frame(1)
+    constraint.penalty = 3.0
+    return body, constraint
+
+
+def test_robust_force_is_the_gradient_of_the_cauchy_energy(robust, rng):
+    # displacements of ~0.3 mm give residuals of ~0.3 rad, beyond r0 = 0.2 rad: the
+    # weight varies, so this checks the weighted force, not the quadratic one
+    body, constraint = robust
+    u = rng.normal(0.0, 0.3, body.ndof)
+    v = rng.normal(0.0, 1.0, body.ndof)
+    st = constraint.state(u)
+    assert st.robust_weight is not None and st.robust_weight[st.tag_valid].min() < 0.5
+    h = 1e-5
+    numeric = (_cauchy_energy(constraint, u + h * v) - _cauchy_energy(constraint, u - h * v)) / (
+        2 * h
+    )
+    assert numeric == pytest.approx(float(constraint.force(st) @ v), rel=1e-6)
+
+
+def test_robust_weight_bounds_the_pull_of_a_point_near_a_wrap(ideal, robust):
+    # a uniform shift of 0.45 tag periods puts every point ~2.8 rad from its phase: the
+    # quadratic pull grows with the residual, the Cauchy pull has fallen to r0 / r of it
+    body, plain = ideal
+    _, constraint = robust
+    period = 1.0 / float(plain.phase["tag_frequency"].max())
+    u = np.zeros(body.ndof)
+    u[0::3] = 0.45 * period
+    quadratic = np.abs(plain.force(plain.state(u))).sum()
+    weighted = np.abs(constraint.force(constraint.state(u))).sum()
+    r = 2 * np.pi * 0.45
+    assert weighted / quadratic == pytest.approx(1.0 / (1.0 + (r / 0.2) ** 2), rel=0.05)
+
+
 def test_points_outside_a_tags_mask_carry_none_of_its_force(rng):
     ds = ideal_phase(still, shape=(9, 16, 16), spacing=(2.0, 2.0, 2.0), times=[0.0, 10.0])
     mask = np.ones((3, 9, 16, 16), dtype=bool)
@@ -195,6 +240,7 @@ def test_multiplier_update_is_lambda_times_the_residual(ideal, rng):
         pytest.param({"max_updates": 0}, "max_updates=0", id="updates"),
         pytest.param({"epsilon_factor": 0.5}, "epsilon_factor=0.5", id="factor"),
         pytest.param({"regularization": "none"}, "regularization='none'", id="regularization"),
+        pytest.param({"robust_scale": 0.0}, "robust_scale=0.0", id="robust"),
     ],
 )
 def test_settings_name_what_is_wrong(kwargs, match):
@@ -206,3 +252,10 @@ def test_settings_attributes_are_netcdf_safe():
     attrs = TrackingSettings().as_attrs()
     assert attrs["setting_epsilon"] == "auto" and attrs["setting_intorder"] == -1
     assert all(isinstance(v, str | int | float) for v in attrs.values())
+
+
+def test_robust_weight_is_for_the_penalty_method_only():
+    # the multiplier update assumes the quadratic penalty
+    assert TrackingSettings().effective_robust_scale == 0.5
+    assert TrackingSettings(method="augmented-lagrangian").effective_robust_scale is None
+    assert TrackingSettings(robust_scale=None).effective_robust_scale is None
