@@ -573,13 +573,26 @@ class PhaseSampler:
         linear = (base_index + start) @ strides[:d]
         order = np.argsort(linear, kind="stable")
         out = np.empty((u.shape[0], nq, nf))
+        # separable contraction: the leading axes with their tensor-product weights (value,
+        # and the derivative along each leading axis), then the last axis (value weights for
+        # those, slope weights for the derivative along it)
+        lead = d if nq > 1 else 1
         for s in range(0, u.shape[0], self.chunk_size):
             chunk = order[s : s + self.chunk_size]
+            m = chunk.size
             weights = [_weights(frac[chunk, a], self.order) for a in range(d)]  # (m, 2, taps)
             gathered = runs[linear[chunk, None] + offsets]  # (m, taps**(d-1)) runs
-            gathered = gathered.view(padded.dtype).reshape(chunk.size, taps**d, nf)
-            tensor = _tensor_weights(weights, nq)  # (m, nq, taps**d)
-            out[chunk] = tensor @ gathered
+            gathered = gathered.view(padded.dtype).reshape(m, taps ** (d - 1), taps * nf)
+            if d > 1:
+                head = np.matmul(_tensor_weights(weights[:-1], lead), gathered)
+            else:
+                head = gathered  # (m, 1, taps * nf)
+            # (m, lead, taps, nf) -> (m, taps, lead * nf): the last axis's taps as rows
+            rows = head.reshape(m, lead, taps, nf).transpose(0, 2, 1, 3).reshape(m, taps, -1)
+            last = np.matmul(weights[-1][:, : 1 if nq == 1 else 2], rows)  # (m, 1|2, lead*nf)
+            out[chunk, :lead] = last[:, 0].reshape(m, lead, nf)
+            if nq > 1:
+                out[chunk, lead] = last[:, 1, :nf]
         return out
 
 
