@@ -406,16 +406,21 @@ class PhaseSampler:
             point–tag pairs) get ``phi = 0`` and ``grad = 0``.
         """
         pts = _as_points(points)
-        demod, deriv, valid_tags = self._evaluate(pts, derivatives=True)
+        values, size, valid_tags = self._evaluate(pts, derivatives=True)
         valid = valid_tags if per_tag else valid_tags.all(axis=1)
-        phi = self._remodulate(pts, demod)
-        grad = np.zeros((pts.shape[0], self._ntag, 3))
-        power = np.abs(demod) ** 2
-        safe = np.where(power > 0, power, 1.0)
+        ntag = self._ntag
+        re, im = values[:, 0, :ntag], values[:, 0, ntag:]
+        phi = self._remodulate(pts, re, im)
+        grad = np.zeros((pts.shape[0], ntag, 3))
+        power = size * size
+        # Im(conj(D) dD) / |D|^2 per voxel of the axis, then per mm
+        scale = np.where(power > 0, power, 1.0)
         for j, column in enumerate(self._columns):
-            grad[:, :, column] = self._k_active[:, j] + (
-                np.imag(np.conj(demod) * deriv[:, j]) / safe
-            )
+            cross = re * values[:, 1 + j, ntag:] - im * values[:, 1 + j, :ntag]
+            cross /= scale
+            cross *= 1.0 / self._spacing[j]
+            cross += self._k_active[:, j]
+            grad[:, :, column] = cross
         invalid = ~(valid_tags if per_tag else valid_tags.all(axis=1, keepdims=True))
         phi[np.broadcast_to(invalid, phi.shape)] = 0.0
         grad[np.broadcast_to(invalid, phi.shape)] = 0.0
@@ -429,9 +434,9 @@ class PhaseSampler:
         ``valid`` has shape (n,), or (n, ntag) with ``per_tag`` (as in :meth:`sample`).
         """
         pts = _as_points(points)
-        demod, _, valid_tags = self._evaluate(pts, derivatives=False)
+        values, _, valid_tags = self._evaluate(pts, derivatives=False)
         valid = valid_tags if per_tag else valid_tags.all(axis=1)
-        phi = self._remodulate(pts, demod)
+        phi = self._remodulate(pts, values[:, 0, : self._ntag], values[:, 0, self._ntag :])
         invalid = ~(valid_tags if per_tag else valid_tags.all(axis=1, keepdims=True))
         phi[np.broadcast_to(invalid, phi.shape)] = 0.0
         return phi, valid
@@ -443,8 +448,8 @@ class PhaseSampler:
         are still reported invalid); points outside the field of view get 0.
         """
         pts = _as_points(points)
-        demod, _, valid_tags = self._evaluate(pts, derivatives=False)
-        return np.abs(demod), valid_tags.all(axis=1)
+        _, size, valid_tags = self._evaluate(pts, derivatives=False)
+        return size, valid_tags.all(axis=1)
 
     def acquired(self, points: ArrayLike) -> NDArray[np.bool_]:
         """Which tags have data at points: inside the field of view and the tag's ``mask``.
@@ -488,15 +493,21 @@ class PhaseSampler:
         buffer, self._buffer, self._padded = self._buffer, None, None
         return buffer
 
-    def _remodulate(self, pts: NDArray[np.float64], demod: NDArray[np.complex128]) -> Any:
-        position = pts.copy()
-        invariant = [c for c in range(3) if c not in self._columns]
-        position[:, invariant] = self._fixed[invariant]
-        return wrap(np.angle(demod) + position @ self.wavevectors.T)
+    def _remodulate(
+        self, pts: NDArray[np.float64], re: NDArray[np.float64], im: NDArray[np.float64]
+    ) -> Any:
+        """W(arg D + k·x) (n, ntag), with the slice position along invariant axes."""
+        phase = np.arctan2(im, re)  # = np.angle(re + i im)
+        for c in range(3):  # k·x column by column (a (n, 3) @ (3, ntag) matmul is slower)
+            coordinate = pts[:, c, None] if c in self._columns.tolist() else self._fixed[c]
+            phase += coordinate * self.wavevectors[:, c]
+        return wrap(phase)
 
     def _evaluate(
         self, pts: NDArray[np.float64], *, derivatives: bool
-    ) -> tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.bool_]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+        """Spline values (n, nq, 2 ntag): Re then Im of D and of its derivative along each
+        active axis (per voxel); ``|D|`` (n, ntag); validity per tag (n, ntag)."""
         n = pts.shape[0]
         d = len(self._active)
         ntag = self._ntag
@@ -510,9 +521,7 @@ class PhaseSampler:
             index = np.flatnonzero(needed)
             if index.size:
                 values[index] = self._spline(u[index], nq)
-        demod = values[:, 0, :ntag] + 1j * values[:, 0, ntag:]
-        deriv = (values[:, 1:, :ntag] + 1j * values[:, 1:, ntag:]) / self._spacing[: nq - 1, None]
-        size = np.abs(demod)
+        size = np.hypot(values[:, 0, :ntag], values[:, 0, ntag:])  # = |D|
         # the masks say which tags were acquired where (per tag); the magnitude floor says
         # whether there is tissue signal at all, so it holds for every acquired tag at once
         # (near an edge one tag's magnitude can pass while another's fails: such a point
@@ -523,7 +532,7 @@ class PhaseSampler:
             inside[needed] = self._support[tuple(np.rint(u[needed]).astype(np.int64).T)]
             signal &= inside
         valid_tags = tag_ok & signal[:, None]
-        return demod, deriv, valid_tags
+        return values, size, valid_tags
 
     def _locate(self, pts: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         """Voxel coordinates (n, d) (clipped into the grid) and which tags acquired each point."""
