@@ -55,9 +55,7 @@ _EDGE = 4
 _REGION_MARGIN = 20
 
 
-def _tap_array(
-    shape: tuple[int, ...], buffer: NDArray[np.float64] | None
-) -> NDArray[np.float64]:
+def _tap_array(shape: tuple[int, ...], buffer: NDArray[np.float64] | None) -> NDArray[np.float64]:
     """An uninitialised float64 array of ``shape``, a view of ``buffer`` where it is big enough.
 
     Reusing one buffer across frames avoids allocating (and the kernel zero-filling) some
