@@ -89,7 +89,7 @@ def main() -> None:
         from error_vs_runtime import _mesh
 
         from harpx.mechanics import Body, NeoHookean
-        from harpx.tracking import track
+        from harpx.tracking.track import track
 
         body = Body(_mesh("paper", False), NeoHookean(c1=1.0, kappa=120.0), element="hex8")
         pinned = {} if args.epsilon is None else {"epsilon": args.epsilon}
