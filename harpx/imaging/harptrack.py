@@ -216,12 +216,13 @@ def _grid_candidates(ds: xr.Dataset) -> tuple[NDArray[np.float64], NDArray[np.in
 
 
 def _bounds(
-    points: NDArray[np.float64], keep: NDArray[np.bool_], reach: float
+    points: NDArray[np.float64], keep: ArrayLike, reach: float
 ) -> NDArray[np.float64] | None:
     """Box (2, 3) in mm around the kept points, widened by ``reach`` (None: no point kept)."""
-    if not keep.any():
+    mask = np.asarray(keep, dtype=bool)
+    if not mask.any():
         return None
-    kept = points[keep]
+    kept = points[mask]
     return np.stack([kept.min(axis=0) - reach, kept.max(axis=0) + reach])
 
 

@@ -156,7 +156,7 @@ def _cubic_taps(
     work = out[(slice(1, -1),) * d]
     core = tuple(slice(b, b + n) for n, b in zip(shape, lead, strict=True))
     # with float32 phase and carrier, cos/sin run in float32 (SIMD, about 3x faster)
-    _write_demodulated(phase, magnitude, carrier, squeeze, lambda c: work[(*core, c)])
+    _write_demodulated(phase, magnitude, carrier, squeeze, lambda c: work[core][..., c])
     # a NaN voxel would spread over the whole slice through the spline prefilter; as 0 it
     # falls below the magnitude floor and stays invalid where it is
     if not _finite(phase, magnitude):
@@ -354,7 +354,7 @@ class PhaseSampler:
                 buffer,
             )
         self._padded: NDArray[np.float64] | None = padded
-        self._buffer = padded.base if padded.base is not None else padded
+        self._buffer: NDArray[np.float64] | None = padded if padded.base is None else padded.base
 
         mask = None
         if "mask" in phase_ds.variables:
