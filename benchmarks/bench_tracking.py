@@ -10,17 +10,25 @@ once per revision with ``--label`` (e.g. ``PYTHONPATH`` pointing at each checkou
   since this benchmark was written) or float64 (``--dtype``; older revisions ignore it);
 * ``HARP``: :func:`harpx.imaging.harptrack.track_harp` on the voxel centres of the images;
 * ``FE``: :func:`harpx.tracking.track` with the hex8 paper mesh (4320 cells), neo-Hookean
-  C1 = 1 kPa, κ = 120 kPa, penalty method, ε = 0.05 rad (as in
-  ``benchmarks/error_vs_runtime.py``), with the tracker's own time split (``time_*`` attrs).
+  C1 = 1 kPa, κ = 120 kPa, penalty method, the tracker's default ε (``--epsilon`` to pin it;
+  as in ``benchmarks/error_vs_runtime.py``), with the tracker's own time split (``time_*``
+  attrs).
 
-Errors are :func:`harpx.tracking.results.tracking_error` against the scene's true motion (mean
-over frames and points, mm); wall-clock seconds on this machine.
+``--steps`` picks the rows (e.g. ``--steps harp`` for conventional HARP alone). Each row also
+gives the process CPU time (user + system) of its step, which a shared machine distorts less
+than wall time. Errors are :func:`harpx.tracking.results.tracking_error` against the scene's
+true motion (mean / p95 / max over frames and points, mm); wall-clock seconds on this machine.
+
+Side by side (before/after): check the old revision out into a temporary worktree
+(``git worktree add /tmp/harpx-main main``) and run this same script once with
+``PYTHONPATH=/tmp/harpx-main`` and once with this checkout, alternating, several times.
 """
 
 from __future__ import annotations
 
 import argparse
 import inspect
+import resource
 import sys
 import tempfile
 import time
@@ -46,6 +54,10 @@ def main() -> None:
     parser.add_argument("--skip-fe", action="store_true")
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument(
+        "--steps", nargs="+", default=["phase", "harp", "fe"], choices=["phase", "harp", "fe"]
+    )
+    parser.add_argument("--epsilon", type=float, default=None)
+    parser.add_argument(
         "--cache", type=Path, default=Path(tempfile.gettempdir()) / "harpx_phantom_paper.nc"
     )
     args = parser.parse_args()
@@ -57,43 +69,57 @@ def main() -> None:
     kwargs = {}
     if "dtype" in inspect.signature(extract_phase).parameters:
         kwargs["dtype"] = args.dtype
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _cpu()
     phase = extract_phase(tagged, upsample=2, **kwargs)
-    t_phase = time.perf_counter() - t0
+    t_phase, c_phase = time.perf_counter() - t0, _cpu() - c0
     label = f"{args.label}, phase {phase.phase.dtype}"
-    rows = [f"| {label} | phase() | {t_phase:.1f} | - | - | - |"]
-    t0 = time.perf_counter()
-    harp = track_harp(phase, points=tagged)
-    t_harp = time.perf_counter() - t0
-    err = tracking_error(harp, tagged)
-    rows.append(
-        f"| {label} | HARP | {t_harp:.1f} | {float(err.mean_all):.4f} | "
-        f"{float(err.coverage):.3f} | - |"
-    )
-    if not args.skip_fe:
+    rows = []
+    if "phase" in args.steps:
+        rows.append(f"| {label} | phase() | {t_phase:.1f} | {c_phase:.1f} | - | - | - |")
+    if "harp" in args.steps:
+        t0, c0 = time.perf_counter(), _cpu()
+        harp = track_harp(phase, points=tagged)
+        t_harp, c_harp = time.perf_counter() - t0, _cpu() - c0
+        err = tracking_error(harp, tagged)
+        rows.append(
+            f"| {label} | HARP | {t_harp:.1f} | {c_harp:.1f} | {_errors(err)} | "
+            f"{float(err.coverage):.3f} | - |"
+        )
+    if "fe" in args.steps and not args.skip_fe:
         from error_vs_runtime import _mesh
 
         from harpx.mechanics import Body, NeoHookean
-        from harpx.tracking import track
+        from harpx.tracking.track import track
 
         body = Body(_mesh("paper", False), NeoHookean(c1=1.0, kappa=120.0), element="hex8")
-        t0 = time.perf_counter()
-        fe = track(phase, body, method="penalty", epsilon=0.05)
-        t_fe = time.perf_counter() - t0
+        pinned = {} if args.epsilon is None else {"epsilon": args.epsilon}
+        t0, c0 = time.perf_counter(), _cpu()
+        fe = track(phase, body, method="penalty", **pinned)
+        t_fe, c_fe = time.perf_counter() - t0, _cpu() - c0
         err = tracking_error(fe, tagged)
         split = ", ".join(
             f"{k[5:]} {float(v):.1f}" for k, v in fe.attrs.items() if k.startswith("time_")
         )
         rows.append(
             f"| {label} | FE hex8 {body.ncell} cells (+ phase() = {t_fe + t_phase:.1f} s) | "
-            f"{t_fe:.1f} | {float(err.mean_all):.4f} | {float(err.coverage):.3f} | {split} |"
+            f"{t_fe:.1f} | {c_fe:.1f} | {_errors(err)} | {float(err.coverage):.3f} | {split} |"
         )
-    print("| run | step | wall s | mean error mm | coverage | time split s |")
-    print("|---|---|---|---|---|---|")
+    print("| run | step | wall s | CPU s | error mean / p95 / max mm | coverage | time split s |")
+    print("|---|---|---|---|---|---|---|")
     print("\n".join(rows))
     if args.out is not None:
         with args.out.open("a") as fh:
             fh.write("\n".join(rows) + "\n")
+
+
+def _cpu() -> float:
+    """User + system CPU seconds of this process so far."""
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+def _errors(err: xr.Dataset) -> str:
+    return f"{float(err.mean_all):.4f} / {float(err.p95_all):.4f} / {float(err.max_all):.3f}"
 
 
 if __name__ == "__main__":

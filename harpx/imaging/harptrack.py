@@ -121,19 +121,25 @@ def track_harp(
     ds = _as_phase(ds)
     grid = ds if points is None else points if isinstance(points, xr.Dataset) else None
     grid_points = grid is not None
-    reference = PhaseSampler(ds, 0)
+    flat_index: NDArray[np.int64] | None = None
     if grid is not None:
-        X, flat_index = _grid_points(grid, reference)
+        X, flat_index = _grid_candidates(grid)
     else:
         X = np.asarray(points, dtype=np.float64)
         if X.ndim != 2 or X.shape[1] != 3:
             raise ValueError(
                 f"points must have shape (n, 3) with columns (x, y, z) in mm; got {X.shape}"
             )
-        flat_index = None
+    # every sampler prepares only the box the points can reach (see _reach)
+    reference = PhaseSampler(ds, 0, region=_bounds(X, np.isfinite(X).all(axis=1), 0.0))
     phi0, valid0 = reference.phase(X)
+    if grid is not None:
+        assert flat_index is not None
+        X, flat_index, phi0, valid0 = X[valid0], flat_index[valid0], phi0[valid0], valid0[valid0]
     basis = _tag_basis(reference.wavevectors)
     step_limit = _voxel_size(ds)
+    # a point moves at most `iterations` clamped steps in a frame
+    reach = float(int(iterations) * np.max(np.where(np.isfinite(step_limit), step_limit, 0.0)))
 
     ntime = ds.sizes["time"]
     n = X.shape[0]
@@ -143,13 +149,14 @@ def track_harp(
     sweeps = np.zeros(ntime, dtype=np.int64)
     wall = np.zeros(ntime)
     position = X.copy()
+    sampler = reference
     for t in range(1, ntime):
         start = _time.perf_counter()
-        sampler = PhaseSampler(ds, t)
-        sweeps[t] = _track_frame(
+        region = _bounds(position, valid0, reach)
+        sampler = PhaseSampler(ds, t, region=region, reuse=sampler)
+        sweeps[t], phi, valid = _track_frame(
             sampler, position, phi0, valid0, basis, step_limit, int(iterations)
         )
-        phi, valid = sampler.phase(position)
         valid &= valid0
         residual = np.abs(wrap(phi[valid] - phi0[valid]))
         epsilon[t] = float(residual.mean()) if residual.size else np.nan
@@ -192,10 +199,11 @@ def _as_phase(ds: xr.Dataset) -> xr.Dataset:
     return ds
 
 
-def _grid_points(
-    ds: xr.Dataset, reference: PhaseSampler
-) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """Voxel centres inside the data at frame 0 and their flat (z, y, x) indices."""
+def _grid_candidates(ds: xr.Dataset) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Voxel centres inside every mask and the body, and their flat (z, y, x) indices.
+
+    The caller keeps those valid in the reference frame (above the magnitude floor).
+    """
     z, y, x = (np.asarray(ds[d].values, np.float64) for d in GRID_DIMS)
     inside = np.ones((z.size, y.size, x.size), bool)
     if "mask" in ds.variables:
@@ -204,9 +212,18 @@ def _grid_points(
         inside &= np.asarray(ds["body"].transpose(*GRID_DIMS).values) >= 0.5
     flat = np.flatnonzero(inside)
     iz, iy, ix = np.unravel_index(flat, inside.shape)
-    pts = np.stack([x[ix], y[iy], z[iz]], axis=-1)
-    _, valid = reference.phase(pts)
-    return pts[valid], flat[valid]
+    return np.stack([x[ix], y[iy], z[iz]], axis=-1), flat
+
+
+def _bounds(
+    points: NDArray[np.float64], keep: ArrayLike, reach: float
+) -> NDArray[np.float64] | None:
+    """Box (2, 3) in mm around the kept points, widened by ``reach`` (None: no point kept)."""
+    mask = np.asarray(keep, dtype=bool)
+    if not mask.any():
+        return None
+    kept = points[mask]
+    return np.stack([kept.min(axis=0) - reach, kept.max(axis=0) + reach])
 
 
 def _tag_basis(wavevectors: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -234,17 +251,25 @@ def _track_frame(
     basis: NDArray[np.float64],
     step_limit: NDArray[np.float64],
     iterations: int,
-) -> int:
-    """Gauss–Newton phase matching of every point in one frame (updates ``position``)."""
+) -> tuple[int, NDArray[np.float64], NDArray[np.bool_]]:
+    """Gauss–Newton phase matching of every point in one frame (updates ``position``).
+
+    Returns the sweeps run and the phase and validity at the final positions. A point that
+    stops (converged, invalid or ill-conditioned) stops where it was last sampled, so only
+    the points still moving after the last sweep are sampled again.
+    """
     active = valid0.copy()
     rank = basis.shape[1]
     sweeps = 0
+    phi_end = np.zeros_like(phi0)
+    valid_end = np.zeros(valid0.shape, dtype=bool)
     for sweep in range(iterations):
         index = np.flatnonzero(active)
         if index.size == 0:
             break
         sweeps = sweep + 1
         phi, grad, valid = sampler.sample(position[index])
+        phi_end[index], valid_end[index] = phi, valid
         error = wrap(phi - phi0[index])  # (m, ntag), rad
         done = valid & (np.linalg.norm(error, axis=1) < TOLERANCE)
         gb = grad @ basis  # (m, ntag, r): gradient within the tag span
@@ -260,7 +285,10 @@ def _track_frame(
             step[update] = -(solved @ basis.T)
         position[index] += np.clip(step, -step_limit, step_limit)
         active[index[done | ~valid | ~healthy]] = False
-    return sweeps
+    moved = np.flatnonzero(active)  # stepped after their last sample
+    if moved.size:
+        phi_end[moved], valid_end[moved] = sampler.phase(position[moved])
+    return sweeps, phi_end, valid_end
 
 
 def _assemble(

@@ -35,7 +35,6 @@ from typing import Any, cast
 
 import numpy as np
 import xarray as xr
-from numpy.lib.stride_tricks import as_strided
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
@@ -50,6 +49,22 @@ _TWO_PI = 2.0 * np.pi
 _FOV_TOL = 1e-9
 # Voxels of smooth extension beyond the field of view before cubic prefiltering.
 _EDGE = 4
+#: Voxels of real data kept around a requested ``region`` for the cubic prefilter. Its
+#: influence decays by 2 − √3 ≈ 0.268 per voxel, so inside the region the spline differs from
+#: the whole grid's by ~0.268**20 ≈ 4e-12 of the data (the trilinear taps need no margin).
+_REGION_MARGIN = 20
+
+
+def _tap_array(shape: tuple[int, ...], buffer: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """An uninitialised float64 array of ``shape``, a view of ``buffer`` where it is big enough.
+
+    Reusing one buffer across frames avoids allocating (and the kernel zero-filling) some
+    hundred MB of fresh pages per frame.
+    """
+    size = int(np.prod(shape))
+    if buffer is not None and buffer.size >= size and buffer.dtype == np.float64:
+        return buffer.reshape(-1)[:size].reshape(shape)
+    return np.empty(shape)
 
 
 def _demodulated_taps(
@@ -57,6 +72,7 @@ def _demodulated_taps(
     magnitude: NDArray[np.floating],
     carrier: NDArray[np.floating],
     squeeze: tuple[int, ...],
+    buffer: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
     """Real and imaginary parts of ``|H| exp(i(φ − k·x))`` per tag, padded by one voxel.
 
@@ -67,11 +83,18 @@ def _demodulated_taps(
     ntag = phase.shape[0]
     keep = [a for a in range(3) if a + 1 not in squeeze]
     shape = tuple(phase.shape[a + 1] for a in keep)
-    out = np.empty(tuple(n + 2 for n in shape) + (2 * ntag,))
+    out = _tap_array(tuple(n + 2 for n in shape) + (2 * ntag,), buffer)
     inner: tuple[slice | int, ...] = (slice(1, -1),) * len(shape)
     _write_demodulated(phase, magnitude, carrier, squeeze, lambda c: out[(*inner, c)])
+    if not _finite(phase, magnitude):
+        np.nan_to_num(out[inner], copy=False, nan=0.0, posinf=0.0, neginf=0.0)
     _reflect_border(out, shape)
     return out
+
+
+def _finite(*arrays: NDArray[np.floating]) -> bool:
+    """Whether every value of every array is finite."""
+    return all(bool(np.isfinite(a).all()) for a in arrays)
 
 
 def _write_demodulated(
@@ -109,53 +132,54 @@ def _cubic_taps(
     magnitude: NDArray[np.floating],
     carrier: NDArray[np.floating],
     squeeze: tuple[int, ...],
-    edge: NDArray[np.int64],
+    before: NDArray[np.int64],
+    after: NDArray[np.int64],
+    buffer: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
     """Cubic B-spline coefficients of ``|H| exp(i(φ − k·x))`` per tag, tap-ready.
 
-    Each tag's demodulated image is written (real and imaginary parts as separate channels)
-    into an array extended by ``edge`` voxels of odd reflection (``2 D[0] − D[k]``) per
-    active axis, prefiltered in place along each axis (mirror boundary), and copied into
-    the channel-last layout of :func:`_demodulated_taps` with a reflected one-voxel border.
-    The same numbers as ``np.pad(..., mode="reflect", reflect_type="odd")`` followed by
-    :func:`scipy.ndimage.spline_filter`, without complex temporaries or repeated copies.
+    Each tag's demodulated image is written (real and imaginary parts as separate channels,
+    channel-last as :func:`_demodulated_taps` lays them out) into an array extended by
+    ``before``/``after`` voxels of odd reflection (``2 D[0] − D[k]``) per active axis,
+    prefiltered in place along each axis (mirror boundary), and given a reflected one-voxel
+    border. The same numbers as ``np.pad(..., mode="reflect", reflect_type="odd")`` followed
+    by :func:`scipy.ndimage.spline_filter`, without complex temporaries or copies.
     """
     ntag = phase.shape[0]
     keep = [a for a in range(3) if a + 1 not in squeeze]
     shape = tuple(phase.shape[a + 1] for a in keep)
     d = len(shape)
-    ext = tuple(n + 2 * int(e) for n, e in zip(shape, edge, strict=True))
-    work = np.empty((2 * ntag, *ext))
-    core = (slice(None), *(slice(int(e), int(e) + n) for n, e in zip(shape, edge, strict=True)))
+    lead = [int(b) for b in before]
+    trail = [int(e) for e in after]
+    ext = tuple(n + b + e for n, b, e in zip(shape, lead, trail, strict=True))
+    out = _tap_array((*(n + 2 for n in ext), 2 * ntag), buffer)
+    work = out[(slice(1, -1),) * d]
+    core = tuple(slice(b, b + n) for n, b in zip(shape, lead, strict=True))
     # with float32 phase and carrier, cos/sin run in float32 (SIMD, about 3x faster)
-    _write_demodulated(phase, magnitude, carrier, squeeze, lambda c: work[core][c])
+    _write_demodulated(phase, magnitude, carrier, squeeze, lambda c: work[core][..., c])
     # a NaN voxel would spread over the whole slice through the spline prefilter; as 0 it
     # falls below the magnitude floor and stays invalid where it is
-    np.nan_to_num(work, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
+    if not _finite(phase, magnitude):
+        np.nan_to_num(work, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
     for a in range(d):  # odd reflection, one axis after the other (as np.pad does)
-        e, n = int(edge[a]), shape[a]
-        if e == 0:
-            continue
-        axis = a + 1
+        b, e, n = lead[a], trail[a], shape[a]
 
-        def sl(start: int, stop: int | None, step: int = 1, axis: int = axis) -> tuple:
+        def sl(start: int, stop: int | None, step: int = 1, axis: int = a) -> tuple:
             index: list[slice | int] = [slice(None)] * work.ndim
             index[axis] = slice(start, stop, step)
             return tuple(index)
 
-        first, last = sl(e, e + 1), sl(e + n - 1, e + n)
-        # D[e - k] = 2 D[e] - D[e + k] and D[e + n - 1 + k] = 2 D[e + n - 1] - D[e + n - 1 - k]
-        np.subtract(2.0 * work[first], work[sl(2 * e, e, -1)], out=work[sl(0, e)])
-        below = e + n - 2 - e
-        np.subtract(
-            2.0 * work[last],
-            work[sl(e + n - 2, below if below >= 0 else None, -1)],
-            out=work[sl(e + n, None)],
-        )
+        if b:  # D[b - k] = 2 D[b] - D[b + k]
+            np.subtract(2.0 * work[sl(b, b + 1)], work[sl(2 * b, b, -1)], out=work[sl(0, b)])
+        if e:  # D[b + n - 1 + k] = 2 D[b + n - 1] - D[b + n - 1 - k]
+            stop = b + n - 2 - e
+            np.subtract(
+                2.0 * work[sl(b + n - 1, b + n)],
+                work[sl(b + n - 2, stop if stop >= 0 else None, -1)],
+                out=work[sl(b + n, b + n + e)],
+            )
     for a in range(d):
-        ndimage.spline_filter1d(work, order=3, axis=a + 1, mode="mirror", output=work)
-    out = np.empty((*(n + 2 for n in ext), 2 * ntag))
-    np.copyto(out[(slice(1, -1),) * d], np.moveaxis(work, 0, -1))
+        ndimage.spline_filter1d(work, order=3, axis=a, mode="mirror", output=work)
     _reflect_border(out, ext)
     return out
 
@@ -182,6 +206,17 @@ class PhaseSampler:
         nearest voxel): partial-volume edge voxels carry a background-contaminated phase.
     chunk_size : int, default 4096
         Points evaluated per vectorised batch (memory ~ 2 kB per point).
+    region : array_like of shape (2, 3), optional
+        Lower and upper corners (rows) of a box in mm, columns (x, y, z), that holds every
+        point this sampler will be asked about. Only the grid inside it (plus a margin of
+        20 voxels for the cubic prefilter) is prepared, which makes construction cheaper in
+        proportion; the samples inside the box are those of the whole grid to ~1e-11 of the
+        data (exactly for ``order=1``). Points outside the box are reported as outside the
+        field of view (invalid, not acquired). Default: the whole grid.
+    reuse : PhaseSampler, optional
+        A sampler that is no longer needed (e.g. the previous frame's): its tap array is
+        reused where it is big enough, sparing the allocation and zero-filling of some
+        hundred MB per frame. ``reuse`` cannot sample afterwards.
 
     Raises
     ------
@@ -190,7 +225,7 @@ class PhaseSampler:
     IndexError
         If ``time_index`` is out of range.
     ValueError
-        If ``order`` is not 1 or 3.
+        If ``order`` is not 1 or 3, or ``region`` is not a finite (2, 3) box.
 
     Notes
     -----
@@ -229,6 +264,8 @@ class PhaseSampler:
         order: int = 3,
         magnitude_floor: float = 0.05,
         chunk_size: int = 4096,
+        region: ArrayLike | None = None,
+        reuse: PhaseSampler | None = None,
     ) -> None:
         if order not in (1, 3):
             raise ValueError(f"order={order!r} is not supported; use 3 (cubic) or 1 (linear)")
@@ -271,12 +308,20 @@ class PhaseSampler:
         for a in range(3):
             if a not in self._active:
                 self._fixed[AXES.index(GRID_DIMS[a])] = grid[a][0]
+        # the prepared window [lo, hi) of voxel indices along the active axes
+        margin = _REGION_MARGIN if order == 3 else 0
+        self._lo, self._hi = self._window(region, margin)
+        self._windowed = bool(np.any(self._lo > 0) or np.any(self._hi < self._shape))
+        cut = [slice(None)] * 3
+        for j, a in enumerate(self._active):
+            cut[a] = slice(int(self._lo[j]), int(self._hi[j]))
+        window = (slice(None), *cut)
 
         # k·x as a sum of per-axis terms, each wrapped to [-π, π) (in float64) so that in the
         # phase's precision (float32 for the extract_phase default) φ − k·x keeps float32's
         # resolution of ~1e-6 rad; k·x itself reaches hundreds of rad across the field of view
         terms = [
-            wrap(self.wavevectors[:, AXES.index(d), None] * grid[g][None, :])
+            wrap(self.wavevectors[:, AXES.index(d), None] * grid[g][cut[g]][None, :])
             .astype(phase.dtype)
             .reshape([len(self.tags)] + [-1 if i == g else 1 for i in range(3)])
             for g, d in enumerate(GRID_DIMS)
@@ -288,15 +333,28 @@ class PhaseSampler:
         # Extend D by odd reflection (2 D[0] - D[k]), which keeps value and slope continuous
         # at the border, before prefiltering: the spline's own mirror boundary (a slope
         # discontinuity) then sits `edge` voxels outside the field of view, where its error
-        # has decayed by 0.268**edge.
-        edge = _EDGE if order == 3 else 0
-        self._edge = np.minimum(edge, self._shape - 1)
+        # has decayed by 0.268**edge. A window edge inside the grid needs no extension: the
+        # margin of real data beyond it does that job.
+        edge = np.minimum(_EDGE if order == 3 else 0, self._hi - self._lo - 1)
+        self._before = np.where(self._lo == 0, edge, 0)
+        self._after = np.where(self._hi == self._shape, edge, 0)
+        buffer = reuse._release() if reuse is not None else None
         if order == 1:
             # trilinear taps need no prefilter: write cos/sin of the demodulated phase
             # straight into the padded tap array (no complex temporaries, one pass per tag)
-            self._padded = _demodulated_taps(phase, magnitude, carrier, squeeze)
+            padded = _demodulated_taps(phase[window], magnitude[window], carrier, squeeze, buffer)
         else:
-            self._padded = _cubic_taps(phase, magnitude, carrier, squeeze, self._edge)
+            padded = _cubic_taps(
+                phase[window],
+                magnitude[window],
+                carrier,
+                squeeze,
+                self._before,
+                self._after,
+                buffer,
+            )
+        self._padded: NDArray[np.float64] | None = padded
+        self._buffer: NDArray[np.float64] | None = padded if padded.base is None else padded.base
 
         mask = None
         if "mask" in phase_ds.variables:
@@ -346,16 +404,21 @@ class PhaseSampler:
             point–tag pairs) get ``phi = 0`` and ``grad = 0``.
         """
         pts = _as_points(points)
-        demod, deriv, valid_tags = self._evaluate(pts, derivatives=True)
+        values, size, valid_tags = self._evaluate(pts, derivatives=True)
         valid = valid_tags if per_tag else cast(NDArray[np.bool_], valid_tags.all(axis=1))
-        phi = self._remodulate(pts, demod)
-        grad = np.zeros((pts.shape[0], self._ntag, 3))
-        power = np.abs(demod) ** 2
-        safe = np.where(power > 0, power, 1.0)
+        ntag = self._ntag
+        re, im = values[:, 0, :ntag], values[:, 0, ntag:]
+        phi = self._remodulate(pts, re, im)
+        grad = np.zeros((pts.shape[0], ntag, 3))
+        power = size * size
+        # Im(conj(D) dD) / |D|^2 per voxel of the axis, then per mm
+        scale = np.where(power > 0, power, 1.0)
         for j, column in enumerate(self._columns):
-            grad[:, :, column] = self._k_active[:, j] + (
-                np.imag(np.conj(demod) * deriv[:, j]) / safe
-            )
+            cross = re * values[:, 1 + j, ntag:] - im * values[:, 1 + j, :ntag]
+            cross /= scale
+            cross *= 1.0 / self._spacing[j]
+            cross += self._k_active[:, j]
+            grad[:, :, column] = cross
         invalid = ~(valid_tags if per_tag else valid_tags.all(axis=1, keepdims=True))
         phi[np.broadcast_to(invalid, phi.shape)] = 0.0
         grad[np.broadcast_to(invalid, phi.shape)] = 0.0
@@ -369,9 +432,9 @@ class PhaseSampler:
         ``valid`` has shape (n,), or (n, ntag) with ``per_tag`` (as in :meth:`sample`).
         """
         pts = _as_points(points)
-        demod, _, valid_tags = self._evaluate(pts, derivatives=False)
+        values, _, valid_tags = self._evaluate(pts, derivatives=False)
         valid = valid_tags if per_tag else cast(NDArray[np.bool_], valid_tags.all(axis=1))
-        phi = self._remodulate(pts, demod)
+        phi = self._remodulate(pts, values[:, 0, : self._ntag], values[:, 0, self._ntag :])
         invalid = ~(valid_tags if per_tag else valid_tags.all(axis=1, keepdims=True))
         phi[np.broadcast_to(invalid, phi.shape)] = 0.0
         return phi, valid
@@ -383,8 +446,8 @@ class PhaseSampler:
         are still reported invalid); points outside the field of view get 0.
         """
         pts = _as_points(points)
-        demod, _, valid_tags = self._evaluate(pts, derivatives=False)
-        return np.abs(demod), cast(NDArray[np.bool_], valid_tags.all(axis=1))
+        _, size, valid_tags = self._evaluate(pts, derivatives=False)
+        return size, cast(NDArray[np.bool_], valid_tags.all(axis=1))
 
     def acquired(self, points: ArrayLike) -> NDArray[np.bool_]:
         """Which tags have data at points: inside the field of view and the tag's ``mask``.
@@ -404,15 +467,45 @@ class PhaseSampler:
         return self._locate(_as_points(points))[1]
 
     # ------------------------------------------------------------------------------------
-    def _remodulate(self, pts: NDArray[np.float64], demod: NDArray[np.complex128]) -> Any:
-        position = pts.copy()
-        invariant = [c for c in range(3) if c not in self._columns]
-        position[:, invariant] = self._fixed[invariant]
-        return wrap(np.angle(demod) + position @ self.wavevectors.T)
+    def _window(
+        self, region: ArrayLike | None, margin: int
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """Voxel index range [lo, hi) along the active axes that covers ``region``."""
+        if region is None:
+            return np.zeros(self._shape.size, np.int64), self._shape.astype(np.int64)
+        box = np.asarray(region, dtype=np.float64)
+        if box.shape != (2, 3) or not np.isfinite(box).all():
+            raise ValueError(
+                f"region must be a finite (2, 3) box (rows: lower and upper corner, columns "
+                f"x, y, z, mm); got shape {box.shape}"
+            )
+        u = (box[:, self._columns] - self._origin) / self._spacing  # (2, d) in voxels
+        lo = np.floor(u.min(axis=0)).astype(np.int64) - margin
+        hi = np.ceil(u.max(axis=0)).astype(np.int64) + 1 + margin
+        lo = np.clip(lo, 0, self._shape - 2)  # at least two voxels: a box off the grid
+        hi = np.clip(hi, lo + 2, self._shape)  # samples nothing but stays well formed
+        return lo, hi
+
+    def _release(self) -> NDArray[np.float64] | None:
+        """Hand this sampler's tap buffer to a new sampler (this one cannot sample after)."""
+        buffer, self._buffer, self._padded = self._buffer, None, None
+        return buffer
+
+    def _remodulate(
+        self, pts: NDArray[np.float64], re: NDArray[np.float64], im: NDArray[np.float64]
+    ) -> Any:
+        """W(arg D + k·x) (n, ntag), with the slice position along invariant axes."""
+        phase = np.arctan2(im, re)  # = np.angle(re + i im)
+        for c in range(3):  # k·x column by column (a (n, 3) @ (3, ntag) matmul is slower)
+            coordinate = pts[:, c, None] if c in self._columns.tolist() else self._fixed[c]
+            phase += coordinate * self.wavevectors[:, c]
+        return wrap(phase)
 
     def _evaluate(
         self, pts: NDArray[np.float64], *, derivatives: bool
-    ) -> tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.bool_]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+        """Spline values (n, nq, 2 ntag): Re then Im of D and of its derivative along each
+        active axis (per voxel); ``|D|`` (n, ntag); validity per tag (n, ntag)."""
         n = pts.shape[0]
         d = len(self._active)
         ntag = self._ntag
@@ -426,9 +519,7 @@ class PhaseSampler:
             index = np.flatnonzero(needed)
             if index.size:
                 values[index] = self._spline(u[index], nq)
-        demod = values[:, 0, :ntag] + 1j * values[:, 0, ntag:]
-        deriv = (values[:, 1:, :ntag] + 1j * values[:, 1:, ntag:]) / self._spacing[: nq - 1, None]
-        size = np.abs(demod)
+        size = np.hypot(values[:, 0, :ntag], values[:, 0, ntag:])  # = |D|
         # the masks say which tags were acquired where (per tag); the magnitude floor says
         # whether there is tissue signal at all, so it holds for every acquired tag at once
         # (near an edge one tag's magnitude can pass while another's fails: such a point
@@ -439,14 +530,15 @@ class PhaseSampler:
             inside[needed] = self._support[tuple(np.rint(u[needed]).astype(np.int64).T)]
             signal &= inside
         valid_tags = tag_ok & signal[:, None]
-        return demod, deriv, valid_tags
+        return values, size, valid_tags
 
     def _locate(self, pts: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         """Voxel coordinates (n, d) (clipped into the grid) and which tags acquired each point."""
         u = (pts[:, self._columns] - self._origin) / self._spacing  # (n, d) in voxels
         inside = np.all(np.isfinite(u), axis=1)
-        inside &= np.all((u >= -_FOV_TOL) & (u <= self._shape - 1 + _FOV_TOL), axis=1)
-        u = np.clip(np.where(inside[:, None], u, 0.0), 0.0, self._shape - 1)
+        # the prepared window: the whole grid unless a region was given
+        inside &= np.all((u >= self._lo - _FOV_TOL) & (u <= self._hi - 1 + _FOV_TOL), axis=1)
+        u = np.clip(np.where(inside[:, None], u, self._lo), self._lo, self._hi - 1)
         tag_ok = np.repeat(inside[:, None], self._ntag, axis=1)  # (n, ntag)
         if self._mask is not None and inside.any():
             nearest = tuple(np.rint(u[inside]).astype(np.int64).T)
@@ -458,16 +550,21 @@ class PhaseSampler:
         taps = self.order + 1
         d = u.shape[1]
         padded = self._padded
+        if padded is None:
+            raise RuntimeError(
+                "this PhaseSampler handed its buffers to another one (reuse=); sample with that"
+            )
         pshape = padded.shape[:-1]
         nf = padded.shape[-1]
-        flat = padded.reshape(-1, nf)
-        # rows of `taps` consecutive samples along the last (contiguous) axis: one gather
-        # fetches a whole run of taps for all tags
-        runs = as_strided(
-            flat,
-            shape=(flat.shape[0] - taps + 1, taps, nf),
-            strides=(flat.strides[0], flat.strides[0], flat.strides[1]),
-            writeable=False,
+        # runs of `taps` consecutive voxels along the last axis, all channels, as one opaque
+        # item each (overlapping, one voxel apart): one gather index fetches a whole run, and
+        # numpy copies an item as a block (twice as fast as a (taps, nf) subarray)
+        nvox = padded.size // nf
+        runs = np.ndarray(
+            shape=(nvox - taps + 1,),
+            dtype=np.dtype((np.void, taps * nf * padded.itemsize)),
+            buffer=np.ascontiguousarray(padded),
+            strides=(nf * padded.itemsize,),
         )
         strides = np.cumprod((*pshape[1:], 1)[::-1])[::-1]  # element strides of the grid
         offsets = np.zeros(1, dtype=np.int64)
@@ -475,20 +572,34 @@ class PhaseSampler:
             offsets = (offsets[:, None] + strides[a] * np.arange(taps)).ravel()
         # padded index of the first tap: cubic taps i-1..i+2, linear taps i..i+1 (pad of 1)
         start = 0 if self.order == 3 else 1
-        u = u + self._edge  # index in the extended grid
-        base_index = np.clip(np.floor(u).astype(np.int64), 0, self._shape + 2 * self._edge - 2)
+        u = u - self._lo + self._before  # index in the extended window
+        extended = self._hi - self._lo + self._before + self._after
+        base_index = np.clip(np.floor(u).astype(np.int64), 0, extended - 2)
         frac = u - base_index
         # sort by voxel so gathers walk memory in order
         linear = (base_index + start) @ strides[:d]
         order = np.argsort(linear, kind="stable")
         out = np.empty((u.shape[0], nq, nf))
+        # separable contraction: the leading axes with their tensor-product weights (value,
+        # and the derivative along each leading axis), then the last axis (value weights for
+        # those, slope weights for the derivative along it)
+        lead = d if nq > 1 else 1
         for s in range(0, u.shape[0], self.chunk_size):
             chunk = order[s : s + self.chunk_size]
+            m = chunk.size
             weights = [_weights(frac[chunk, a], self.order) for a in range(d)]  # (m, 2, taps)
-            gathered = runs[linear[chunk, None] + offsets]  # (m, taps**(d-1), taps, nf)
-            gathered = gathered.reshape(chunk.size, taps**d, nf)
-            tensor = _tensor_weights(weights, nq)  # (m, nq, taps**d)
-            out[chunk] = tensor @ gathered
+            gathered = runs[linear[chunk, None] + offsets]  # (m, taps**(d-1)) runs
+            gathered = gathered.view(padded.dtype).reshape(m, taps ** (d - 1), taps * nf)
+            if d > 1:
+                head = np.matmul(_tensor_weights(weights[:-1], lead), gathered)
+            else:
+                head = gathered  # (m, 1, taps * nf)
+            # (m, lead, taps, nf) -> (m, taps, lead * nf): the last axis's taps as rows
+            rows = head.reshape(m, lead, taps, nf).transpose(0, 2, 1, 3).reshape(m, taps, -1)
+            last = np.matmul(weights[-1][:, : 1 if nq == 1 else 2], rows)  # (m, 1|2, lead*nf)
+            out[chunk, :lead] = last[:, 0].reshape(m, lead, nf)
+            if nq > 1:
+                out[chunk, lead] = last[:, 1, :nf]
         return out
 
 

@@ -356,7 +356,10 @@ class PhaseConstraint:
 
     def set_frame(self, time_index: int) -> None:
         """Target the phase images of frame ``time_index`` (prefilters them once)."""
-        self._sampler = PhaseSampler(self.phase, int(time_index), order=self.spline_order)
+        # the previous frame's sampler is done with: its tap buffer is reused
+        self._sampler = PhaseSampler(
+            self.phase, int(time_index), order=self.spline_order, reuse=self._sampler
+        )
         self.frame = int(time_index)
 
     def current_points(self, u: FloatArray) -> FloatArray:
