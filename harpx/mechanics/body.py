@@ -9,7 +9,13 @@ directions, active-stress levels and growth tensors.
 Elements (``ELEMENTS``): ``hex8`` (trilinear, 2x2x2 Gauss), ``hex20`` (serendipity,
 3x3x3 Gauss), ``tet4`` (linear tetrahedron, 1 point) and ``tet10`` (quadratic tetrahedron,
 14-point rule of degree 5 with positive weights). A ``skfem.MeshTet2`` carries curved
-(isoparametric) tetrahedra: its edge nodes may lie on a curved surface.
+(isoparametric) tetrahedra: its edge nodes may lie on a curved surface. A ``skfem.MeshHex2``
+(27-node triquadratic geometry, :func:`~harpx.mechanics.mesh.curved_hex_mesh`; ``tube`` and
+``ventricle`` with ``curved=True``) carries curved hexahedra for hex20: the displacement is
+the 20-node serendipity field on the curved cells (its dofs are the vertices and the edge
+nodes; the face and cell geometry nodes carry no dofs). Point location
+(:func:`~harpx.mechanics.locate.locate`, ``Body.displacement_at``, tracking) handles
+straight hexahedra only and refuses curved ones.
 
 Degrees of freedom: scalar dof ``n`` of the scalar element (mesh vertices first, then, for
 hex20 and tet10, one node per mesh edge) carries the displacement components ``3n, 3n+1, 3n+2``
@@ -99,6 +105,7 @@ _VTK_HEX_EDGES = np.array(
 )  # fmt: skip
 _VTK_TET_EDGES = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])
 _HEX_MESHES = (skfem.MeshHex1,)
+_HEX20_MESHES = (skfem.MeshHex1, skfem.MeshHex2)
 _TET_MESHES = (skfem.MeshTet1, skfem.MeshTet2)
 
 #: element name -> :class:`ElementKind`
@@ -107,7 +114,7 @@ ELEMENTS: dict[str, ElementKind] = {
         skfem.ElementHex1, 3, 8, 3, _HEX_MESHES, ("mean-dilatation", "pointwise"), _NO_EDGES
     ),
     "hex20": ElementKind(
-        skfem.ElementHexS2, 5, 27, 5, _HEX_MESHES,
+        skfem.ElementHexS2, 5, 27, 5, _HEX20_MESHES,
         ("mean-dilatation", "linear-dilatation", "pointwise"), _VTK_HEX_EDGES,
     ),
     "tet4": ElementKind(
@@ -125,8 +132,10 @@ _VOLUMETRIC = ("mean-dilatation", "linear-dilatation", "nodal-dilatation", "poin
 
 
 def default_element(mesh: Any) -> ElementName:
-    """The element a mesh implies: hex8 for hexahedra, tet4 / tet10 for linear / quadratic
-    tetrahedra."""
+    """The element a mesh implies: hex8 / hex20 for straight / curved (``MeshHex2``)
+    hexahedra, tet4 / tet10 for linear / quadratic tetrahedra."""
+    if isinstance(mesh, skfem.MeshHex2):
+        return "hex20"
     if isinstance(mesh, skfem.MeshTet2):
         return "tet10"
     if isinstance(mesh, skfem.MeshTet1):
@@ -217,6 +226,9 @@ def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> 
 
     Raises
     ------
+    NotImplementedError
+        For a body on curved hexahedra (``skfem.MeshHex2``): tracking samples the body
+        through the straight-cell point locator.
     ValueError
         Naming the nodes far outside the field of view, the mesh and field-of-view sizes,
         the estimated point count and memory, and a likely unit mix-up (µm or m instead
@@ -237,6 +249,12 @@ def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> 
     ...     print(str(err).split(": ")[-1])
     are its coordinates in micrometres (divide by 1000)?
     """
+    if isinstance(body.mesh, skfem.MeshHex2):
+        raise NotImplementedError(
+            "tracking a body on curved hexahedra (skfem.MeshHex2) is not implemented: the "
+            "tracker locates points with the straight (trilinear) cell map; track with the "
+            "straight mesh (curved=False)"
+        )
     low, high, step = [], [], []
     for axis in ("x", "y", "z"):
         if axis not in grid.coords:
@@ -425,9 +443,10 @@ class Body:
 
     Parameters
     ----------
-    mesh : skfem.MeshHex1, skfem.MeshTet1, skfem.MeshTet2 or MeshSpec
+    mesh : skfem.MeshHex1, skfem.MeshHex2, skfem.MeshTet1, skfem.MeshTet2 or MeshSpec
         The reference configuration (mm): a scikit-fem hexahedral or tetrahedral mesh
-        (``MeshTet2``: curved quadratic tetrahedra) or a
+        (``MeshHex2``: curved hexahedra for hex20, ``MeshTet2``: curved quadratic
+        tetrahedra) or a
         :class:`~harpx.mechanics.mesh.MeshSpec` from the builders in
         :mod:`harpx.mechanics.mesh`. A :class:`meshio.Mesh` goes through
         :meth:`from_meshio`; a mesh file through :func:`harpx.io.mesh.read_body`.
@@ -444,7 +463,8 @@ class Body:
     element : {"hex8", "hex20", "tet4", "tet10"}, optional
         Trilinear hexahedron (2x2x2 Gauss points), 20-node serendipity hexahedron (3x3x3),
         linear tetrahedron (1 point) or quadratic tetrahedron (14 points). Default: what the
-        mesh implies (hex8 for hexahedra, tet4 for ``MeshTet1``, tet10 for ``MeshTet2``).
+        mesh implies (hex8 for ``MeshHex1``, hex20 for ``MeshHex2``, tet4 for ``MeshTet1``,
+        tet10 for ``MeshTet2``).
     active : ActiveContraction, optional
         Active fibre stress law (``response(F, fiber, t_max)``).
     t_max : float or dict of str to float, optional
@@ -558,9 +578,11 @@ class Body:
             raise TypeError("mesh is a meshio.Mesh; build the body with Body.from_meshio(mesh)")
         if isinstance(mesh, skfem.MeshTet1):
             mesh = _orient_tets(mesh)
-        if type(mesh) is skfem.MeshHex2 or not isinstance(mesh, (skfem.MeshHex1, skfem.MeshTet1)):
+        if not isinstance(mesh, (skfem.MeshHex1, skfem.MeshTet1)) or (
+            isinstance(mesh, skfem.MeshHex1) and type(mesh) not in _HEX20_MESHES
+        ):
             raise TypeError(
-                f"mesh must be a skfem.MeshHex1, MeshTet1 or MeshTet2 or a MeshSpec, got "
+                f"mesh must be a skfem.MeshHex1, MeshHex2, MeshTet1 or MeshTet2 or a MeshSpec, got "
                 f"{type(mesh).__name__!r}; build one with harpx.mechanics.mesh.box/cylinder "
                 "(and tetrahedralize for tetrahedra), or read a mesh file with "
                 "harpx.io.mesh.read_body"
@@ -570,7 +592,9 @@ class Body:
         if element not in ELEMENTS:
             raise ValueError(f"element={element!r} is not one of {sorted(ELEMENTS)!r}")
         kind = ELEMENTS[element]
-        if not isinstance(mesh, kind.meshes):
+        if not isinstance(mesh, kind.meshes) or (
+            isinstance(mesh, skfem.MeshHex2) and element != "hex20"
+        ):
             raise ValueError(
                 f"element={element!r} needs a {' or '.join(m.__name__ for m in kind.meshes)} "
                 f"mesh, got {type(mesh).__name__!r}; pick the element that matches the cells "
@@ -597,8 +621,9 @@ class Body:
         self.active = active
         self.ncell = int(mesh.nelements)
 
-        # the cells' vertices (a MeshTet2 also holds its edge nodes in mesh.p)
-        nvert = int(mesh.nvertices) if isinstance(mesh, skfem.MeshTet2) else mesh.p.shape[1]
+        # the cells' vertices (a MeshTet2 / MeshHex2 also holds its geometry nodes in mesh.p)
+        curved = isinstance(mesh, (skfem.MeshTet2, skfem.MeshHex2))
+        nvert = int(mesh.nvertices) if curved else mesh.p.shape[1]
         vertices = np.asarray(mesh.p)[:, :nvert]
         check_nodes(vertices.T, np.asarray(mesh.t).T, nvertex=int(mesh.t.shape[0]))
         pairs = coincident_nodes(vertices.T)
@@ -635,7 +660,10 @@ class Body:
         self.element_dofs: IntArray = 3 * cell_sdofs[:, :, None] + np.arange(3)
         self.n_dof_nodes = int(sb.N)
         self.ndof = 3 * self.n_dof_nodes
-        self.nodes: FloatArray = np.ascontiguousarray(mesh.p.T)
+        # a MeshHex2's face and cell geometry nodes carry no dofs: vertices only
+        self.nodes: FloatArray = np.ascontiguousarray(
+            vertices.T if isinstance(mesh, skfem.MeshHex2) else mesh.p.T
+        )
         self.dof_points: FloatArray = np.ascontiguousarray(sb.doflocs.T)
         self.node_dofs: IntArray = 3 * np.arange(self.n_dof_nodes)[:, None] + np.arange(3)
         self.cells: IntArray = self._vtk_cells()
@@ -791,8 +819,8 @@ class Body:
             return corners
         # match each VTK edge to the element's edge dofs by the edge's end vertices
         edge_dofs = self.cell_scalar_dofs[:, nc:]  # (nel, nedge)
-        if isinstance(self.mesh, skfem.MeshTet2):
-            ends = self.mesh.edges[:, edge_dofs - self.nodes.shape[0]]  # (2, nel, nedge)
+        if isinstance(self.mesh, (skfem.MeshTet2, skfem.MeshHex2)):  # edge dofs follow vertices
+            ends = self.mesh.edges[:, edge_dofs - int(self.mesh.nvertices)]  # (2, nel, nedge)
             mid = 0.5 * (self.nodes[ends[0]] + self.nodes[ends[1]])
         else:
             mid = self.dof_points[edge_dofs]

@@ -27,11 +27,12 @@ vertices: :data:`VTK_CORNERS` (VTK/meshio ``hexahedron``, :attr:`Body.cells
 order of ``skfem.ElementHex1``'s basis). The reference coordinates returned are those of the
 same convention, so they can be fed to the matching shape functions.
 
-Tetrahedral meshes (``skfem.MeshTet1``, and ``skfem.MeshTet2`` with curved, quadratic
-cells) use the same scheme with the linear or quadratic geometry map, four times as many
-candidates (about 24 tetrahedra share a vertex where 8 hexahedra do) and the unit
-tetrahedron as the reference cell. :func:`displacement_at` evaluates a body's displacement
-at points with this locator.
+Curved hexahedra (``skfem.MeshHex2``) are not supported: :func:`locate` raises
+``NotImplementedError``. Tetrahedral meshes (``skfem.MeshTet1``, and ``skfem.MeshTet2``
+with curved, quadratic cells) use the same scheme with the linear or quadratic geometry
+map, four times as many candidates (about 24 tetrahedra share a vertex where 8 hexahedra
+do) and the unit tetrahedron as the reference cell. :func:`displacement_at` evaluates a
+body's displacement at points with this locator.
 """
 
 from __future__ import annotations
@@ -353,6 +354,13 @@ def locate(
         the unit tetrahedron); 0 where ``cells == -1``.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if isinstance(mesh, skfem.MeshHex2):
+        raise NotImplementedError(
+            "point location in curved hexahedra (skfem.MeshHex2, 27-node geometry) is not "
+            "implemented: the locator inverts the trilinear map of straight cells only. "
+            "Evaluate at dof nodes (body.dof_points) instead, or build the body on the "
+            "straight mesh (curved=False) to track or sample it"
+        )
     if isinstance(mesh, (skfem.MeshTet1, skfem.MeshTet2)):
         return _locate_tets(mesh, points, candidates=candidates, tol=tol)
     locator = HexLocator(mesh.p.T, mesh.t.T, corners=SKFEM_CORNERS)

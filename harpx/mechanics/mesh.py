@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 import skfem
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from skfem.io.meshio import HEX_MAPPING
 
 __all__ = [
@@ -28,6 +28,7 @@ __all__ = [
     "check_nodes",
     "check_unused_nodes",
     "coincident_nodes",
+    "curved_hex_mesh",
     "cylinder",
     "tube",
     "hex_mesh",
@@ -307,6 +308,64 @@ def labelled_spec(
                     boundaries=dict(boundaries))  # fmt: skip
 
 
+def curved_hex_mesh(
+    mesh: skfem.MeshHex1,
+    centre: Callable[[NDArray[np.int64]], ArrayLike] | None = None,
+) -> skfem.MeshHex2:
+    """A curved (isoparametric) hexahedral mesh: triquadratic 27-node geometry.
+
+    The geometry of every cell is the triquadratic map through its 8 vertices and one
+    node per edge, face and cell; a hex20 :class:`~harpx.mechanics.body.Body` on it is
+    isoparametric (serendipity displacement on curved cells), so edge nodes placed on a
+    curved surface (a cylinder, an ellipsoid) make the cell faces follow that surface to
+    third order in the cell size instead of cutting it with flat faces.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshHex1
+        Vertices (mm), cells, boundaries and subdomains.
+    centre : callable, optional
+        ``centre(vertices) -> (n, 3)``: the position (mm) of the geometry node at the
+        parametric centre of ``n`` entities given by their vertex ids ``vertices``
+        (n, k): ``k = 2`` the ends of each edge of ``mesh.edges``, ``k = 4`` the corners
+        of each face of ``mesh.facets``, ``k = 8`` the corners of each cell. Builders that
+        know the analytic map of their parameter space put the nodes there (see
+        :func:`tube` and :func:`~harpx.mechanics.ventricle.ventricle` with
+        ``curved=True``). Default: the vertex mean (straight edges, flat faces).
+
+    Returns
+    -------
+    skfem.MeshHex2
+        Same vertices, cells, facets, boundaries and subdomains as ``mesh``.
+
+    Examples
+    --------
+    >>> from harpx.mechanics.mesh import box, curved_hex_mesh
+    >>> m = curved_hex_mesh(box((1.0, 1.0, 1.0), (2, 1, 1)).mesh)
+    >>> m.p.shape[1], int(m.nvertices)  # 12 vertices, 20 edges, 11 faces, 2 cells
+    (45, 12)
+    """
+    p = np.asarray(mesh.p, dtype=np.float64)
+
+    def nodes(vertices: NDArray[np.int64]) -> NDArray[np.float64]:
+        vertices = np.ascontiguousarray(np.asarray(vertices, dtype=np.int64).T)  # (n, k)
+        if centre is None:
+            return p[:, vertices].mean(axis=-1)
+        x = np.asarray(centre(vertices), dtype=np.float64)
+        if x.shape != (vertices.shape[0], 3):
+            raise ValueError(
+                f"centre returned shape {x.shape!r} for {vertices.shape[0]} entities of "
+                f"{vertices.shape[1]} vertices; expected ({vertices.shape[0]}, 3) mm"
+            )
+        return x.T
+
+    # skfem's ElementHex2 dof order: vertices, edges, facets, cells
+    doflocs = np.hstack([p, nodes(mesh.edges), nodes(mesh.facets), nodes(mesh.t)])
+    return skfem.MeshHex2(
+        doflocs, mesh.t, _boundaries=mesh._boundaries, _subdomains=mesh._subdomains
+    )
+
+
 def _extrude(
     points2d: NDArray[np.float64], quads: NDArray[np.int64], z: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
@@ -527,6 +586,7 @@ def tube(
     n_axial: int = 1,
     angle: float = 2.0 * np.pi,
     center: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    curved: bool = False,
 ) -> MeshSpec:
     """A thick-walled tube (or a sector of it) along z, structured in (r, θ, z).
 
@@ -542,6 +602,11 @@ def tube(
         Opening angle of the sector in rad, starting at θ = 0 (the +x axis).
     center : tuple of 3 float, default (0, 0, 0)
         Centre of the bottom face, mm.
+    curved : bool, default False
+        Return a curved :class:`skfem.MeshHex2` (:func:`curved_hex_mesh`) whose edge,
+        face and cell nodes are the images of the parametric midpoints in (r, θ, z), so
+        the inner and outer faces lie on the circles; a :class:`~harpx.mechanics.body.Body`
+        on it is hex20 (isoparametric). Off: straight-edged ``MeshHex1``.
 
     Returns
     -------
@@ -604,7 +669,22 @@ def tube(
 
         tests["start"] = (on_start, True)
         tests["end"] = (on_end, True)
-    return _finish(points, cells, {"tissue": np.arange(len(cells))}, tests)
+    spec = _finish(points, cells, {"tissue": np.arange(len(cells))}, tests)
+    if not curved:
+        return spec
+    # (r, θ, z) of every vertex (the extrusion repeats the 2-D points layer by layer)
+    n2 = len(pts2)
+    params = np.column_stack([np.tile(R.ravel(), len(z)), np.tile(TH.ravel(), len(z)),
+                              np.repeat(z, n2)])  # fmt: skip
+
+    def centre(vertices: NDArray[np.int64]) -> NDArray[np.float64]:
+        q = params[vertices]  # (n, k, 3)
+        th0 = q[:, :1, 1]
+        th = th0 + np.mod(q[:, :, 1] - th0 + np.pi, 2.0 * np.pi) - np.pi  # unwrapped
+        r, t, h = q[:, :, 0].mean(axis=1), th.mean(axis=1), q[:, :, 2].mean(axis=1)
+        return np.column_stack([c[0] + r * np.cos(t), c[1] + r * np.sin(t), h])
+
+    return dataclasses.replace(spec, mesh=curved_hex_mesh(spec.mesh, centre))
 
 
 # Kuhn split of a VTK-ordered hexahedron into six tetrahedra around its diagonal 0-6: on a

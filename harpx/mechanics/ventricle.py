@@ -62,6 +62,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -70,7 +71,13 @@ import skfem
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
-from harpx.mechanics.mesh import MeshSpec, facets_where, hex_mesh, labelled_spec
+from harpx.mechanics.mesh import (
+    MeshSpec,
+    curved_hex_mesh,
+    facets_where,
+    hex_mesh,
+    labelled_spec,
+)
 
 if TYPE_CHECKING:
     from harpx.mechanics.body import Body
@@ -418,6 +425,7 @@ def ventricle(
     fiber_endo: float = 60.0,
     fiber_epi: float = -60.0,
     segments: bool = True,
+    curved: bool = False,
 ) -> MeshSpec:
     """Structured hexahedral mesh of a truncated ellipsoidal left ventricle with fibres.
 
@@ -446,6 +454,18 @@ def ventricle(
         six 60° sectors from θ = 0 at +x counter-clockwise, four apical 90° sectors
         centred on the axes, the apex cap); the angular origin is arbitrary here (no
         right ventricle).
+    curved : bool, default False
+        Return curved hexahedra (a :class:`skfem.MeshHex2`, 27-node triquadratic
+        geometry; :func:`~harpx.mechanics.mesh.curved_hex_mesh`) for an isoparametric
+        hex20 :class:`~harpx.mechanics.body.Body` (the default element on it). Each edge,
+        face and cell node is the image of the parametric midpoint of its vertices: the
+        mean transmural fraction t, and the mean (θ, σ) on the (θ, σ) grid or the mean
+        position in the apical O-grid disc, mapped through
+        :meth:`VentricleGeometry.surface_points`. So the nodes of the endocardial and
+        epicardial faces lie on the ellipsoids and those of the base on its plane, and
+        the cells no longer cut the curved walls with flat faces. The vertices are those
+        of the straight mesh. Point location and tracking do not take curved cells (they
+        raise ``NotImplementedError``).
 
     Returns
     -------
@@ -545,7 +565,33 @@ def ventricle(
             np.sin(theta_nodes[quads]).mean(axis=1), np.cos(theta_nodes[quads]).mean(axis=1)
         )
         regions |= _aha_segments(np.tile(quad_theta, nt), np.tile(quad_sigma, nt), sigma_cap)
-    return labelled_spec(mesh, regions, boundaries, fibers)
+    spec = labelled_spec(mesh, regions, boundaries, fibers)
+    if not curved:
+        return spec
+    # parametric coordinates of every layer node: (θ, σ) and, for the cap and its
+    # boundary circle, the position in the O-grid disc
+    disc_xy = np.full((per_layer, 2), np.nan)
+    disc_xy[:n_cap] = disc[cap_only]
+    disc_xy[n_cap : n_cap + nc] = disc[circle]
+
+    def centre(vertices: IntArray) -> FloatArray:
+        local, layer = vertices % per_layer, vertices // per_layer
+        t = layers_t[layer].mean(axis=1)
+        on_grid = np.all(local >= n_cap, axis=1)  # else in the apical cap
+        th0 = theta_nodes[local[:, :1]]
+        th = (th0 + np.mod(theta_nodes[local] - th0 + np.pi, 2.0 * np.pi) - np.pi).mean(axis=1)
+        sg = sigma_nodes[local].mean(axis=1)
+        d = disc_xy[local[~on_grid]].mean(axis=1)
+        th[~on_grid] = np.arctan2(d[:, 1], d[:, 0])
+        sg[~on_grid] = sigma_cap * np.hypot(d[:, 0], d[:, 1])
+        out = np.empty((len(t), 3))
+        key = np.round(t * 2 * nt).astype(np.int64)  # t is a multiple of 1/(2 nt)
+        for k in np.unique(key):
+            sel = key == k
+            out[sel] = geom.surface_points(th[sel], sg[sel], float(t[sel][0]))
+        return out
+
+    return dataclasses.replace(spec, mesh=curved_hex_mesh(spec.mesh, centre))
 
 
 def cavity_volume(body: Body, u: ArrayLike | None = None, *, base: float | None = None) -> float:
