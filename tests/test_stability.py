@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import warnings
 from collections.abc import Iterator
 
 import numpy as np
@@ -125,7 +126,12 @@ def test_fe_holds_three_quarter_period_steps_where_harp_jumps(make, carrier):
     scene = make()
     phase = extract_phase(scene.tagged)
     fe = mean_error(track(phase, scene.body()), scene.tagged)
-    harp = float(tracking_error(track_harp(phase, points=scene.tagged), scene.tagged).mean_all)
+    with warnings.catch_warnings():
+        # HARP's jumping edge points may leave the field of view (it says how many, a
+        # HarpxWarning): this test is about the error of the points it keeps
+        warnings.simplefilter("ignore", HarpxWarning)
+        harp_out = track_harp(phase, points=scene.tagged)
+    harp = float(tracking_error(harp_out, scene.tagged).mean_all)
     # noise-free images: FE measured 0.08 mm (rotation) and 0.001 mm (translation), bounded
     # by the 0.5 mm (a third of a voxel); HARP starts each point from its last
     # position and lands a tag (8 mm) away wherever the step exceeds half a period
