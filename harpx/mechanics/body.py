@@ -1024,7 +1024,8 @@ class Body:
         -------
         meshio.Mesh
             Named boundaries and regions are encoded as skfem cell data; fibres (per cell) as
-            cell data ``"fiber"``.
+            cell data ``"fiber"``. Curved hexahedra (``MeshHex2``) are written by their
+            vertices (``hexahedron``): the curved geometry is not kept.
         """
         pdata = dict(point_data or {})
         if u is not None:
@@ -1033,6 +1034,8 @@ class Body:
         if self.fibers is not None and self.fibers.shape == (self.ncell, 3):
             cdata["fiber"] = [self.fibers]
         mesh = self.mesh
+        if isinstance(mesh, skfem.MeshHex2):  # the vertices only: straight hexahedra
+            mesh = skfem.MeshHex1(np.ascontiguousarray(self.nodes.T), mesh.t)
         if self.regions or self.boundaries:
             mesh = dataclasses.replace(
                 mesh,

@@ -99,7 +99,7 @@ def test_facet_dofs_and_bad_names():
         Body(box(), MAT, volumetric="plain")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="element='hex27'"):
         Body(box(), MAT, element="hex27")  # type: ignore[arg-type]
-    with pytest.raises(TypeError, match="skfem.MeshHex1, MeshTet1 or MeshTet2"):
+    with pytest.raises(TypeError, match="skfem.MeshHex1, MeshHex2, MeshTet1 or MeshTet2"):
         Body(skfem.MeshTri(), MAT)
     with pytest.raises(ValueError, match="expected \\(81,\\) dofs"):
         body_small = Body(box(), MAT)

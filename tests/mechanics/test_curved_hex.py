@@ -158,3 +158,15 @@ def test_curved_hex_mesh_default_is_straight():
     np.testing.assert_allclose(a.dV, b.dV, rtol=1e-12)
     with pytest.raises(ValueError, match="centre returned shape"):
         curved_hex_mesh(spec.mesh, lambda v: np.zeros((1, 3)))
+
+
+def test_curved_to_meshio_writes_the_vertices():
+    spec = tube(1.0, 2.0, 0.2, n_radial=1, n_circumferential=4, angle=np.pi / 2, curved=True)
+    body = Body(spec, MAT)
+    u = np.arange(body.ndof, dtype=np.float64)
+    m = body.to_meshio(u)
+    assert m.cells[0].type == "hexahedron" and m.points.shape == body.nodes.shape
+    np.testing.assert_array_equal(m.point_data["displacement"], u.reshape(-1, 3)[: len(body.nodes)])
+    back = Body.from_meshio(m, MAT)  # straight: the curved geometry is not written
+    assert isinstance(back.mesh, skfem.MeshHex1) and not isinstance(back.mesh, skfem.MeshHex2)
+    assert sorted(back.boundaries) == sorted(body.boundaries)
