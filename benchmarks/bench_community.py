@@ -160,18 +160,22 @@ def _project_edges(spec):
     return curved_tet_mesh(mesh, mid)
 
 
+def _ventricle_mesh(label, tets, level):
+    """The benchmark ventricle at one refinement level (curved or tetrahedral per element)."""
+    nc, nl, nt = level
+    spec = ventricle(inner=ENDO, outer=EPI, truncation=BASE, n_circumferential=nc,
+                     n_longitudinal=nl, n_transmural=nt, segments=False,
+                     curved=label in CURVED)  # fmt: skip
+    return tetrahedralize(spec) if tets else spec
+
+
 def inflation(levels, elements):
     rows = []
     for label, element, volumetric, tets in elements:
         for nc, nl, nt in levels:
-            spec = ventricle(inner=ENDO, outer=EPI, truncation=BASE, n_circumferential=nc,
-                             n_longitudinal=nl, n_transmural=nt, segments=False,
-                             curved=label in CURVED)  # fmt: skip
-            mesh = spec
-            if tets:
-                spec = mesh = tetrahedralize(spec)
-                if CURVED_TETS:
-                    mesh = _project_edges(spec)
+            spec = mesh = _ventricle_mesh(label, tets, (nc, nl, nt))
+            if tets and CURVED_TETS:
+                mesh = _project_edges(spec)
             mat = Guccione(c=10.0, bf=1.0, bt=1.0, bfs=1.0, kappa=10000.0)
             body = Body(mesh, mat, fibers=spec.fibers, element=element, volumetric=volumetric,
                         boundaries=spec.boundaries, regions=spec.regions)  # fmt: skip
@@ -201,11 +205,7 @@ def contraction(levels, elements):
     rows = []
     for label, element, volumetric, tets in elements:
         for nc, nl, nt in levels:
-            spec = ventricle(inner=ENDO, outer=EPI, truncation=BASE, n_circumferential=nc,
-                             n_longitudinal=nl, n_transmural=nt, segments=False,
-                             curved=label in CURVED)  # fmt: skip
-            if tets:
-                spec = tetrahedralize(spec)
+            spec = _ventricle_mesh(label, tets, (nc, nl, nt))
             mat = Guccione(c=2.0, bf=8.0, bt=2.0, bfs=4.0, kappa=20000.0)
             body = Body(spec.mesh, mat, fibers=fibers, element=element, volumetric=volumetric,
                         boundaries=spec.boundaries, regions=spec.regions,

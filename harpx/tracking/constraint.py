@@ -436,11 +436,9 @@ class PhaseConstraint:
         lam = s * self.penalty
         r = self.force(st, s)
         G = st.gradient
-        if st.robust_weight is not None:  # λ w(r) per (point, tag): weight each tag's row
-            G_w = G * st.robust_weight[..., None]
-            M = np.matmul(G_w.transpose(0, 2, 1), G) * (lam * st.weight)[:, None, None]
-        else:
-            M = np.matmul(G.transpose(0, 2, 1), G) * (lam * st.weight)[:, None, None]
+        # λ w(r) per (point, tag): weight each tag's row (w = 1 for the quadratic penalty)
+        G_w = G if st.robust_weight is None else G * st.robust_weight[..., None]
+        M = np.matmul(G_w.transpose(0, 2, 1), G) * (lam * st.weight)[:, None, None]
         M = M.reshape(ncell, npc, 9)
         # K_e[a, i, k, b] = Σ_q N_a N_b M_q[i, k], as (c, ab, q) @ (c, q, ik) in cell blocks
         Ke = np.empty((ncell, nb, 3, 3, nb))
