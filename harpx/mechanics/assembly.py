@@ -111,7 +111,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import sparse
 
 from harpx._typing import FloatArray, IntArray
-from harpx.mechanics import kinematics
+from harpx.mechanics import kernel, kinematics
 
 if TYPE_CHECKING:
     from harpx.mechanics.body import Body
@@ -363,10 +363,15 @@ def _build_pressure_space(body: Body) -> tuple[FloatArray, FloatArray, FloatArra
     return psi, psiW, Minv, proj
 
 
-def _volumetric(body: Body, F: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, dict]:
-    """Pressure field p (ncell,nqp), cof F, J and extra data for the tangent."""
+def _volumetric(
+    body: Body, F: FloatArray, Jc: tuple[FloatArray, FloatArray] | None = None
+) -> tuple[FloatArray, FloatArray, FloatArray, dict]:
+    """Pressure field p (ncell,nqp), cof F, J and extra data for the tangent.
+
+    ``Jc`` is ``(det F, cof F)`` if already computed.
+    """
     Jg = body.growth_jacobian
-    J, cof = _det_cof(F)
+    J, cof = _det_cof(F) if Jc is None else Jc
     mat = body.material
     extra: dict = {}
     jg = 1.0 if Jg is None else Jg[:, None]
@@ -462,73 +467,77 @@ def internal_forces(
         stress or tangent is not finite (then ``inverted_cells`` lists the cells).
     """
     F = body.deformation_gradient(u)
-    Jq, _ = _det_cof(F)
+    Jq, cof = _det_cof(F)
     min_j = float(Jq.min()) if Jq.size else 1.0
     bad = np.nonzero(~(Jq > 0.0).all(axis=1))[0]
     if bad.size or not np.isfinite(min_j):
         return Internal(None, None, min_j, bad)
+    # a material with a factored tangent is contracted without forming the 4th-order tensor
+    # (harpx.mechanics.kernel); active stress and growth take the full tangent
+    factored = hasattr(body.material, "isochoric_factors") and (
+        body.active is None and body.growth_tensor is None
+    )
+    A: FloatArray | None = None
+    fac: kernel.TangentFactors | None = None
     with np.errstate(over="ignore", invalid="ignore"):  # checked just below
-        P, A = material_response(body, F, tangent=tangent)
-        p, cof, J, extra = _volumetric(body, F)
+        if factored:
+            P, fac = body.material.isochoric_factors(F, body.fibers_qp)
+        else:
+            P, A = material_response(body, F, tangent=tangent)
+        p, cof, J, extra = _volumetric(body, F, (Jq, cof))
         P = P + p[..., None, None] * cof
     # an exponential law (Guccione) overflows at extreme strain before det F reaches 0: such
     # a state is as inadmissible as an inverted one (the caller halves its step)
     with np.errstate(over="ignore", invalid="ignore"):  # inf - inf is the point of the test
         finite = np.isfinite(P.reshape(P.shape[0], -1).sum(axis=1))
-        if A is not None:
+        if tangent and A is not None:
             finite &= np.isfinite(A.reshape(A.shape[0], -1).sum(axis=1))
+        if tangent and fac is not None:
+            finite &= np.isfinite(fac.Z.reshape(fac.Z.shape[0], -1).sum(axis=1) + fac.c.sum(axis=1))
     if not finite.all():
         return Internal(None, None, min_j, np.nonzero(~finite)[0])
     G = body.grad_N  # (e, q, a, J)
     dV = body.dV
     ed = body.element_dofs
     nel, nq, nb, _ = G.shape
-    Gt = G.transpose(0, 2, 1, 3).reshape(nel, nb, nq * 3)  # (e, a, (q, J))
+    grads = body.cached("gradient_layouts", lambda: kernel.Gradients.of(G))
     Pt = (P * dV[..., None, None]).transpose(0, 1, 3, 2).reshape(nel, nq * 3, 3)
-    re = np.matmul(Gt, Pt)  # (e, a, i)
+    re = np.matmul(grads.Gn, Pt)  # (e, a, i)
     ndof = int(body.ndof)
     # bincount of float weights is float64 (numpy's stubs type it as int)
     r = np.asarray(np.bincount(ed.ravel(), weights=re.ravel(), minlength=ndof), dtype=np.float64)
     if not tangent:
         return Internal(r, None, min_j, bad)
-    assert A is not None
-    # Volumetric part, contracted through b_q[(a, i)] = (cof F)_iJ ∂_J N_a instead of being
-    # added to A (cheaper): with M_w = Σ_q w_q b_q b_qᵀ,
-    #   Σ_q (p/J) (cof ⊗ cof - cof ⊙ cof) dV → M_{p/J}[(a,i),(b,k)] - M_{p/J}[(a,k),(b,i)],
-    #   pointwise U''-term (U''/Jg) cof ⊗ cof dV → M_{U''/Jg}.
-    Bq = np.matmul(G, np.swapaxes(cof, -1, -2)).reshape(nel, nq, 3 * nb)  # (e, q, (a, i))
-    if pressure_stiffness:
-        w_geo = p / J * dV
-        Mg = np.matmul(np.swapaxes(Bq, 1, 2), Bq * w_geo[..., None]).reshape(nel, nb, 3, nb, 3)
-        Kvol = Mg - Mg.transpose(0, 1, 4, 3, 2)  # (e, a, i, b, k)
-    else:
-        Kvol = np.zeros((nel, nb, 3, nb, 3))
-    if "d2U" in extra:
-        w_u = extra["d2U"] * dV
-        Kvol += np.matmul(np.swapaxes(Bq, 1, 2), Bq * w_u[..., None]).reshape(nel, nb, 3, nb, 3)
+    # Volumetric part (module notes): the initial stress (p/J)(cof ⊗ cof - cof ⊙ cof)
+    # = p J (H ⊗ H - H ⊙ H) and the pointwise (U''/Jg) cof ⊗ cof = (U''/Jg) J² H ⊗ H are
+    # pointwise terms of the tangent; the condensed block Cᵀ Q C (C = ψᵀ W B) is added per
+    # element.
+    geo = p * J if pressure_stiffness else np.zeros_like(p)
+    hh = geo + extra["d2U"] * J * J if "d2U" in extra else geo
     Q = extra.get("Q")
-    if Q is not None:
-        # condensed volumetric block Cᵀ Q C with C = ψᵀ W B
-        C = np.matmul(_pressure_space(body)[1], Bq)  # (e, npr, 3 nb)
-        Kvol += np.matmul(np.swapaxes(C, 1, 2), np.matmul(Q, C)).reshape(nel, nb, 3, nb, 3)
-    Ke = Kvol.transpose(0, 1, 2, 4, 3).copy()  # (e, a, i, k, b)
-    nodal = extra.get("nodal")
-    block = max(1, _BLOCK_FLOATS // (nq * 27 * nb))
-    buf = np.empty((min(block, nel), nq, 3, 3, 3, 3))
-    for s in range(0, nel, block):
-        sl = slice(s, min(s + block, nel))
-        n = sl.stop - sl.start
-        # (e, q, J, i, k, L) scaled by dV in one pass
-        Ap = np.multiply(A[sl].transpose(0, 1, 3, 2, 4, 5), dV[sl, :, None, None, None, None],
-                         out=buf[:n])  # fmt: skip
-        B = np.matmul(Ap.reshape(n, nq, 27, 3), G[sl].transpose(0, 1, 3, 2))  # (e,q,(J,i,k),b)
-        Ke[sl] += np.matmul(Gt[sl], B.reshape(n, nq * 3, 9 * nb)).reshape(n, nb, 3, 3, nb)
+    H = cof / J[..., None, None]
+    condensed = None if Q is None else (_pressure_space(body)[1] * J[:, None, :], Q)
+    Ke = np.empty((nel, nb, 3, 3, nb))  # (e, a, i, k, b)
+    if fac is not None:
+        fac = dataclasses.replace(fac, c=fac.c - geo)
+        kernel.factored_tangent(grads, dV, fac, hh, Ke, condensed)
+    else:
+        assert A is not None
+        A = A + (hh / (J * J))[..., None, None, None, None] * (
+            cof[..., :, :, None, None] * cof[..., None, None, :, :]
+        )
+        A -= (geo / (J * J))[..., None, None, None, None] * (
+            cof[..., :, None, None, :] * np.swapaxes(cof, -1, -2)[..., None, :, :, None]
+        )
+        kernel.dense_tangent(grads, dV, A, Ke, condensed, H)
     pat = sparsity(body)
     # numpy's stub types every bincount as int; with float weights it is float64
     data: FloatArray = np.bincount(  # type: ignore[assignment]
         pat.element_positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz
     )
+    nodal = extra.get("nodal")
     if nodal is not None:
+        Bq = np.matmul(G, np.swapaxes(cof, -1, -2)).reshape(nel, nq, 3 * nb)  # (e, q, (a, i))
         beta = np.matmul(np.swapaxes(extra["nodal_weights"], 1, 2), Bq)  # (e, nv, 3 nb)
         data += _nodal_tangent(body, pat, beta, nodal)
     return Internal(r, pat.matrix(data), min_j, bad)

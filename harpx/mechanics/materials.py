@@ -148,6 +148,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray
+from harpx.mechanics.kernel import TangentFactors
 from harpx.mechanics.kinematics import (
     cofactor,
     fiber_basis,
@@ -367,25 +368,42 @@ class NeoHookean(_Uncoupled):
         A : ndarray, shape (..., 3, 3, 3, 3)
             ``A[..., i, J, k, L] = dP_iJ/dF_kL`` (kPa).
         """
+        P, factors = self.isochoric_factors(F, fiber)
+        return P, factors.dense()
+
+    def isochoric_factors(
+        self, F: ArrayLike, fiber: ArrayLike | None = None
+    ) -> tuple[FloatArray, TangentFactors]:
+        r"""Stress and the factored tangent of the isochoric energy (no 4th-order array).
+
+        Parameters
+        ----------
+        F : array_like, shape (..., 3, 3)
+            Deformation gradients (dimensionless, ``det F > 0``).
+        fiber : array_like, optional
+            Ignored (isotropic law).
+
+        Returns
+        -------
+        P : ndarray, shape (..., 3, 3)
+            ``dWbar/dF`` (kPa).
+        factors : TangentFactors
+            With :math:`a = 2 C_1 J^{-2/3}`: :math:`Y = (F, H)`,
+            :math:`Z = a\,(-\tfrac23 H,\ -\tfrac23 F + \tfrac29 I_1 H)`, :math:`s = a`,
+            :math:`c = a I_1/3` (``h_index = 1``); ``factors.dense()`` is the tangent of
+            :meth:`isochoric_response`.
+        """
         F = _as_F(F)
         J, cof = _det_cof(F)
         H = cof / J[..., None, None]
         I1 = np.einsum("...iJ,...iJ->...", F, F)
         a = 2.0 * self.c1 * J ** (-2.0 / 3.0)
         P = a[..., None, None] * (F - (I1 / 3.0)[..., None, None] * H)
-        # rank-two part -2/3 (F(x)H + H(x)F) + 2/9 I1 H(x)H as K^T (M K) with K = [F; H]
-        batch = J.shape
-        K = np.stack([F, H], axis=-3).reshape(batch + (2, 9))
-        MK = np.stack(
-            [(-2.0 / 3.0) * H, (-2.0 / 3.0) * F + ((2.0 / 9.0) * I1)[..., None, None] * H],
-            axis=-3,
-        ).reshape(batch + (2, 9))
-        A = np.matmul(np.swapaxes(K, -1, -2), MK).reshape(batch + (3, 3, 3, 3))
-        A += (I1 / 3.0)[..., None, None, None, None] * _cross_outer(H)
-        for i in range(3):
-            A[..., i, :, i, :] += np.eye(3)
-        A *= a[..., None, None, None, None]
-        return P, A
+        # rank-two part a (-2/3 (F(x)H + H(x)F) + 2/9 I1 H(x)H) = Y^T Z with Y = [F; H]
+        Y = np.stack([F, H], axis=-3)
+        am = (-2.0 / 3.0) * a[..., None, None]
+        Z = np.stack([am * H, am * F + ((2.0 / 9.0) * a * I1)[..., None, None] * H], axis=-3)
+        return P, TangentFactors(Y=Y, Z=Z, s=a, c=a * I1 / 3.0, H=H, h_index=1)
 
 
 @dataclass(frozen=True)
