@@ -114,14 +114,17 @@ def _write_demodulated(
 ) -> None:
     """Write Re and Im of ``|H| exp(i(φ − k·x))`` of tag ``t`` into channels ``t``, ``ntag + t``."""
     ntag = phase.shape[0]
+    # scratch in the phase's precision, allocated once; |H| cos and |H| sin are formed in
+    # the channel's float64 (exact products of float32 factors)
+    theta = np.empty(phase.shape[1:], dtype=np.result_type(phase, carrier))
+    part = np.empty_like(theta)
+    drop = tuple(a - 1 for a in squeeze)
     for t in range(ntag):
-        theta = phase[t] - np.broadcast_to(carrier[t], phase[t].shape)
-        mag = magnitude[t]
-        if squeeze:
-            theta = theta.squeeze(axis=tuple(a - 1 for a in squeeze))
-            mag = mag.squeeze(axis=tuple(a - 1 for a in squeeze))
-        np.multiply(mag, np.cos(theta), out=channel(t))
-        np.multiply(mag, np.sin(theta), out=channel(ntag + t))
+        np.subtract(phase[t], carrier[t], out=theta)
+        mag = magnitude[t].squeeze(axis=drop) if squeeze else magnitude[t]
+        for c, function in ((t, np.cos), (ntag + t, np.sin)):
+            function(theta, out=part)
+            np.multiply(mag, part.squeeze(axis=drop) if squeeze else part, out=channel(c))
 
 
 def _reflect_border(out: NDArray[np.float64], shape: tuple[int, ...]) -> None:
@@ -296,8 +299,9 @@ class PhaseSampler:
         there is one). Dimensionless. At the reference frame (``time_index`` 0) a dataset
         with ``body`` also requires the point to be tissue there (``body >= 0.5`` at its
         nearest voxel): partial-volume edge voxels carry a background-contaminated phase.
-    chunk_size : int, default 4096
-        Points evaluated per vectorised batch (memory ~ 2 kB per point).
+    chunk_size : int, default 1024
+        Points evaluated per vectorised batch (memory ~ 4 kB per point; small batches keep
+        the gathered taps in cache).
     region : array_like of shape (2, 3), optional
         Lower and upper corners (rows) of a box in mm, columns (x, y, z), that holds every
         point this sampler will be asked about. Only the grid inside it (plus a margin of
@@ -355,7 +359,7 @@ class PhaseSampler:
         *,
         order: int = 3,
         magnitude_floor: float = 0.05,
-        chunk_size: int = 4096,
+        chunk_size: int = 1024,
         region: ArrayLike | None = None,
         reuse: PhaseSampler | None = None,
     ) -> None:
@@ -678,16 +682,16 @@ class PhaseSampler:
         for s in range(0, u.shape[0], self.chunk_size):
             chunk = order[s : s + self.chunk_size]
             m = chunk.size
-            weights = [_weights(frac[chunk, a], self.order) for a in range(d)]  # (m, 2, taps)
+            weights = _weights(frac[chunk], self.order)  # (m, d, 2, taps)
             gathered = runs[linear[chunk, None] + offsets]  # (m, taps**(d-1)) runs
             gathered = gathered.view(padded.dtype).reshape(m, taps ** (d - 1), taps * nf)
             if d > 1:
-                head = np.matmul(_tensor_weights(weights[:-1], lead), gathered)
+                head = np.matmul(_tensor_weights(weights[:, :-1], lead), gathered)
             else:
                 head = gathered  # (m, 1, taps * nf)
             # (m, lead, taps, nf) -> (m, taps, lead * nf): the last axis's taps as rows
             rows = head.reshape(m, lead, taps, nf).transpose(0, 2, 1, 3).reshape(m, taps, -1)
-            last = np.matmul(weights[-1][:, : 1 if nq == 1 else 2], rows)  # (m, 1|2, lead*nf)
+            last = np.matmul(weights[:, -1, : 1 if nq == 1 else 2], rows)  # (m, 1|2, lead*nf)
             out[chunk, :lead] = last[:, 0].reshape(m, lead, nf)
             if nq > 1:
                 out[chunk, lead] = last[:, 1, :nf]
@@ -695,32 +699,47 @@ class PhaseSampler:
 
 
 def _weights(t: NDArray[np.float64], order: int) -> NDArray[np.float64]:
-    """B-spline tap weights (row 0) and their derivatives (row 1) at fractions ``t``."""
+    """B-spline tap weights (``[..., 0, :]``) and their derivatives (``[..., 1, :]``).
+
+    ``t`` holds fractions in [0, 1) of any shape; the result has shape
+    ``(*t.shape, 2, order + 1)``.
+    """
+    out = np.empty((*t.shape, 2, order + 1))
     if order == 1:
-        one = np.ones_like(t)
-        return np.stack([np.stack([1 - t, t], -1), np.stack([-one, one], -1)], 1)
+        out[..., 0, 0] = 1 - t
+        out[..., 0, 1] = t
+        out[..., 1, 0] = -1.0
+        out[..., 1, 1] = 1.0
+        return out
     t2 = t * t
     t3 = t2 * t
     s = 1.0 - t
-    value = np.stack(
-        [s**3 / 6, (3 * t3 - 6 * t2 + 4) / 6, (-3 * t3 + 3 * t2 + 3 * t + 1) / 6, t3 / 6], -1
-    )
-    slope = np.stack([-(s * s) / 2, (3 * t2 - 4 * t) / 2, (-3 * t2 + 2 * t + 1) / 2, t2 / 2], -1)
-    return np.stack([value, slope], 1)
+    out[..., 0, 0] = s**3 / 6
+    out[..., 0, 1] = (3 * t3 - 6 * t2 + 4) / 6
+    out[..., 0, 2] = (-3 * t3 + 3 * t2 + 3 * t + 1) / 6
+    out[..., 0, 3] = t3 / 6
+    out[..., 1, 0] = -(s * s) / 2
+    out[..., 1, 1] = (3 * t2 - 4 * t) / 2
+    out[..., 1, 2] = (-3 * t2 + 2 * t + 1) / 2
+    out[..., 1, 3] = t2 / 2
+    return out
 
 
-def _tensor_weights(weights: list[NDArray[np.float64]], nq: int) -> NDArray[np.float64]:
-    """Tensor-product weights (m, nq, taps**d): q=0 value, q=j derivative along axis j-1."""
-    m = weights[0].shape[0]
+def _tensor_weights(weights: NDArray[np.float64], nq: int) -> NDArray[np.float64]:
+    """Tensor-product weights (m, nq, taps**d) of ``weights`` (m, d, 2, taps).
+
+    Output q=0 is the value, q=j the derivative along axis j-1.
+    """
+    m, d = weights.shape[:2]
     tensor: NDArray[np.float64] | None = None
-    for a, w in enumerate(weights):
+    for a in range(d):
         # per output q: derivative weights along axis a when q == a + 1, else value weights
-        select = np.array([1 if q == a + 1 else 0 for q in range(nq)])
-        factor = w[:, select]  # (m, nq, taps)
+        select = [1 if q == a + 1 else 0 for q in range(nq)]
+        factor = weights[:, a, select]  # (m, nq, taps)
         if tensor is None:
             tensor = factor
         else:
-            tensor = (tensor[..., :, None] @ factor[..., None, :]).reshape(m, nq, -1)
+            tensor = (tensor[..., :, None] * factor[..., None, :]).reshape(m, nq, -1)
     assert tensor is not None
     return tensor
 
