@@ -466,7 +466,13 @@ def internal_forces(
         ``r`` and ``K`` are None when some Gauss point has ``det F <= 0``, or some cell's
         stress or tangent is not finite (then ``inverted_cells`` lists the cells).
     """
-    F = body.deformation_gradient(u)
+    G = body.grad_N  # (e, q, a, J)
+    nel, nq, nb, _ = G.shape
+    grads = body.cached("gradient_layouts", lambda: kernel.Gradients.of(G))
+    # F_iJ = δ_iJ + Σ_a u_ai ∂_J N_a as one (3, nb) @ (nb, 3 nq) product per element
+    ue = body.element_displacement(u)  # (e, a, i)
+    F = np.matmul(np.swapaxes(ue, 1, 2), grads.Gn).reshape(nel, 3, nq, 3).transpose(0, 2, 1, 3)
+    F = F + np.eye(3)
     Jq, cof = _det_cof(F)
     min_j = float(Jq.min()) if Jq.size else 1.0
     bad = np.nonzero(~(Jq > 0.0).all(axis=1))[0]
@@ -496,11 +502,8 @@ def internal_forces(
             finite &= np.isfinite(fac.Z.reshape(fac.Z.shape[0], -1).sum(axis=1) + fac.c.sum(axis=1))
     if not finite.all():
         return Internal(None, None, min_j, np.nonzero(~finite)[0])
-    G = body.grad_N  # (e, q, a, J)
     dV = body.dV
     ed = body.element_dofs
-    nel, nq, nb, _ = G.shape
-    grads = body.cached("gradient_layouts", lambda: kernel.Gradients.of(G))
     Pt = (P * dV[..., None, None]).transpose(0, 1, 3, 2).reshape(nel, nq * 3, 3)
     re = np.matmul(grads.Gn, Pt)  # (e, a, i)
     ndof = int(body.ndof)

@@ -122,8 +122,16 @@ def cofactor(F: ArrayLike) -> FloatArray:
            [ 0.,  0.,  6.]])
     """
     F = _as_tensor(F)
-    a, b, c = F[..., 0, :], F[..., 1, :], F[..., 2, :]
-    return np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], axis=-2)
+    # rows: b x c, c x a, a x b for the rows a, b, c of F, written component by component
+    cof = np.empty(F.shape)
+    for r in range(3):
+        s, t = (r + 1) % 3, (r + 2) % 3
+        for j in range(3):
+            k, m = (j + 1) % 3, (j + 2) % 3
+            np.subtract(
+                F[..., s, k] * F[..., t, m], F[..., s, m] * F[..., t, k], out=cof[..., r, j]
+            )
+    return cof
 
 
 def _det_cof(F: FloatArray) -> tuple[FloatArray, FloatArray]:

@@ -400,9 +400,14 @@ class NeoHookean(_Uncoupled):
         a = 2.0 * self.c1 * J ** (-2.0 / 3.0)
         P = a[..., None, None] * (F - (I1 / 3.0)[..., None, None] * H)
         # rank-two part a (-2/3 (F(x)H + H(x)F) + 2/9 I1 H(x)H) = Y^T Z with Y = [F; H]
-        Y = np.stack([F, H], axis=-3)
+        Y = np.empty(F.shape[:-2] + (2, 3, 3))
+        Y[..., 0, :, :] = F
+        Y[..., 1, :, :] = H
         am = (-2.0 / 3.0) * a[..., None, None]
-        Z = np.stack([am * H, am * F + ((2.0 / 9.0) * a * I1)[..., None, None] * H], axis=-3)
+        Z = np.empty_like(Y)
+        np.multiply(am, H, out=Z[..., 0, :, :])
+        np.multiply(((2.0 / 9.0) * a * I1)[..., None, None], H, out=Z[..., 1, :, :])
+        Z[..., 1, :, :] += am * F
         return P, TangentFactors(Y=Y, Z=Z, s=a, c=a * I1 / 3.0, H=H, h_index=1)
 
 
