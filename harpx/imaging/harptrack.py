@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import time as _time
 import warnings
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -260,6 +261,7 @@ def _track_frame(
     """
     active = valid0.copy()
     rank = basis.shape[1]
+    ntag = phi0.shape[1]
     sweeps = 0
     phi_end = np.zeros_like(phi0)
     valid_end = np.zeros(valid0.shape, dtype=bool)
@@ -272,23 +274,64 @@ def _track_frame(
         phi_end[index], valid_end[index] = phi, valid
         error = wrap(phi - phi0[index])  # (m, ntag), rad
         done = valid & (np.linalg.norm(error, axis=1) < TOLERANCE)
-        gb = grad @ basis  # (m, ntag, r): gradient within the tag span
-        normal = np.einsum("mti,mtj->mij", gb, gb)
-        rhs = np.einsum("mti,mt->mi", gb, error)
-        # ill-conditioned normal equations (|H| ~ 0, collinear gradients): no update
-        scale = np.trace(normal, axis1=1, axis2=2) / rank
-        healthy = np.linalg.det(normal) > 1e-10 * np.maximum(scale, 1e-300) ** rank
-        update = valid & ~done & healthy
-        step = np.zeros((index.size, 3))
-        if update.any():
-            solved = np.linalg.solve(normal[update], rhs[update][..., None])[..., 0]
-            step[update] = -(solved @ basis.T)
-        position[index] += np.clip(step, -step_limit, step_limit)
+        # only the valid points that have not converged step: the algebra runs on those
+        moving = np.flatnonzero(valid & ~done)
+        healthy = np.ones(index.size, dtype=bool)
+        if moving.size:
+            # gradient within the tag span (k, ntag, r), normal equations (k, r, r) and
+            # right-hand side (k, r), summed tag by tag (small-matrix products are slower)
+            g = grad[moving]
+            gb = g @ basis
+            normal = gb[:, 0, :, None] * gb[:, 0, None, :]
+            for t in range(1, ntag):
+                normal += gb[:, t, :, None] * gb[:, t, None, :]
+            rhs = np.einsum("mti,mt->mi", gb, error[moving])
+            # ill-conditioned normal equations (|H| ~ 0, collinear gradients): no update
+            scale = np.trace(normal, axis1=1, axis2=2) / rank
+            det, solve = _symmetric_solver(normal)
+            well = det > 1e-10 * np.maximum(scale, 1e-300) ** rank
+            healthy[moving] = well
+            if well.any():
+                step = -(solve(well, rhs[well]) @ basis.T)
+                target = index[moving[well]]
+                position[target] += np.clip(step, -step_limit, step_limit)
         active[index[done | ~valid | ~healthy]] = False
     moved = np.flatnonzero(active)  # stepped after their last sample
     if moved.size:
         phi_end[moved], valid_end[moved] = sampler.phase(position[moved])
     return sweeps, phi_end, valid_end
+
+
+def _symmetric_solver(
+    normal: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], Callable[[NDArray[np.bool_], NDArray[np.float64]], Any]]:
+    """Determinants of symmetric (k, r, r) matrices and a solver for a subset of them.
+
+    For r = 3 (three tags) by the adjugate, in a few vectorised operations; otherwise by
+    LAPACK. Both agree to rounding (the solver is only used on well-conditioned matrices).
+    Returns ``det`` (k,) and ``solve(select, rhs)`` giving ``normal[select]⁻¹ rhs``.
+    """
+    if normal.shape[1] != 3:
+
+        def lapack(select: NDArray[np.bool_], rhs: NDArray[np.float64]) -> Any:
+            return np.linalg.solve(normal[select], rhs[..., None])[..., 0]
+
+        return np.linalg.det(normal), lapack
+    a, b, c = normal[:, 0, 0], normal[:, 0, 1], normal[:, 0, 2]
+    d, e, f = normal[:, 1, 1], normal[:, 1, 2], normal[:, 2, 2]
+    adjugate = np.empty_like(normal)  # symmetric: the cofactors
+    adjugate[:, 0, 0] = d * f - e * e
+    adjugate[:, 0, 1] = adjugate[:, 1, 0] = c * e - b * f
+    adjugate[:, 0, 2] = adjugate[:, 2, 0] = b * e - c * d
+    adjugate[:, 1, 1] = a * f - c * c
+    adjugate[:, 1, 2] = adjugate[:, 2, 1] = b * c - a * e
+    adjugate[:, 2, 2] = a * d - b * b
+    det = a * adjugate[:, 0, 0] + b * adjugate[:, 0, 1] + c * adjugate[:, 0, 2]
+
+    def cofactors(select: NDArray[np.bool_], rhs: NDArray[np.float64]) -> Any:
+        return np.einsum("kij,kj->ki", adjugate[select], rhs) / det[select, None]
+
+    return det, cofactors
 
 
 def _assemble(

@@ -506,14 +506,15 @@ class PhaseSampler:
         phi = self._remodulate(pts, re, im)
         grad = np.zeros((pts.shape[0], ntag, 3))
         power = size * size
-        # Im(conj(D) dD) / |D|^2 per voxel of the axis, then per mm
+        # Im(conj(D) dD) / |D|^2 per voxel of each active axis (m, d, ntag), then per mm
         scale = np.where(power > 0, power, 1.0)
-        for j, column in enumerate(self._columns):
-            cross = re * values[:, 1 + j, ntag:] - im * values[:, 1 + j, :ntag]
-            cross /= scale
-            cross *= 1.0 / self._spacing[j]
-            cross += self._k_active[:, j]
-            grad[:, :, column] = cross
+        d = self._columns.size
+        cross = re[:, None] * values[:, 1 : 1 + d, ntag:]
+        cross -= im[:, None] * values[:, 1 : 1 + d, :ntag]
+        cross /= scale[:, None]
+        cross *= (1.0 / self._spacing)[:, None]
+        cross += self._k_active.T
+        grad[:, :, self._columns] = cross.transpose(0, 2, 1)
         invalid = ~(valid_tags if per_tag else valid_tags.all(axis=1, keepdims=True))
         phi[np.broadcast_to(invalid, phi.shape)] = 0.0
         grad[np.broadcast_to(invalid, phi.shape)] = 0.0
