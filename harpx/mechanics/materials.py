@@ -372,7 +372,11 @@ class NeoHookean(_Uncoupled):
         return P, factors.dense()
 
     def isochoric_factors(
-        self, F: ArrayLike, fiber: ArrayLike | None = None
+        self,
+        F: ArrayLike,
+        fiber: ArrayLike | None = None,
+        *,
+        det_cof: tuple[FloatArray, FloatArray] | None = None,
     ) -> tuple[FloatArray, TangentFactors]:
         r"""Stress and the factored tangent of the isochoric energy (no 4th-order array).
 
@@ -382,6 +386,9 @@ class NeoHookean(_Uncoupled):
             Deformation gradients (dimensionless, ``det F > 0``).
         fiber : array_like, optional
             Ignored (isotropic law).
+        det_cof : (ndarray, ndarray), optional
+            ``(det F, cof F)`` if the caller has them (all ``det F > 0``), to save their
+            evaluation.
 
         Returns
         -------
@@ -394,7 +401,7 @@ class NeoHookean(_Uncoupled):
             :meth:`isochoric_response`.
         """
         F = _as_F(F)
-        J, cof = _det_cof(F)
+        J, cof = _det_cof(F) if det_cof is None else det_cof
         H = cof / J[..., None, None]
         I1 = np.einsum("...iJ,...iJ->...", F, F)
         a = 2.0 * self.c1 * J ** (-2.0 / 3.0)
