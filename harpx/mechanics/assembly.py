@@ -526,10 +526,14 @@ def internal_forces(
     Q = extra.get("Q")
     H = fac.H if fac is not None else cof / J[..., None, None]
     condensed = None if Q is None else (_pressure_space(body)[1] * J[:, None, :], Q)
-    Ke = np.empty((nel, nb, 3, 3, nb))  # (e, a, i, k, b)
+    pat = sparsity(body)
+    # element matrices (e, a, i, k, b) are added into the CSR data block by block, while
+    # they are in cache
+    data = np.zeros(pat.nnz)
+    sink = kernel.scatter(data, pat.element_positions)
     if fac is not None:
         fac = dataclasses.replace(fac, c=fac.c - geo)
-        kernel.factored_tangent(grads, dV, fac, hh, Ke, condensed)
+        kernel.factored_tangent(grads, dV, fac, hh, sink, condensed)
     else:
         assert A is not None
         A = A + (hh / (J * J))[..., None, None, None, None] * (
@@ -538,12 +542,7 @@ def internal_forces(
         A -= (geo / (J * J))[..., None, None, None, None] * (
             cof[..., :, None, None, :] * np.swapaxes(cof, -1, -2)[..., None, :, :, None]
         )
-        kernel.dense_tangent(grads, dV, A, Ke, condensed, H)
-    pat = sparsity(body)
-    # numpy's stub types every bincount as int; with float weights it is float64
-    data: FloatArray = np.bincount(  # type: ignore[assignment]
-        pat.element_positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz
-    )
+        kernel.dense_tangent(grads, dV, A, sink, condensed, H)
     nodal = extra.get("nodal")
     if nodal is not None:
         Bq = np.matmul(G, np.swapaxes(cof, -1, -2)).reshape(nel, nq, 3 * nb)  # (e, q, (a, i))

@@ -40,13 +40,22 @@ of :attr:`harpx.mechanics.assembly.Pattern.element_positions`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from harpx._typing import FloatArray
+from harpx._typing import FloatArray, IntArray
 
-__all__ = ["Gradients", "TangentFactors", "dense_tangent", "factored_tangent"]
+__all__ = [
+    "Gradients",
+    "Sink",
+    "TangentFactors",
+    "dense_tangent",
+    "factored_tangent",
+    "into",
+    "scatter",
+]
 
 #: target size (floats) of the per-block temporaries of the element products: a few MB,
 #: so that a block's operands stay in cache between the products
@@ -104,84 +113,41 @@ class TangentFactors:
         return A
 
 
-def factored_tangent(
-    grads: Gradients,
-    dV: FloatArray,
-    factors: TangentFactors,
-    h_weight: FloatArray | None,
-    Ke: FloatArray,
-    condensed: tuple[FloatArray, FloatArray] | None = None,
-) -> None:
-    r"""Element stiffness matrices of a factored tangent, written into ``Ke``.
+#: receives ``(cells, Ke)``: a slice of cells and their element matrices (n, nb, 3, 3, nb)
+Sink = Callable[[slice, FloatArray], None]
+
+
+def scatter(data: FloatArray, positions: IntArray) -> Sink:
+    """A sink adding element matrices into CSR ``data`` at ``positions[cells]``.
 
     Parameters
     ----------
-    grads : Gradients
-        Reference shape-function gradients in the layouts the products need, 1/mm.
-    dV : ndarray, shape (ncell, nqp)
-        Quadrature weights times the reference Jacobian, mm³.
-    factors : TangentFactors
-        Batch shape ``(ncell, nqp)``. ``factors.c`` must already include any volumetric
-        :math:`H \odot H` weight.
-    h_weight : ndarray, shape (ncell, nqp), or None
-        Extra weight of :math:`H \otimes H` (kPa), added to the factor ``h_index`` (the
-        volumetric initial-stress and pointwise :math:`U''` terms); ``h_index`` must be set
-        when this is given.
-    Ke : ndarray, shape (ncell, nb, 3, 3, nb)
-        Output, mN/mm (kPa·mm); overwritten.
-    condensed : (W, Q), optional
-        Statically condensed volumetric block :math:`C^T Q C` with
-        :math:`C_{r,ai} = \sum_q W_{rq} H_{iJ} \partial_J N_a` (for the dilatation modes
-        :math:`\psi_r`, :math:`W_{rq} = \psi_r J\, dV_q`, so that :math:`C` is the
-        derivative of :math:`\int \psi_r J\, dV`): ``W`` (ncell, npr, nqp) in mm³ and ``Q``
-        (ncell, npr, npr) in kPa/mm⁶.
+    data : ndarray, shape (nnz,)
+        CSR data, accumulated in place (zeros to start).
+    positions : ndarray of int, shape (ncell, nb, 3, 3, nb)
+        Position in ``data`` of every element entry
+        (:attr:`harpx.mechanics.assembly.Pattern.element_positions`).
+
+    Returns
+    -------
+    callable
+        The sink. Entries are added in element order, as ``np.bincount`` of all element
+        matrices at once would add them.
     """
-    G, GT, Gn = grads.G, grads.GT, grads.Gn
-    nel, nq, nb, _ = G.shape
-    m = factors.Y.shape[2]
-    hi = factors.h_index
-    npr = 0 if condensed is None else condensed[1].shape[1]
-    nt = m * nq + npr
-    n3 = 3 * nb
-    H = factors.H
-    Y, Z = factors.Y, factors.Z
-    wc = factors.c * dV
-    ws = np.repeat(factors.s * dV, 3, axis=1)  # per (q, J)
-    if h_weight is not None and hi is None:
-        raise ValueError("h_weight needs factors.h_index")
-    step = _blocks_step(2 * nt * n3 + 2 * n3 * n3 + nq * n3)
-    for s0 in range(0, nel, step):
-        sl = slice(s0, min(s0 + step, nel))
-        n = sl.stop - sl.start
-        GTs = GT[sl]  # (n, q, J, b)
-        L = np.empty((n, nt, n3))  # rows (q, r) | pressure modes; columns (a, i)
-        R = np.empty((n, nt, n3))  # rows as L; columns (k, b)
-        Lq = L[:, : m * nq].reshape(n, nq, m, nb, 3)
-        np.einsum("eqaJ,eqriJ->eqrai", G[sl], Y[sl], optimize=True, out=Lq)
-        Zs = Z[sl] * dV[sl, :, None, None, None]
-        if h_weight is not None:
-            assert hi is not None
-            Zs[:, :, hi] += (h_weight[sl] * dV[sl])[:, :, None, None] * H[sl]
-        np.matmul(Zs.reshape(n, nq, 3 * m, 3), GTs, out=R[:, : m * nq].reshape(n, nq, 3 * m, nb))
-        HGt = np.matmul(H[sl], GTs)  # (n, q, i, b): h_bi
-        if condensed is not None:
-            W, Q = condensed[0][sl], condensed[1][sl]
-            Ck = np.matmul(W, HGt.reshape(n, nq, n3))  # (n, npr, (k, b)): C in column layout
-            L[:, m * nq :] = np.swapaxes(Ck.reshape(n, npr, 3, nb), -1, -2).reshape(n, npr, n3)
-            np.matmul(Q, Ck, out=R[:, m * nq :])
-        np.matmul(np.swapaxes(L, 1, 2), R, out=Ke[sl].reshape(n, n3, n3))
-        # c H_iL H_kJ: rows (a, k), columns (i, b), then the 3x3 blocks transposed
-        if hi is not None:
-            h = Lq[:, :, hi].reshape(n, nq, n3)  # (n, q, (a, k))
-        else:
-            h = np.einsum("eqaJ,eqiJ->eqai", G[sl], H[sl], optimize=True).reshape(n, nq, n3)
-        Rs = (HGt * wc[sl, :, None, None]).reshape(n, nq, n3)
-        S = np.matmul(np.swapaxes(h, 1, 2), Rs).reshape(n, nb, 3, 3, nb)
-        # s δ_ik ∇N_a·∇N_b
-        Gns = Gn[sl]
-        lap = np.matmul(Gns, np.swapaxes(Gns * ws[sl, None, :], 1, 2))  # (n, a, b)
-        S.reshape(n, nb, 9, nb)[:, :, ::4, :] += lap[:, :, None, :]
-        Ke[sl] += S.transpose(0, 1, 3, 2, 4)
+
+    def add(cells: slice, Ke: FloatArray) -> None:
+        np.add.at(data, positions[cells].ravel(), Ke.ravel())
+
+    return add
+
+
+def into(Ke: FloatArray) -> Sink:
+    """A sink copying element matrices into ``Ke`` (ncell, nb, 3, 3, nb)."""
+
+    def put(cells: slice, block: FloatArray) -> None:
+        Ke[cells] = block
+
+    return put
 
 
 @dataclass(frozen=True)
@@ -211,6 +177,94 @@ class Gradients:
         return cls(G, GT, Gn)
 
 
+def factored_tangent(
+    grads: Gradients,
+    dV: FloatArray,
+    factors: TangentFactors,
+    h_weight: FloatArray | None,
+    sink: Sink,
+    condensed: tuple[FloatArray, FloatArray] | None = None,
+) -> None:
+    r"""Element stiffness matrices of a factored tangent, handed to ``sink`` block by block.
+
+    Parameters
+    ----------
+    grads : Gradients
+        Reference shape-function gradients in the layouts the products need, 1/mm.
+    dV : ndarray, shape (ncell, nqp)
+        Quadrature weights times the reference Jacobian, mm³.
+    factors : TangentFactors
+        Batch shape ``(ncell, nqp)``. ``factors.c`` must already include any volumetric
+        :math:`H \odot H` weight.
+    h_weight : ndarray, shape (ncell, nqp), or None
+        Extra weight of :math:`H \otimes H` (kPa), added to the factor ``h_index`` (the
+        volumetric initial-stress and pointwise :math:`U''` terms); ``h_index`` must be set
+        when this is given.
+    sink : callable
+        ``sink(cells, Ke)`` receives the element matrices ``Ke`` (n, nb, 3, 3, nb) of the
+        cells ``cells`` (a slice), mN/mm (kPa·mm); ``Ke`` is a buffer reused for the next
+        block (:func:`scatter`, :func:`into`).
+    condensed : (W, Q), optional
+        Statically condensed volumetric block :math:`C^T Q C` with
+        :math:`C_{r,ai} = \sum_q W_{rq} H_{iJ} \partial_J N_a` (for the dilatation modes
+        :math:`\psi_r`, :math:`W_{rq} = \psi_r J\, dV_q`, so that :math:`C` is the
+        derivative of :math:`\int \psi_r J\, dV`): ``W`` (ncell, npr, nqp) in mm³ and ``Q``
+        (ncell, npr, npr) in kPa/mm⁶.
+    """
+    G, GT, Gn = grads.G, grads.GT, grads.Gn
+    nel, nq, nb, _ = G.shape
+    m = factors.Y.shape[2]
+    hi = factors.h_index
+    npr = 0 if condensed is None else condensed[1].shape[1]
+    nt = m * nq + npr
+    n3 = 3 * nb
+    H = factors.H
+    Y, Z = factors.Y, factors.Z
+    wc = factors.c * dV
+    ws = np.repeat(factors.s * dV, 3, axis=1)  # per (q, J)
+    if h_weight is not None and hi is None:
+        raise ValueError("h_weight needs factors.h_index")
+    step = min(nel, _blocks_step(2 * nt * n3 + 2 * n3 * n3 + nq * n3))
+    # buffers of one block, reused (they stay in cache)
+    Lb = np.empty((step, nt, n3))  # rows (q, r) | pressure modes; columns (a, i)
+    Rb = np.empty((step, nt, n3))  # rows as L; columns (k, b)
+    Kb = np.empty((step, n3, n3))  # rows (a, i), columns (k, b)
+    Sb = np.empty((step, n3, n3))  # rows (a, k), columns (i, b)
+    for s0 in range(0, nel, step):
+        sl = slice(s0, min(s0 + step, nel))
+        n = sl.stop - sl.start
+        L, R, K, S = Lb[:n], Rb[:n], Kb[:n], Sb[:n]
+        GTs = GT[sl]  # (n, q, J, b)
+        Lq = L[:, : m * nq].reshape(n, nq, m, nb, 3)
+        np.einsum("eqaJ,eqriJ->eqrai", G[sl], Y[sl], optimize=True, out=Lq)
+        Zs = Z[sl] * dV[sl, :, None, None, None]
+        if h_weight is not None:
+            assert hi is not None
+            Zs[:, :, hi] += (h_weight[sl] * dV[sl])[:, :, None, None] * H[sl]
+        np.matmul(Zs.reshape(n, nq, 3 * m, 3), GTs, out=R[:, : m * nq].reshape(n, nq, 3 * m, nb))
+        HGt = np.matmul(H[sl], GTs)  # (n, q, i, b): h_bi
+        if condensed is not None:
+            W, Q = condensed[0][sl], condensed[1][sl]
+            Ck = np.matmul(W, HGt.reshape(n, nq, n3))  # (n, npr, (k, b)): C in column layout
+            L[:, m * nq :] = np.swapaxes(Ck.reshape(n, npr, 3, nb), -1, -2).reshape(n, npr, n3)
+            np.matmul(Q, Ck, out=R[:, m * nq :])
+        np.matmul(np.swapaxes(L, 1, 2), R, out=K)
+        # c H_iL H_kJ: rows (a, k), columns (i, b), then the 3x3 blocks transposed
+        if hi is not None:
+            h = Lq[:, :, hi].reshape(n, nq, n3)  # (n, q, (a, k))
+        else:
+            h = np.einsum("eqaJ,eqiJ->eqai", G[sl], H[sl], optimize=True).reshape(n, nq, n3)
+        Rs = (HGt * wc[sl, :, None, None]).reshape(n, nq, n3)
+        np.matmul(np.swapaxes(h, 1, 2), Rs, out=S)
+        # s δ_ik ∇N_a·∇N_b
+        Gns = Gn[sl]
+        lap = np.matmul(Gns, np.swapaxes(Gns * ws[sl, None, :], 1, 2))  # (n, a, b)
+        S.reshape(n, nb, 9, nb)[:, :, ::4, :] += lap[:, :, None, :]
+        Ke = K.reshape(n, nb, 3, 3, nb)
+        Ke += S.reshape(n, nb, 3, 3, nb).transpose(0, 1, 3, 2, 4)
+        sink(sl, Ke)
+
+
 def _blocks_step(per_cell: int) -> int:
     return max(1, _BLOCK_FLOATS // max(per_cell, 1))
 
@@ -219,11 +273,11 @@ def dense_tangent(
     grads: Gradients,
     dV: FloatArray,
     A: FloatArray,
-    Ke: FloatArray,
+    sink: Sink,
     condensed: tuple[FloatArray, FloatArray] | None = None,
     H: FloatArray | None = None,
 ) -> None:
-    r"""Element stiffness matrices of a full tangent ``A``, written into ``Ke``.
+    r"""Element stiffness matrices of a full tangent ``A``, handed to ``sink`` block by block.
 
     Parameters
     ----------
@@ -233,8 +287,8 @@ def dense_tangent(
         Quadrature weights times the reference Jacobian, mm³.
     A : ndarray, shape (ncell, nqp, 3, 3, 3, 3)
         ``dP_iJ/dF_kL`` (kPa), including every pointwise volumetric term.
-    Ke : ndarray, shape (ncell, nb, 3, 3, nb)
-        Output, mN/mm; overwritten.
+    sink : callable
+        Receives the element matrices block by block, as in :func:`factored_tangent`.
     condensed : (W, Q), optional
         Condensed volumetric block as in :func:`factored_tangent`; needs ``H``.
     H : ndarray, shape (ncell, nqp, 3, 3), optional
@@ -243,14 +297,16 @@ def dense_tangent(
     G, GT, Gn = grads.G, grads.GT, grads.Gn
     nel, nq, nb, _ = G.shape
     n3 = 3 * nb
-    step = _blocks_step(nq * 81 + nq * 27 * nb + 2 * n3 * n3)
+    step = min(nel, _blocks_step(nq * 81 + nq * 27 * nb + 2 * n3 * n3))
+    Kb = np.empty((step, nb, 3, 3, nb))
     for s0 in range(0, nel, step):
         sl = slice(s0, min(s0 + step, nel))
         n = sl.stop - sl.start
+        Ke = Kb[:n]
         # (e, q, J, i, k, L) scaled by dV in one pass
         Ap = A[sl].transpose(0, 1, 3, 2, 4, 5) * dV[sl, :, None, None, None, None]
         B = np.matmul(Ap.reshape(n, nq, 27, 3), GT[sl])  # (e, q, (J, i, k), b)
-        np.matmul(Gn[sl], B.reshape(n, nq * 3, 9 * nb), out=Ke[sl].reshape(n, nb, 9 * nb))
+        np.matmul(Gn[sl], B.reshape(n, nq * 3, 9 * nb), out=Ke.reshape(n, nb, 9 * nb))
         if condensed is not None:
             assert H is not None
             W, Q = condensed[0][sl], condensed[1][sl]
@@ -258,4 +314,5 @@ def dense_tangent(
             Ck = np.matmul(W, cg)  # (n, npr, (k, b))
             npr = Ck.shape[1]
             Ca = np.swapaxes(Ck.reshape(n, npr, 3, nb), -1, -2).reshape(n, npr, n3)
-            Ke[sl] += np.matmul(np.swapaxes(Ca, 1, 2), np.matmul(Q, Ck)).reshape(n, nb, 3, 3, nb)
+            Ke += np.matmul(np.swapaxes(Ca, 1, 2), np.matmul(Q, Ck)).reshape(n, nb, 3, 3, nb)
+        sink(sl, Ke)

@@ -125,12 +125,12 @@ def test_factored_and_dense_element_matrices_agree(element, rng):
     Ke_f = np.empty((nel, nb, 3, 3, nb))
     Ke_d = np.empty_like(Ke_f)
     hw = rng.uniform(0.5, 2.0, (nel, nq))  # any H⊗H weight
-    kernel.factored_tangent(grads, body.dV, fac, hw, Ke_f)
+    kernel.factored_tangent(grads, body.dV, fac, hw, kernel.into(Ke_f))
     H = fac.H
     A = fac.dense() + hw[..., None, None, None, None] * (
         H[..., :, :, None, None] * H[..., None, None, :, :]
     )
-    kernel.dense_tangent(grads, body.dV, A, Ke_d)
+    kernel.dense_tangent(grads, body.dV, A, kernel.into(Ke_d))
     np.testing.assert_allclose(Ke_f, Ke_d, rtol=0.0, atol=RTOL * np.abs(Ke_d).max())
     # symmetric element matrices: (a, i, k, b) <-> (b, k, i, a)
     np.testing.assert_allclose(
