@@ -18,6 +18,13 @@ Problem: a 25 x 17 x 10 mm box of 25 x 17 x 10 = 4250 hexahedra (hex8: 15.4k dof
 Each part runs in its own process so that its peak memory (``ru_maxrss``) is its own.
 Run ``python benchmarks/bench_mechanics.py`` (``--quick`` for a 10 x 7 x 4 box); it prints a
 Markdown table and the ratios. Timings are wall-clock seconds on this machine.
+
+Before/after (``benchmarks/results/mechanics.md``): run single parts with each checkout on
+``PYTHONPATH`` (the old one from a temporary ``git worktree``), alternating, several times:
+``--part ours --element hex8`` (the Newton run: assembly and solve per iteration) and
+``--part assembly --element hex8 --mesh phantom`` (one residual-and-tangent assembly at a
+random displacement, min and median of 7; ``--mesh box`` is the box above, ``phantom`` the
+paper phantom's 4320-cell cylinder that ``benchmarks/bench_tracking.py`` tracks with).
 """
 
 from __future__ import annotations
@@ -95,6 +102,34 @@ def part_ours(element: str, divisions) -> dict:
         "assembly_per_iteration": res.time_assembly / res.iterations,
         "solve_per_iteration": res.time_solve / res.iterations,
         "converged": res.converged,
+        "peak_mb": _peak_mb(),
+    }
+
+
+def part_assembly(element: str, divisions, mesh: str) -> dict:
+    from harpx.mechanics import Body, NeoHookean, box, cylinder
+    from harpx.mechanics.assembly import internal_forces, sparsity
+
+    if mesh == "phantom":  # harpx.scenes.phantom "paper": 48 x 6 rings + core, 10 layers
+        spec = cylinder(60.0, 15.0, n_radial=6, n_circumferential=48, n_axial=10)
+    else:
+        spec = box(tuple(float(d) for d in divisions), divisions)
+    body = Body(spec, NeoHookean(C1, KAPPA), element=element)
+    sparsity(body)
+    rng = np.random.default_rng(0)
+    u = (0.02 if element == "hex8" else 0.01) * rng.standard_normal(body.ndof)
+    internal_forces(body, u)  # warm-up (cached gradient layouts)
+    times = []
+    for _ in range(7):
+        t0 = time.perf_counter()
+        internal_forces(body, u)
+        times.append(time.perf_counter() - t0)
+    return {
+        "mesh": mesh,
+        "ncell": body.ncell,
+        "ndof": body.ndof,
+        "assembly_min": min(times),
+        "assembly_median": float(np.median(times)),
         "peak_mb": _peak_mb(),
     }
 
@@ -255,7 +290,8 @@ def _run(part: str, element: str, divisions, extra: list[str]) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--part", choices=["ours", "peer", "solvers"])
+    ap.add_argument("--part", choices=["ours", "peer", "solvers", "assembly"])
+    ap.add_argument("--mesh", choices=["box", "phantom"], default="box")
     ap.add_argument("--element", default="hex8")
     ap.add_argument("--divisions", type=int, nargs=3, default=list(DIVISIONS))
     ap.add_argument("--peer-iterations", type=int, default=None)
@@ -266,6 +302,8 @@ def main() -> None:
     if args.part:
         if args.part == "ours":
             res = part_ours(args.element, divisions)
+        elif args.part == "assembly":
+            res = part_assembly(args.element, divisions, args.mesh)
         elif args.part == "peer":
             n = args.peer_iterations or (3 if args.element == "hex8" else 1)
             res = part_peer(args.element, divisions, n)
