@@ -23,6 +23,7 @@ from pathlib import Path
 
 from harpx.imaging.harp import extract_phase
 from harpx.inverse import (
+    ACTIVATION_TRACKING,
     calibrate_activation,
     correct_activation,
     estimate_activation,
@@ -162,13 +163,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", default="paper", choices=["paper", "small"])
     parser.add_argument("--seed", type=int, default=0)
-    # tracking settings left out are the tracker's defaults, as for every scene
+    # tracking settings left out are the activation chain's (harpx.inverse.ACTIVATION_TRACKING:
+    # the tracker's defaults with the target at twice the noise floor)
     parser.add_argument("--epsilon", type=float, help="target ε, rad (default: automatic)")
     parser.add_argument("--penalty", type=float, help="starting relative penalty")
     parser.add_argument("--ramp", type=int, help="penalty stages per frame")
     args = parser.parse_args()
     chosen = {"epsilon": args.epsilon, "penalty": args.penalty, "ramp": args.ramp}
-    settings = {k: v for k, v in chosen.items() if v is not None}
+    settings = {"epsilon_factor": ACTIVATION_TRACKING.epsilon_factor}
+    settings.update({k: v for k, v in chosen.items() if v is not None})
     table = run(args.size, args.seed, settings)
     OUT.mkdir(exist_ok=True)
     path = OUT / f"tongue_scene_{args.size}.md"

@@ -125,6 +125,7 @@ class HarpAccessor:
         method: Method = "penalty",
         epsilon: float | None = None,
         epsilon_factor: float = 1.0,
+        plateau_factor: float = 2.0,
         epsilon_min: float = 0.02,
         penalty: float = 1.0,
         penalty_limit: float = 1e4,
@@ -153,7 +154,8 @@ class HarpAccessor:
 
         return track(
             self._ds, body, method=method, epsilon=epsilon, epsilon_factor=epsilon_factor,
-            epsilon_min=epsilon_min, penalty=penalty, penalty_limit=penalty_limit, ramp=ramp,
+            plateau_factor=plateau_factor, epsilon_min=epsilon_min, penalty=penalty,
+            penalty_limit=penalty_limit, ramp=ramp,
             multiplier_tolerance=multiplier_tolerance, max_updates=max_updates,
             predictor=predictor, robust_scale=robust_scale, regularization=regularization,
             tolerance=tolerance, max_iterations=max_iterations, dirichlet=dirichlet, terms=terms,

@@ -13,7 +13,10 @@ Three kinds of :class:`xarray.Dataset` flow through harpx. Each carries its kind
     (z, y, x), a voxel-averaged density in [0, 1]; ``displacement_true`` (time, axis, z, y,
     x) is NaN outside it. :func:`harpx.imaging.stacks.tagged_dataset` builds one.
 ``phase/1``
-    ``phase`` (tag, time, z, y, x) wrapped to [-π, π) and ``magnitude`` (same dims) >= 0.
+    ``phase`` (tag, time, z, y, x) wrapped to [-π, π) and ``magnitude`` (same dims) >= 0;
+    optional ``harmonic_noise`` (tag): the noise standard deviation of each tag's complex
+    harmonic image, in the units of ``magnitude`` (:mod:`harpx.imaging.noise`), from which
+    the tracker derives the noise floor of its residual.
 ``tracked/1``
     ``points`` (node, axis), ``cells`` (cell, vertex) and ``displacement`` (time, node, axis),
     plus optional strain and per-frame diagnostics.
@@ -103,6 +106,7 @@ UNITS: dict[str, str] = {
     "displacement_true": "mm",
     "phase": "rad",
     "magnitude": "1",
+    "harmonic_noise": "1",
     "points": "mm",
     "cells": "1",
     "region": "1",
@@ -135,6 +139,7 @@ LONG_NAMES: dict[str, str] = {
     "displacement_true": "true Lagrangian displacement",
     "phase": "harmonic phase",
     "magnitude": "harmonic image magnitude",
+    "harmonic_noise": "noise standard deviation of the complex harmonic image",
     "points": "reference position of node",
     "cells": "cell connectivity",
     "region": "region label of cell",
@@ -273,6 +278,7 @@ SCHEMAS: dict[str, dict[str, VarSpec]] = {
     SCHEMA_PHASE: {
         "phase": VarSpec(IMAGE_DIMS, coord=False),
         "magnitude": VarSpec(IMAGE_DIMS, coord=False),
+        "harmonic_noise": VarSpec(("tag",), required=False),
         **_COMMON_IMAGE_COORDS,
     },
     SCHEMA_TRACKED: {

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from harpx.errors import SchemaError
 from harpx.imaging._kernels import harmonic_phase, refine_linear, refine_positions
 from harpx.imaging.fft import default_threads
+from harpx.imaging.noise import harmonic_noise
 from harpx.schema import AXES, GRID_DIMS, standard_attrs, validate
 
 __all__ = ["extract_phase", "refinement_factors"]
@@ -305,6 +306,9 @@ def extract_phase(
             dims, magnitude.transpose(*dims).data, standard_attrs("magnitude")
         ),
     }
+    data_vars["harmonic_noise"] = harmonic_noise(
+        image.isel(time=0), freq_var, slice_var, spacing=spacing, radius=float(radius)
+    )
     if "mask" in ds.data_vars or "mask" in ds.coords:
         mask = _refine_nearest(ds["mask"].variable, factor_of)
         mask.attrs = {**standard_attrs("mask"), **ds["mask"].attrs}

@@ -235,13 +235,16 @@ class TongueScene:
         phase = extract_phase(self.tagged if tagged is None else tagged)
         return track(phase, body, dirichlet=list(self.dirichlet), **settings)
 
-    def measure(self, body: Body, displacement: FloatArray, *, seed: int = 1) -> xr.Dataset:
+    def measure(
+        self, body: Body, displacement: FloatArray, *, seed: int = 1, **settings: Any
+    ) -> xr.Dataset:
         """Image a motion of ``body`` like the scene's data and track it the same way.
 
         The measurement chain for :func:`harpx.inverse.calibration.calibrate_activation`:
-        ``self.track(body, self.acquire(body, displacement, seed=seed))``.
+        ``self.track(body, self.acquire(body, displacement, seed=seed), **settings)``; pass
+        the settings the data were tracked with.
         """
-        return self.track(body, self.acquire(body, displacement, seed=seed))
+        return self.track(body, self.acquire(body, displacement, seed=seed), **settings)
 
     def true_fiber_stretch(self, body: Body) -> xr.DataArray:
         """Fibre stretch per cell of ``body`` under the true motion, (time, cell).

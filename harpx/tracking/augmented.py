@@ -16,7 +16,12 @@ from harpx.tracking.penalty import STALL
 
 
 def track_frame_augmented(
-    problem: FrameProblem, u: FloatArray, *, target: float, penalty: float
+    problem: FrameProblem,
+    u: FloatArray,
+    *,
+    target: float,
+    penalty: float,
+    plateau: float | None = None,
 ) -> FrameOutcome:
     """Track one frame with the augmented-Lagrangian method.
 
@@ -31,6 +36,8 @@ def track_frame_augmented(
         Tracking residual ε to reach, rad.
     penalty : float
         Relative penalty λ (dimensionless).
+    plateau : float, optional
+        Highest ε at which a levelled-off raise counts as reached, rad (default: the target).
 
     Returns
     -------
@@ -53,7 +60,6 @@ def track_frame_augmented(
             if change < settings.multiplier_tolerance:
                 break
         if 2.0 * lam > settings.penalty_limit or outcome.epsilon > (1.0 - STALL) * best:
-            outcome.stalled = outcome.epsilon > (1.0 - STALL) * best
-            return outcome.finish(reached=False)
+            return outcome.finish_raise(best, STALL, target if plateau is None else plateau)
         best = min(best, outcome.epsilon)
         lam *= 2.0

@@ -52,7 +52,7 @@ from scipy import sparse
 from harpx._typing import FloatArray
 from harpx.imaging.sample import PhaseSampler, wrap
 from harpx.mechanics.assembly import sparsity
-from harpx.tracking.noise import epsilon_floor, reference_residual
+from harpx.tracking.noise import epsilon_floor, noise_floor, reference_residual
 from harpx.tracking.observability import Observability, observability
 
 if TYPE_CHECKING:
@@ -194,6 +194,14 @@ def _epsilon(weight: FloatArray, tag_valid: np.ndarray, residual: FloatArray) ->
     return float((w * np.abs(residual)).sum() / total)
 
 
+def _harmonic_noise(phase: xr.Dataset) -> FloatArray | None:
+    """The images' ``harmonic_noise`` per tag, or None where absent or not finite."""
+    if "harmonic_noise" not in phase.variables:
+        return None
+    sigma = np.asarray(phase["harmonic_noise"].values, dtype=np.float64).reshape(-1)
+    return sigma if bool(np.all(np.isfinite(sigma) & (sigma >= 0))) else None
+
+
 class PhaseConstraint:
     r"""Phase-conservation body force and Gauss–Newton tangent for one body and phase series.
 
@@ -295,6 +303,10 @@ class PhaseConstraint:
             self.points, self.volume, phi0, valid0, self.wavevectors
         )
         self.reference_magnitude = self._mean_magnitude(reference, self.points, valid0)
+        self.harmonic_noise = _harmonic_noise(phase)
+        self._reference_point_magnitude = (
+            None if self.harmonic_noise is None else reference.magnitude(self.points)[0]
+        )
         self.observability: Observability | None = None
         self.penalty = 0.0
         self.multipliers = np.zeros_like(phi0)
@@ -341,9 +353,20 @@ class PhaseConstraint:
     def epsilon_floor(self, u: FloatArray) -> float:
         """Noise floor of ε in the current frame with the tissue at ``u`` (rad).
 
-        See :mod:`harpx.tracking.noise`; the reference frame's floor is its own affine-fit
-        residual alone.
+        See :mod:`harpx.tracking.noise`: the phase noise of both frames where the images
+        carry ``harmonic_noise``; otherwise the affine-fit residual of the reference frame
+        (alone in frame 0), grown by the tags' fading.
         """
+        if self.harmonic_noise is not None and self._reference_point_magnitude is not None:
+            if self.frame == 0 or self._sampler is None:
+                magnitude, valid = self._reference_point_magnitude, self.reference_valid
+            else:
+                magnitude, now = self._sampler.magnitude(self.current_points(u))
+                valid = self.reference_valid & now[:, None]
+            return noise_floor(
+                self.harmonic_noise, self._reference_point_magnitude, magnitude, self.volume,
+                valid,
+            )  # fmt: skip
         share = (self.volume[:, None] * self.reference_valid).sum(axis=0)
         share = share / max(float(share.sum()), 1e-300)
         if self.frame == 0 or self._sampler is None:

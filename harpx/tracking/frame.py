@@ -89,13 +89,15 @@ class FrameOutcome:
     stages : int
         Penalty stages (penalty method) or multiplier updates (augmented Lagrangian).
     reached : bool
-        Whether ε met the target.
+        Whether ε met the target, or levelled off within the accepted plateau.
     converged : bool
         Whether the last full Gauss–Newton solve met its increment tolerance (rather than
         stopping at its iteration limit).
     stalled : bool
-        Whether the penalty raise stopped because ε no longer fell (the data's noise floor)
+        Whether the penalty raise stopped because ε no longer fell (the data's plateau)
         rather than at ``penalty_limit``.
+    plateau : bool
+        Whether the frame counts as reached at a plateau above its target.
     """
 
     u: FloatArray
@@ -107,6 +109,7 @@ class FrameOutcome:
     reached: bool = False
     converged: bool = True
     stalled: bool = False
+    plateau: bool = False
 
     @classmethod
     def start(cls, u: FloatArray) -> FrameOutcome:
@@ -122,6 +125,17 @@ class FrameOutcome:
         self.stages += 1
         if final_stage:
             self.converged = bool(result.converged)
+
+    def finish_raise(self, best: float, stall: float, accepted: float) -> FrameOutcome:
+        """End a penalty raise that did not meet the target (limit or plateau).
+
+        The raise stalled if the last ε fell by less than the fraction ``stall`` below the
+        ``best`` before it; a stalled raise whose ε is at most ``accepted`` counts as reached
+        (a plateau), any other is a miss.
+        """
+        self.stalled = self.epsilon > (1.0 - stall) * best
+        self.plateau = self.stalled and self.epsilon <= accepted
+        return self.finish(reached=self.plateau)
 
     def finish(self, *, reached: bool) -> FrameOutcome:
         """Mark whether the target was met and return self."""

@@ -6,8 +6,9 @@ penalty, so the parts of the body whose phase is unambiguous pull the model firs
 mechanics carries it past wrap ambiguities; the frame stops at the first stage whose ε meets
 the target. When the ramp's top does not reach it, λ_max is doubled (up to ``penalty_limit``)
 while each doubling still lowers ε by at least 3 %; past that the residual is at the noise
-floor of the data, and raising λ would only fit noise. The λ_max that worked starts the next
-frame.
+floor of the data, and raising λ would only fit noise: a plateau within the accepted level
+(:meth:`~harpx.tracking.settings.TrackingSettings.accepted_plateau`) counts as reached. The
+λ_max that worked starts the next frame.
 """
 
 from __future__ import annotations
@@ -25,7 +26,12 @@ RAMP_ITERATIONS = 3
 
 
 def track_frame_penalty(
-    problem: FrameProblem, u: FloatArray, *, target: float, penalty: float
+    problem: FrameProblem,
+    u: FloatArray,
+    *,
+    target: float,
+    penalty: float,
+    plateau: float | None = None,
 ) -> FrameOutcome:
     """Track one frame with the penalty method.
 
@@ -39,6 +45,9 @@ def track_frame_penalty(
         Tracking residual ε to reach, rad.
     penalty : float
         Relative λ_max at the top of the ramp (dimensionless).
+    plateau : float, optional
+        Highest ε at which a levelled-off raise counts as reached, rad (default: the target;
+        :meth:`TrackingSettings.accepted_plateau`).
 
     Returns
     -------
@@ -68,8 +77,7 @@ def track_frame_penalty(
                 return outcome.finish(reached=True)
         if 2.0 * lam_max > settings.penalty_limit or outcome.epsilon > (1.0 - STALL) * best:
             # the limit, or the data's noise floor: doubling λ no longer lowers ε
-            outcome.stalled = outcome.epsilon > (1.0 - STALL) * best
-            return outcome.finish(reached=False)
+            return outcome.finish_raise(best, STALL, target if plateau is None else plateau)
         best = min(best, outcome.epsilon)
         lam_max *= 2.0
         levels = [lam_max]

@@ -14,7 +14,14 @@ from harpx.tracking.resample import interpolate_displacement
 
 _DIAGNOSTIC_ATTRS = {
     "stages": {"units": "1", "long_name": "penalty stages or multiplier updates"},
-    "target_reached": {"units": "1", "long_name": "tracking residual met its target"},
+    "target_reached": {
+        "units": "1",
+        "long_name": "tracking residual met its target or levelled off within the accepted plateau",
+    },
+    "plateau": {
+        "units": "1",
+        "long_name": "tracking residual levelled off above its target, within the accepted plateau",
+    },
     "converged": {"units": "1", "long_name": "Gauss-Newton met its increment tolerance"},
     "epsilon_target": {"units": "rad", "long_name": "target tracking residual"},
     "epsilon_floor": {

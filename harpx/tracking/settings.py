@@ -54,11 +54,14 @@ class TrackingSettings:
         :mod:`harpx.tracking.noise`), but never below ``epsilon_min``, so that the penalty is
         not raised to fit noise. Passing a number keeps full control.
     epsilon_factor : float, default 1.0
-        Default target relative to the estimated noise floor (dimensionless, ≥ 1). At the
-        floor itself: measured with the robust weighting, a fit to the floor is as accurate
-        as 1.15 × floor on the paper phantom (0.132 against 0.129 mm mean) and more accurate
-        on the tongue (0.109 against 0.122) and the left ventricle; a fit well below it
-        (ε = 0.02) fits noise on the phantom (0.161 mm).
+        Default target relative to the estimated noise floor (dimensionless, ≥ 1).
+    plateau_factor : float, default 2.0
+        With the default target only: a frame whose ε levels off above the target (doubling
+        λ lowers it by less than 3 %: the images' own residual, e.g. the band-pass filter's
+        blur at the tissue's edges, not noise) has reached what the data allow if that
+        plateau is within ``plateau_factor`` times the noise floor (dimensionless, ≥ 1); it is
+        marked ``plateau`` and counts as reached. A plateau above that is a miss (warned).
+        A user-given ``epsilon`` is never relaxed.
     epsilon_min : float, default 0.02
         Lowest default target, rad (0.3 % of a tag period): on clean data (an estimated
         floor near 0) the target is this. It sits below the floors of the scenes' images
@@ -132,6 +135,7 @@ class TrackingSettings:
     method: Method = "penalty"
     epsilon: float | None = None
     epsilon_factor: float = 1.0
+    plateau_factor: float = 2.0
     epsilon_min: float = 0.02
     penalty: float = 1.0
     penalty_limit: float = 1e4
@@ -158,7 +162,7 @@ class TrackingSettings:
         set_ = object.__setattr__
         set_(self, "epsilon", _positive("epsilon", self.epsilon, allow_none=True))
         set_(self, "robust_scale", _positive("robust_scale", self.robust_scale, allow_none=True))
-        for name in ("epsilon_factor", "epsilon_min", "penalty", "penalty_limit",
+        for name in ("epsilon_factor", "plateau_factor", "epsilon_min", "penalty", "penalty_limit",
                      "multiplier_tolerance", "tolerance"):  # fmt: skip
             set_(self, name, _positive(name, getattr(self, name)))
         if self.epsilon_factor < 1.0:
@@ -166,6 +170,8 @@ class TrackingSettings:
                 f"epsilon_factor={self.epsilon_factor!r} must be ≥ 1: a target below the "
                 "images' noise floor cannot be reached"
             )
+        if self.plateau_factor < 1.0:
+            raise ValueError(f"plateau_factor={self.plateau_factor!r} must be ≥ 1")
         if self.penalty_limit < self.penalty:
             raise ValueError(
                 f"penalty_limit={self.penalty_limit!r} is below penalty={self.penalty!r}"
@@ -190,6 +196,23 @@ class TrackingSettings:
         if self.epsilon is not None:
             return float(self.epsilon)
         return float(max(self.epsilon_min, self.epsilon_factor * floor))
+
+    def accepted_plateau(self, floor: float) -> float:
+        """Highest ε at which a levelled-off penalty raise still counts as reached, rad.
+
+        ``plateau_factor`` times the frame's target for the default target; the target
+        itself when the user gave ``epsilon`` (a plateau above it is then always a miss).
+
+        Examples
+        --------
+        >>> TrackingSettings().accepted_plateau(0.03)
+        0.06
+        >>> TrackingSettings(epsilon=0.1).accepted_plateau(0.03)
+        0.1
+        """
+        if self.epsilon is not None:
+            return float(self.epsilon)
+        return float(self.plateau_factor * self.target(floor))
 
     def as_attrs(self) -> dict[str, Any]:
         """The settings as NetCDF-safe attributes (None written as -1 or "auto")."""

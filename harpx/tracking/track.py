@@ -132,9 +132,10 @@ def _warn_frames(phase: xr.Dataset, reached: np.ndarray, converged: np.ndarray,
         )
         warnings.warn(
             f"{len(missed)} frame(s) missed the tracking target: {detail}"
-            f"{' …' if len(missed) > 5 else ''}. The penalty stopped rising there (limit, or ε "
-            "no longer fell); 'target_reached' marks them. Pass a larger epsilon=, or a "
-            "larger penalty_limit= if the penalty reached its limit.",
+            f"{' …' if len(missed) > 5 else ''}. The penalty stopped rising there (its limit, or ε "
+            "levelled off above what noise explains: the model cannot follow the data, or a "
+            "tag jumped); 'target_reached' marks them. Pass a larger epsilon=, or a larger "
+            "penalty_limit= if the penalty reached its limit.",
             HarpxWarning,
             stacklevel=3,
         )
@@ -156,6 +157,7 @@ def track(
     method: Method = "penalty",
     epsilon: float | None = None,
     epsilon_factor: float = 1.0,
+    plateau_factor: float = 2.0,
     epsilon_min: float = 0.02,
     penalty: float = 1.0,
     penalty_limit: float = 1e4,
@@ -182,7 +184,7 @@ def track(
         ``phase/1`` dataset, or ``tagged/1`` (its phase is extracted with defaults first).
     body : Body
         Finite-element model in the reference configuration of frame 0 (mm).
-    method, epsilon, epsilon_factor, epsilon_min, penalty, penalty_limit, ramp, \
+    method, epsilon, epsilon_factor, plateau_factor, epsilon_min, penalty, penalty_limit, ramp, \
 multiplier_tolerance, max_updates, predictor, robust_scale, regularization, tolerance, \
 max_iterations, intorder, linear_solver, progress
         The tracking settings, documented (with units and defaults) on
@@ -203,7 +205,7 @@ max_iterations, intorder, linear_solver, progress
         ``tracked/1`` with displacement, strain, fibre stretch (if fibres), per-frame
         diagnostics ``epsilon``, ``epsilon_target``, ``epsilon_floor``, ``epsilon_cell``,
         ``penalty``, ``iterations``, ``stages``, ``wall_time``, ``target_reached``,
-        ``converged``; observability ``observed_directions`` (cell) and
+        ``plateau``, ``converged``; observability ``observed_directions`` (cell) and
         ``observed_fraction`` (cell, axis) with the unseen rigid motions in the attribute
         ``unseen_directions``; ``displacement_grid`` on the phase grid. Constraint points
         outside the field of view or the mask carry no force; a point inside some tags'
@@ -232,7 +234,8 @@ max_iterations, intorder, linear_solver, progress
     :mod:`harpx.tracking.constraint` for the wrap-safe form used here.
     """
     chosen = TrackingSettings(
-        method=method, epsilon=epsilon, epsilon_factor=epsilon_factor, epsilon_min=epsilon_min,
+        method=method, epsilon=epsilon, epsilon_factor=epsilon_factor,
+        plateau_factor=plateau_factor, epsilon_min=epsilon_min,
         penalty=penalty, penalty_limit=penalty_limit, ramp=ramp,
         multiplier_tolerance=multiplier_tolerance, max_updates=max_updates, predictor=predictor,
         robust_scale=robust_scale, regularization=regularization,
@@ -292,6 +295,7 @@ def track_with(
     stages = np.zeros(ntime, dtype=np.int64)
     reached = np.ones(ntime, dtype=bool)
     converged = np.ones(ntime, dtype=bool)
+    plateau = np.zeros(ntime, dtype=bool)
     wall = np.zeros(ntime)
     constraint.set_frame(0)
     st0 = constraint.state(U[0])
@@ -315,7 +319,10 @@ def track_with(
         floor[n] = constraint.epsilon_floor(u0)
         target[n] = settings.target(floor[n])
         timings.prediction += _time.perf_counter() - clock
-        outcome: FrameOutcome = strategy(problem, u0, target=target[n], penalty=lam)
+        outcome: FrameOutcome = strategy(
+            problem, u0, target=target[n], penalty=lam,
+            plateau=settings.accepted_plateau(floor[n]),
+        )  # fmt: skip
         if not np.isfinite(outcome.epsilon) or outcome.state is None:
             raise SchemaError(
                 f"frame {n} (time={float(phase['time'][n])!r} ms) has no valid phase at any "
@@ -330,6 +337,7 @@ def track_with(
         stages[n] = outcome.stages
         reached[n] = outcome.reached
         converged[n] = outcome.converged
+        plateau[n] = outcome.plateau
         wall[n] = _time.perf_counter() - start
     _warn_frames(phase, reached, converged, eps, target, floor)
     clock = _time.perf_counter()
@@ -358,6 +366,7 @@ def track_with(
         "stages": stages,
         "target_reached": reached,
         "converged": converged,
+        "plateau": plateau,
         "wall_time": wall,
         "observed_directions": (("cell",), seen.cell_rank),
         "observed_fraction": (("cell", "axis"), seen.cell_seen),

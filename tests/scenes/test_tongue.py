@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 import pytest
 
 from harpx.inverse import (
+    ACTIVATION_TRACKING,
     calibrate_activation,
     correct_activation,
     estimate_activation,
@@ -28,7 +31,8 @@ def body(scene):
 
 @pytest.fixture(scope="module")
 def tracked(scene, body):
-    return scene.track(body)
+    # the activation chain's settings: the defaults with the target at twice the floor
+    return scene.track(body, settings=ACTIVATION_TRACKING)
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +41,11 @@ def estimates(scene, body, tracked):
     direct = estimate_activation(tracked, body)
     corrected = correct_activation(direct, tracked, body, dirichlet=bcs)
     calibrated = calibrate_activation(
-        corrected, tracked, body, measure=scene.measure, dirichlet=bcs
+        corrected,
+        tracked,
+        body,
+        measure=partial(scene.measure, settings=ACTIVATION_TRACKING),
+        dirichlet=bcs,
     )
     return direct, corrected, calibrated
 
@@ -62,13 +70,15 @@ def test_images_follow_the_schema_and_the_tongue_moves_a_few_mm(scene):
 
 
 def test_tracking_reaches_epsilon_with_sub_voxel_error(scene, tracked):
-    # the tracker's default target: the images' noise floor itself (never below 0.02 rad);
-    # measured ε 0.036-0.039 rad against targets (= floors) 0.038-0.044 rad
+    # the activation chain's target: twice the images' phase-noise floor (never below
+    # 0.02 rad); measured floors 0.019-0.022 rad (SNR 20 CSPAMM), ε 0.036-0.039 rad. A
+    # frame may end at a plateau of ε within plateau_factor (2) × the target.
     assert tracked.target_reached.all(), tracked.epsilon.values
     eps, target = tracked.epsilon.values[1:], tracked.epsilon_target.values[1:]
     floor = tracked.epsilon_floor.values[1:]
-    np.testing.assert_allclose(target, np.maximum(floor, 0.02))
-    assert np.all(eps <= target) and np.all(target > 0.03) and np.all(target < 0.05), target
+    np.testing.assert_allclose(target, np.maximum(2.0 * floor, 0.02))
+    assert np.all(floor > 0.01) and np.all(floor < 0.03), floor
+    assert np.all(np.where(tracked.plateau.values[1:], eps <= 2.0 * target, eps <= target)), eps
     # the tracked grid is the acquired grid, up to round-off in its coordinates: use the
     # tagged coordinates so that xarray aligns every voxel
     grid = {d: scene.tagged[d] for d in ("z", "y", "x")}
