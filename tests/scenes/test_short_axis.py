@@ -131,3 +131,30 @@ def test_scene_states_its_boundary_condition_only(scene):
     bottom = nodes[np.abs(nodes[:, 2] - scene.motion.bottom) < 1e-9]
     # the truth does not move the held plane along z
     np.testing.assert_allclose(scene.motion(bottom, float(scene.tagged.time[-1]))[:, 2], 0.0)
+
+
+def test_in_plane_tags_only_track_no_worse_than_harp_and_say_what_they_cannot_see(scene):
+    from harpx.errors import HarpxWarning
+    from harpx.imaging.harptrack import track_harp
+    from harpx.tracking.track import track
+
+    phase = extract_phase(scene.tagged)
+    with pytest.warns(HarpxWarning, match="no tag sees motion along z"):
+        fe = track(phase, scene.body(), dirichlet=list(scene.dirichlet))
+    assert (fe.observed_directions.values == 2).all()
+    assert fe.target_reached.all(), fe.epsilon.values
+    harp = track_harp(phase, points=scene.tagged)
+    ours, theirs = scene.error_split(fe), scene.error_split(harp)
+    # in-plane, on the same images with the tracker's defaults: measured FE 0.193 / 0.530 mm
+    # against HARP 0.198 / 0.542 (mean / p95); the phase-noise target is what makes it so
+    # (the earlier affine floor, 0.067 rad, stopped at 0.237 / 0.655)
+    assert float(ours.in_plane_mean_all) <= float(theirs.in_plane_mean_all)
+    assert float(ours.in_plane_p95_all) <= float(theirs.in_plane_p95_all)
+    # through-plane the motion is the model's: no rigid drift, and the mean u_z stays within
+    # 0.4 mm of HARP's (which reports none, so its drift is the truth's mean shortening,
+    # up to 1.47 mm); measured FE at most 1.71 mm (the blurred phase under-reports wall
+    # thickening, so the nearly incompressible model shortens too little)
+    assert np.all(np.abs(ours.drift.values) <= np.abs(theirs.drift.values) + 0.4), (
+        ours.drift.values,
+        theirs.drift.values,
+    )
