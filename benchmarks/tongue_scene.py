@@ -170,7 +170,10 @@ def main() -> None:
     parser.add_argument("--ramp", type=int, help="penalty stages per frame")
     args = parser.parse_args()
     chosen = {"epsilon": args.epsilon, "penalty": args.penalty, "ramp": args.ramp}
-    settings = {"epsilon_factor": ACTIVATION_TRACKING.epsilon_factor}
+    settings = {
+        "epsilon_factor": ACTIVATION_TRACKING.epsilon_factor,
+        "blur_passes": ACTIVATION_TRACKING.blur_passes,
+    }
     settings.update({k: v for k, v in chosen.items() if v is not None})
     table = run(args.size, args.seed, settings)
     OUT.mkdir(exist_ok=True)

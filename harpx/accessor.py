@@ -135,6 +135,7 @@ class HarpAccessor:
         predictor: Predictor = "linear",
         robust_scale: float | None = 0.5,
         regularization: Regularization = "total",
+        blur_passes: int = 1,
         tolerance: float = 0.01,
         max_iterations: int = 20,
         dirichlet: Sequence[Any] = (),
@@ -158,7 +159,8 @@ class HarpAccessor:
             penalty_limit=penalty_limit, ramp=ramp,
             multiplier_tolerance=multiplier_tolerance, max_updates=max_updates,
             predictor=predictor, robust_scale=robust_scale, regularization=regularization,
-            tolerance=tolerance, max_iterations=max_iterations, dirichlet=dirichlet, terms=terms,
+            blur_passes=blur_passes, tolerance=tolerance, max_iterations=max_iterations,
+            dirichlet=dirichlet, terms=terms,
             intorder=intorder, linear_solver=linear_solver, progress=progress, settings=settings,
         )  # fmt: skip
 

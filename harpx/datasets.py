@@ -159,7 +159,7 @@ def _recipes() -> dict[str, Recipe]:
                 size,
                 "left ventricle in systole (CSPAMM, SA + LA)",
                 phase={"upsample": 1, "radius": 0.7},
-                track={"epsilon": 0.2},
+                track={},  # the tracker's defaults
             ),
             Recipe(
                 "tongue",

@@ -221,8 +221,10 @@ def extract_phase(
         ``phase/1``: ``phase`` (rad, in [-π, π)) and ``magnitude`` (image units), of ``dtype``, with
         dims (tag, time, z, y, x) on the refined grid; the tag coords and ``time``; ``mask``
         (nearest native voxel), ``body`` and ``displacement_true`` (linear interpolation, NaN where
-        a neighbour is NaN) when present. Attributes: ``harpx_schema="phase/1"``, ``sequence``,
-        ``upsample``, ``radius`` and ``upsample_factors`` (z, y, x).
+        a neighbour is NaN) when present; ``harmonic_noise`` (tag), the noise standard deviation of
+        each harmonic image (:mod:`harpx.imaging.noise`). Attributes:
+        ``harpx_schema="phase/1"``, ``sequence``, ``upsample``, ``radius``, ``bandpass="disk"``
+        (the filter the tracker's blur correction models) and ``upsample_factors`` (z, y, x).
 
     Raises
     ------
@@ -324,6 +326,7 @@ def extract_phase(
         sequence=ds.attrs["sequence"],
         upsample=int(upsample),
         radius=float(radius),
+        bandpass="disk",
         upsample_factors=[int(m) for m in factors],
     )
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)

@@ -75,8 +75,8 @@ def slice_noise(
     >>> x = np.arange(96) * 1.2
     >>> tags = 100 * (1 + np.cos(2 * np.pi * x / 7))[None, :] * np.ones((96, 1))
     >>> noisy = tags + rng.normal(0, 3.0, (4, 96, 96))
-    >>> round(slice_noise(noisy, (1.2, 1.2), (0.0, 1 / 7)), 1)
-    3.0
+    >>> bool(abs(slice_noise(noisy, (1.2, 1.2), (0.0, 1 / 7)) - 3.0) < 0.2)
+    True
     """
     a = np.asarray(slices, dtype=np.float64)
     d = np.asarray(spacing, dtype=np.float64)

@@ -39,8 +39,10 @@ class Timings:
     sampling, residual/tangent assembly (with step-halving checks) and linear solves;
     ``phase`` validates (or extracts) the phase images, ``setup`` builds the constraint
     points and samples the reference frame, ``prefilter`` prepares each frame's images for
-    interpolation, ``prediction`` picks each frame's starting guess and ``output`` builds the
-    ``tracked/1`` dataset (strain, resampling onto the image grid).
+    interpolation, ``prediction`` picks each frame's starting guess, ``blur`` predicts and
+    removes the band-pass blur between passes (:mod:`harpx.tracking.blur`) and ``output``
+    builds the ``tracked/1`` dataset (strain, resampling onto the image grid). Parts that
+    repeat in every pass add up.
     """
 
     sampling: float = 0.0
@@ -50,6 +52,7 @@ class Timings:
     setup: float = 0.0
     prefilter: float = 0.0
     prediction: float = 0.0
+    blur: float = 0.0
     output: float = 0.0
 
     def as_attrs(self) -> dict[str, float]:

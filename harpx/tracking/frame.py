@@ -97,7 +97,8 @@ class FrameOutcome:
         Whether the penalty raise stopped because ε no longer fell (the data's plateau)
         rather than at ``penalty_limit``.
     plateau : bool
-        Whether the frame counts as reached at a plateau above its target.
+        Whether the frame counts as reached above its target (ε levelled off, or the
+        penalty at its limit, within the accepted level).
     """
 
     u: FloatArray
@@ -130,11 +131,12 @@ class FrameOutcome:
         """End a penalty raise that did not meet the target (limit or plateau).
 
         The raise stalled if the last ε fell by less than the fraction ``stall`` below the
-        ``best`` before it; a stalled raise whose ε is at most ``accepted`` counts as reached
-        (a plateau), any other is a miss.
+        ``best`` before it; otherwise it stopped at ``penalty_limit``, where the data
+        outweigh the model 10⁴-fold and more penalty changes little. Either way an ε of at
+        most ``accepted`` counts as reached (``plateau``); above it the frame is a miss.
         """
         self.stalled = self.epsilon > (1.0 - stall) * best
-        self.plateau = self.stalled and self.epsilon <= accepted
+        self.plateau = self.epsilon <= accepted
         return self.finish(reached=self.plateau)
 
     def finish(self, *, reached: bool) -> FrameOutcome:

@@ -20,10 +20,14 @@ _DIAGNOSTIC_ATTRS = {
     },
     "plateau": {
         "units": "1",
-        "long_name": "tracking residual levelled off above its target, within the accepted plateau",
+        "long_name": "tracking residual ended above its target, within the accepted plateau",
     },
     "converged": {"units": "1", "long_name": "Gauss-Newton met its increment tolerance"},
     "epsilon_target": {"units": "rad", "long_name": "target tracking residual"},
+    "blur_correction": {
+        "units": "rad",
+        "long_name": "mean phase removed as the band-pass blur of the tracked motion",
+    },
     "epsilon_floor": {
         "units": "rad",
         "long_name": "noise floor of the tracking residual estimated from the images",

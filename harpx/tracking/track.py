@@ -14,6 +14,7 @@ from __future__ import annotations
 import time as _time
 import warnings
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any, cast
 
 import numpy as np
@@ -28,6 +29,7 @@ from harpx.mechanics.body import check_fits_image
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.schema import validate
 from harpx.tracking.augmented import track_frame_augmented
+from harpx.tracking.blur import blur_correction, deblurred
 from harpx.tracking.constraint import PhaseConstraint
 from harpx.tracking.equilibrium import Timings, split_dirichlet
 from harpx.tracking.frame import FrameOutcome, FrameProblem
@@ -167,6 +169,7 @@ def track(
     predictor: Predictor = "linear",
     robust_scale: float | None = 0.5,
     regularization: Regularization = "total",
+    blur_passes: int = 1,
     tolerance: float = 0.01,
     max_iterations: int = 20,
     dirichlet: Sequence[Any] = (),
@@ -185,12 +188,14 @@ def track(
     body : Body
         Finite-element model in the reference configuration of frame 0 (mm).
     method, epsilon, epsilon_factor, plateau_factor, epsilon_min, penalty, penalty_limit, ramp, \
-multiplier_tolerance, max_updates, predictor, robust_scale, regularization, tolerance, \
-max_iterations, intorder, linear_solver, progress
+multiplier_tolerance, max_updates, predictor, robust_scale, regularization, blur_passes, \
+tolerance, max_iterations, intorder, linear_solver, progress
         The tracking settings, documented (with units and defaults) on
         :class:`harpx.tracking.settings.TrackingSettings`. By default the target ε is the
-        noise floor the images allow in each frame (never below 0.02 rad), and each point's
-        pull is weighted robustly (``robust_scale``).
+        noise floor the images allow in each frame (never below 0.02 rad), each point's
+        pull is weighted robustly (``robust_scale``), and after a first pass over all
+        frames the band-pass blur predicted from it is removed from the images and every
+        frame tracked again (``blur_passes``, :mod:`harpx.tracking.blur`).
     dirichlet : sequence, optional
         Prescribed displacements (:class:`harpx.mechanics.loads.Fixed`, ``Prescribed``).
     terms : sequence, optional
@@ -205,7 +210,8 @@ max_iterations, intorder, linear_solver, progress
         ``tracked/1`` with displacement, strain, fibre stretch (if fibres), per-frame
         diagnostics ``epsilon``, ``epsilon_target``, ``epsilon_floor``, ``epsilon_cell``,
         ``penalty``, ``iterations``, ``stages``, ``wall_time``, ``target_reached``,
-        ``plateau``, ``converged``; observability ``observed_directions`` (cell) and
+        ``plateau``, ``converged``, ``blur_correction``; observability
+        ``observed_directions`` (cell) and
         ``observed_fraction`` (cell, axis) with the unseen rigid motions in the attribute
         ``unseen_directions``; ``displacement_grid`` on the phase grid. Constraint points
         outside the field of view or the mask carry no force; a point inside some tags'
@@ -238,7 +244,7 @@ max_iterations, intorder, linear_solver, progress
         plateau_factor=plateau_factor, epsilon_min=epsilon_min,
         penalty=penalty, penalty_limit=penalty_limit, ramp=ramp,
         multiplier_tolerance=multiplier_tolerance, max_updates=max_updates, predictor=predictor,
-        robust_scale=robust_scale, regularization=regularization,
+        robust_scale=robust_scale, regularization=regularization, blur_passes=blur_passes,
         tolerance=tolerance, max_iterations=max_iterations, intorder=intorder,
         linear_solver=linear_solver, progress=progress,
     )  # fmt: skip
@@ -254,6 +260,92 @@ max_iterations, intorder, linear_solver, progress
     return track_with(ds, body, chosen, dirichlet=dirichlet, terms=terms)
 
 
+@dataclass
+class _Pass:
+    """Arrays of one pass over every frame (:func:`_track_frames`)."""
+
+    U: np.ndarray
+    eps: np.ndarray
+    floor: np.ndarray
+    target: np.ndarray
+    eps_cell: np.ndarray
+    penalty: np.ndarray
+    iterations: np.ndarray
+    stages: np.ndarray
+    reached: np.ndarray
+    converged: np.ndarray
+    plateau: np.ndarray
+    wall: np.ndarray
+
+
+def _track_frames(
+    problem: FrameProblem, phase: xr.Dataset, start: float, earlier: _Pass | None = None
+) -> _Pass:
+    """Track every frame of ``phase`` in order, each started from the last (one pass).
+
+    A later pass (``earlier`` given) starts each frame from the earlier pass's result and
+    penalty for it, which the blur correction moves only a little.
+    """
+    body, constraint, settings = problem.body, problem.constraint, problem.settings
+    timings, terms = problem.timings, problem.terms
+    strategy = STRATEGIES[settings.method]
+    ntime = phase.sizes["time"]
+    out = _Pass(
+        U=np.zeros((ntime, body.ndof)), eps=np.zeros(ntime), floor=np.zeros(ntime),
+        target=np.zeros(ntime), eps_cell=np.full((ntime, body.ncell), np.nan),
+        penalty=np.zeros(ntime), iterations=np.zeros(ntime, dtype=np.int64),
+        stages=np.zeros(ntime, dtype=np.int64), reached=np.ones(ntime, dtype=bool),
+        converged=np.ones(ntime, dtype=bool), plateau=np.zeros(ntime, dtype=bool),
+        wall=np.zeros(ntime),
+    )  # fmt: skip
+    U = out.U
+    constraint.set_frame(0)
+    st0 = constraint.state(U[0])
+    out.eps[0] = st0.epsilon()
+    out.floor[0] = constraint.epsilon_floor(U[0])
+    out.target[0] = settings.target(out.floor[0])
+    out.eps_cell[0] = constraint.epsilon_cell(st0)
+    out.wall[0] = _time.perf_counter() - start
+    timings.setup += out.wall[0]
+    lam = settings.penalty
+    for n in tqdm(range(1, ntime), disable=not settings.progress, desc="tracking", unit="frame"):
+        begin = _time.perf_counter()
+        constraint.set_frame(n)
+        clock = _time.perf_counter()
+        timings.prefilter += clock - begin
+        u0 = U[n - 1]
+        if earlier is not None:
+            u0, lam = earlier.U[n], max(settings.penalty, float(earlier.penalty[n]))
+        elif settings.predictor == "linear" and n >= 2:
+            u0 = _predict(body, constraint, U[n - 1], U[n - 2])
+        if settings.regularization == "increment":
+            problem.offset = -_mechanical_force(body, U[n - 1], terms)
+        out.floor[n] = constraint.epsilon_floor(u0)
+        out.target[n] = settings.target(out.floor[n])
+        timings.prediction += _time.perf_counter() - clock
+        outcome: FrameOutcome = strategy(
+            problem, u0, target=out.target[n], penalty=lam,
+            plateau=settings.accepted_plateau(out.floor[n]),
+        )  # fmt: skip
+        if not np.isfinite(outcome.epsilon) or outcome.state is None:
+            raise SchemaError(
+                f"frame {n} (time={float(phase['time'][n])!r} ms) has no valid phase at any "
+                f"constraint point of the body: {explain_missing_data(phase, constraint.points, n)}"
+            )
+        U[n] = outcome.u
+        out.eps[n] = outcome.epsilon
+        out.eps_cell[n] = constraint.epsilon_cell(outcome.state)
+        out.penalty[n] = outcome.penalty
+        lam = max(settings.penalty, outcome.penalty)
+        out.iterations[n] = outcome.iterations
+        out.stages[n] = outcome.stages
+        out.reached[n] = outcome.reached
+        out.converged[n] = outcome.converged
+        out.plateau[n] = outcome.plateau
+        out.wall[n] = _time.perf_counter() - begin
+    return out
+
+
 def track_with(
     ds: xr.Dataset,
     body: Any,
@@ -266,7 +358,6 @@ def track_with(
     timings = Timings()
     clock = _time.perf_counter()
     phase = _as_phase(ds)
-    ntime = phase.sizes["time"]
     setup_start = _time.perf_counter()
     timings.phase = setup_start - clock
     swapped = phase_direction_mismatch(phase)
@@ -280,66 +371,28 @@ def track_with(
     fixed, _ = split_dirichlet(body, dirichlet)
     seen = constraint.observe(fixed)
     _warn_unseen(constraint)
-    problem = FrameProblem(
-        body, constraint, settings, LinearSolver(settings.linear_solver), dirichlet, terms,
-        timings,
-    )  # fmt: skip
-    strategy = STRATEGIES[settings.method]
-    U = np.zeros((ntime, body.ndof))
-    eps = np.zeros(ntime)
-    floor = np.zeros(ntime)
-    target = np.zeros(ntime)
-    eps_cell = np.full((ntime, body.ncell), np.nan)
-    lam_used = np.zeros(ntime)
-    iterations = np.zeros(ntime, dtype=np.int64)
-    stages = np.zeros(ntime, dtype=np.int64)
-    reached = np.ones(ntime, dtype=bool)
-    converged = np.ones(ntime, dtype=bool)
-    plateau = np.zeros(ntime, dtype=bool)
-    wall = np.zeros(ntime)
-    constraint.set_frame(0)
-    st0 = constraint.state(U[0])
-    eps[0] = st0.epsilon()
-    floor[0] = constraint.epsilon_floor(U[0])
-    target[0] = settings.target(floor[0])
-    eps_cell[0] = constraint.epsilon_cell(st0)
-    wall[0] = _time.perf_counter() - setup_start
-    timings.setup = wall[0]
-    lam = settings.penalty
-    for n in tqdm(range(1, ntime), disable=not settings.progress, desc="tracking", unit="frame"):
-        start = _time.perf_counter()
-        constraint.set_frame(n)
+    solver = LinearSolver(settings.linear_solver)
+    problem = FrameProblem(body, constraint, settings, solver, dirichlet, terms, timings)
+    result = _track_frames(problem, phase, setup_start)
+    wall = result.wall.copy()  # per frame, over every pass
+    correction_mean = np.zeros(phase.sizes["time"])
+    passes = settings.blur_passes if phase.attrs.get("bandpass") == "disk" else 0
+    for _ in range(passes):
         clock = _time.perf_counter()
-        timings.prefilter += clock - start
-        u0 = U[n - 1]
-        if settings.predictor == "linear" and n >= 2:
-            u0 = _predict(body, constraint, U[n - 1], U[n - 2])
-        if settings.regularization == "increment":
-            problem.offset = -_mechanical_force(body, U[n - 1], terms)
-        floor[n] = constraint.epsilon_floor(u0)
-        target[n] = settings.target(floor[n])
-        timings.prediction += _time.perf_counter() - clock
-        outcome: FrameOutcome = strategy(
-            problem, u0, target=target[n], penalty=lam,
-            plateau=settings.accepted_plateau(floor[n]),
+        correction = blur_correction(phase, body, result.U)
+        corrected = deblurred(phase, correction)
+        constraint = PhaseConstraint(
+            body, corrected, intorder=settings.intorder,
+            robust_scale=settings.effective_robust_scale,
         )  # fmt: skip
-        if not np.isfinite(outcome.epsilon) or outcome.state is None:
-            raise SchemaError(
-                f"frame {n} (time={float(phase['time'][n])!r} ms) has no valid phase at any "
-                f"constraint point of the body: {explain_missing_data(phase, constraint.points, n)}"
-            )
-        U[n] = outcome.u
-        eps[n] = outcome.epsilon
-        eps_cell[n] = constraint.epsilon_cell(outcome.state)
-        lam_used[n] = outcome.penalty
-        lam = max(settings.penalty, outcome.penalty)
-        iterations[n] = outcome.iterations
-        stages[n] = outcome.stages
-        reached[n] = outcome.reached
-        converged[n] = outcome.converged
-        plateau[n] = outcome.plateau
-        wall[n] = _time.perf_counter() - start
-    _warn_frames(phase, reached, converged, eps, target, floor)
+        constraint.observe(fixed)
+        problem = FrameProblem(body, constraint, settings, solver, dirichlet, terms, timings)
+        correction_mean = _mean_correction(correction)
+        timings.blur += _time.perf_counter() - clock
+        result = _track_frames(problem, corrected, _time.perf_counter(), result)
+        wall[1:] += result.wall[1:]
+    wall[0] = timings.setup + timings.blur  # frame 0: every pass's set-up and the corrections
+    _warn_frames(phase, result.reached, result.converged, result.eps, result.target, result.floor)
     clock = _time.perf_counter()
     attrs = {
         "method": settings.method,
@@ -354,24 +407,34 @@ def track_with(
         "seen_directions": int(seen.body_rank),
         "unseen_directions": "; ".join(seen.unseen_directions) or "none",
         "rigid_modes_removed": int(seen.unseen_modes.shape[0]),
+        "blur_passes_applied": int(passes),
         **timings.as_attrs(),
     }
     diagnostics: dict[str, Any] = {
-        "epsilon": eps,
-        "epsilon_target": target,
-        "epsilon_floor": floor,
-        "epsilon_cell": eps_cell,
-        "penalty": lam_used,
-        "iterations": iterations,
-        "stages": stages,
-        "target_reached": reached,
-        "converged": converged,
-        "plateau": plateau,
+        "epsilon": result.eps,
+        "epsilon_target": result.target,
+        "epsilon_floor": result.floor,
+        "epsilon_cell": result.eps_cell,
+        "penalty": result.penalty,
+        "iterations": result.iterations,
+        "stages": result.stages,
+        "target_reached": result.reached,
+        "converged": result.converged,
+        "plateau": result.plateau,
+        "blur_correction": correction_mean,
         "wall_time": wall,
         "observed_directions": (("cell",), seen.cell_rank),
         "observed_fraction": (("cell", "axis"), seen.cell_seen),
     }
-    out = tracked_dataset(body, U, phase, diagnostics, attrs)
+    out = tracked_dataset(body, result.U, phase, diagnostics, attrs)
     timings.output = _time.perf_counter() - clock
     out.attrs.update(timings.as_attrs())
     return out
+
+
+def _mean_correction(correction: np.ndarray) -> np.ndarray:
+    """Mean |correction| per frame over the grid voxels that carry one, rad."""
+    moved = np.abs(correction) > 0
+    total = moved.sum(axis=(0, 2, 3, 4))
+    size = np.abs(correction).sum(axis=(0, 2, 3, 4), dtype=np.float64)
+    return np.where(total > 0, size / np.maximum(total, 1), 0.0)

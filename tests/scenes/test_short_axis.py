@@ -145,16 +145,13 @@ def test_in_plane_tags_only_track_no_worse_than_harp_and_say_what_they_cannot_se
     assert fe.target_reached.all(), fe.epsilon.values
     harp = track_harp(phase, points=scene.tagged)
     ours, theirs = scene.error_split(fe), scene.error_split(harp)
-    # in-plane, on the same images with the tracker's defaults: measured FE 0.193 / 0.530 mm
-    # against HARP 0.198 / 0.542 (mean / p95); the phase-noise target is what makes it so
-    # (the earlier affine floor, 0.067 rad, stopped at 0.237 / 0.655)
+    # in-plane, on the same images with the tracker's defaults: measured FE 0.159 / 0.435 mm
+    # against HARP 0.198 / 0.542 (mean / p95); without the blur correction 0.193 / 0.530,
+    # and with the earlier affine noise floor (0.067 rad) 0.237 / 0.655
     assert float(ours.in_plane_mean_all) <= float(theirs.in_plane_mean_all)
     assert float(ours.in_plane_p95_all) <= float(theirs.in_plane_p95_all)
-    # through-plane the motion is the model's: no rigid drift, and the mean u_z stays within
-    # 0.4 mm of HARP's (which reports none, so its drift is the truth's mean shortening,
-    # up to 1.47 mm); measured FE at most 1.71 mm (the blurred phase under-reports wall
-    # thickening, so the nearly incompressible model shortens too little)
-    assert np.all(np.abs(ours.drift.values) <= np.abs(theirs.drift.values) + 0.4), (
-        ours.drift.values,
-        theirs.drift.values,
-    )
+    # through-plane the motion is the model's, inferred from the wall's thickening: HARP
+    # reports none, so its drift is the truth's mean shortening (up to 1.47 mm); measured FE
+    # at most 0.87 mm (1.71 without the blur correction, which under-reports thickening)
+    drift, none = np.abs(ours.drift.values).max(), np.abs(theirs.drift.values).max()
+    assert drift < 0.7 * none, (ours.drift.values, theirs.drift.values)
