@@ -22,9 +22,9 @@ re-implementations of the benchmark, e.g. the torchcor benchmark scripts):
   on the endocardium, base fixed; pressure and tension ramped together. Reported: deformed
   z of the endo- and epicardial apex and the deformed radius of the endocardial equator
   point (7, 0, 0). The paper's consensus values for this problem (its figure 8) were not
-  available offline: the table gives the relative difference to this script's finest
-  hex20 Q2/P1 level instead (``P3_REF``), which is a refinement study, not a
-  verification against other codes.
+  available offline: the rows have no reference (``P3_REF`` is empty; fill it to compare
+  against a chosen level), which makes them a refinement study, not a verification
+  against other codes.
 
 The paper's material is incompressible; here the uncoupled Guccione law with
 κ = 1000 C (modelling error ~C/κ ~ 1e-3) and the locking-free volumetric treatment of each
@@ -37,9 +37,11 @@ of the same hexahedral meshes
 evaluated with ``Body.displacement_at`` (at the dof node for curved cells, which the point
 locator does not take).
 
-Run ``python benchmarks/bench_community.py`` (``--quick`` for the two coarsest levels); it
-writes ``benchmarks/results/community.md``. Times are wall-clock seconds of ``solve`` on
-this machine (2 cores shared with other work: indicative only).
+Run ``python benchmarks/bench_community.py`` (``--quick`` for the two coarsest levels,
+``--levels``/``--lv-levels`` to pick levels); it writes ``benchmarks/results/community.md``
+(``--out`` elsewhere for a partial run: the results file is assembled from several runs).
+Times are wall-clock seconds of ``solve`` on this machine (2 cores shared with other work:
+indicative only).
 """
 
 from __future__ import annotations
@@ -85,8 +87,9 @@ ELEMENTS = [
 #: hex20 on 27-node geometry, edge/face nodes on the ellipsoids and the base plane (the
 #: beam is straight: not run for them)
 CURVED = {"hex20 Q2/P1 curved"}
-#: problem 3: finest hex20 Q2/P1 values of this script (level (16, 8, 2), see the results
-#: file) standing in for the unavailable consensus: endo apex z, epi apex z, endo equator r
+#: problem 3 references by quantity ("endo apex z", "epi apex z", "endo equator r"):
+#: empty, the paper's consensus (its figure 8) was not available offline; the rows print
+#: "-" and are read as a refinement study
 P3_REF: dict[str, float] = {}
 
 
@@ -238,6 +241,10 @@ def main() -> None:
                         help="element labels, e.g. hex8 'tet10 P2/P1'")  # fmt: skip
     parser.add_argument("--levels", nargs="+", type=int, default=None,
                         help="level indices (0 = coarsest) of every problem")  # fmt: skip
+    parser.add_argument("--lv-levels", nargs="+", default=None, metavar="NC,NL,NT",
+                        help="ventricle levels of problems 2 and 3 instead of the standard "
+                        "ones, as n_circumferential,n_longitudinal,n_transmural (e.g. "
+                        "12,6,2: an intermediate tet10 level)")  # fmt: skip
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args()
     beam_levels = [1, 2] if args.quick else [1, 2, 3]
@@ -245,6 +252,8 @@ def main() -> None:
     if args.levels is not None:
         beam_levels = [beam_levels[i] for i in args.levels if i < len(beam_levels)]
         lv_levels = [lv_levels[i] for i in args.levels if i < len(lv_levels)]
+    if args.lv_levels is not None:
+        lv_levels = [tuple(int(n) for n in lv.split(",")) for lv in args.lv_levels]
     elements = [e for e in ELEMENTS if e[0] in args.elements]
     header = ["| problem | element | quantity | value (mm) | reference (mm) | rel. error | cells "
               "| dofs | time (s) | load steps |", "|" + "---|" * 10]  # fmt: skip
