@@ -158,7 +158,7 @@ def track(
     *,
     method: Method = "penalty",
     epsilon: float | None = None,
-    epsilon_factor: float = 1.0,
+    epsilon_factor: float = 1.5,
     plateau_factor: float = 2.0,
     epsilon_min: float = 0.02,
     penalty: float = 1.0,
@@ -169,7 +169,7 @@ def track(
     predictor: Predictor = "linear",
     robust_scale: float | None = 0.5,
     regularization: Regularization = "total",
-    blur_passes: int = 1,
+    blur_passes: int | None = None,
     tolerance: float = 0.01,
     max_iterations: int = 20,
     dirichlet: Sequence[Any] = (),
@@ -376,7 +376,7 @@ def track_with(
     result = _track_frames(problem, phase, setup_start)
     wall = result.wall.copy()  # per frame, over every pass
     correction_mean = np.zeros(phase.sizes["time"])
-    passes = settings.blur_passes if phase.attrs.get("bandpass") == "disk" else 0
+    passes = settings.effective_blur_passes if phase.attrs.get("bandpass") == "disk" else 0
     for _ in range(passes):
         clock = _time.perf_counter()
         correction = blur_correction(phase, body, result.U)
