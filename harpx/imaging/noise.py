@@ -120,7 +120,7 @@ def harmonic_noise_block(
     Returns
     -------
     ndarray, shape (ntag,)
-        σ_H (image units; NaN where :func:`slice_noise` finds no signal-free spectrum).
+        σ_H (image units; NaN where :func:`slice_noise` has no axis along the tag lines).
     """
     out = np.full(volume.shape[0], np.nan)
     for t in range(volume.shape[0]):
