@@ -119,11 +119,11 @@ class TrackingSettings:
         with a pass), and a user-set ε keeps the paper's single pass unless asked. Applied
         only to phase images that say they come from the disk band-pass (``bandpass="disk"``, as
         :func:`~harpx.imaging.harp.extract_phase` writes); the result records the passes
-        made (``blur_passes_applied``). One pass roughly doubles the run
-        time; measured with the defaults it lowered the error on the left ventricle (0.366
-        → 0.283 mm mean, small scene), the short-axis scene (in-plane 0.167 → 0.129 mm,
-        paper size) and the brain phantom (p95 0.563 → 0.468 mm) and left the tongue as it
-        was (0.101 → 0.102 mm); a second pass raised the in-plane error again.
+        made (``blur_passes_applied``). One pass costs 2–2.5× the tracking time; at paper
+        size it lowered the mean error on the left ventricle (0.350 → 0.253 mm), the
+        short-axis scene (in-plane 0.168 → 0.128 mm) and the brain phantom (0.137 → 0.125 mm,
+        its largest error 0.84 → 1.09 mm at one edge voxel) and left the tongue as it was
+        (0.101 → 0.102 mm); a second pass raised the in-plane error again.
     tolerance : float, default 0.01
         Gauss–Newton convergence: largest nodal increment, mm.
     max_iterations : int, default 20
