@@ -377,6 +377,28 @@ class PhaseConstraint:
         )
         return epsilon_floor(self.reference_noise, self.reference_magnitude, magnitude, share)
 
+    def replace_images(self, phase: xr.Dataset) -> None:
+        """Read later frames from ``phase`` (same grid and tags, frame 0 unchanged).
+
+        Used by the blur correction (:mod:`harpx.tracking.blur`), which leaves the reference
+        frame as it is: the reference samples, the noise floor and the observability
+        worked out from it stay valid, so the set-up is not repeated.
+
+        Raises
+        ------
+        ValueError
+            If ``phase`` has another grid, other tags, or a different frame 0.
+        """
+        same = all(phase.sizes[d] == self.phase.sizes[d] for d in ("tag", "time", "z", "y", "x"))
+        first = [np.asarray(p["phase"].isel(time=0).values, dtype=np.float64)
+                 for p in (phase, self.phase)]  # fmt: skip
+        if not same or np.abs(wrap(first[0] - first[1])).max(initial=0.0) > 1e-5:
+            raise ValueError(
+                "replace_images needs images on the same grid and tags with frame 0 unchanged"
+            )
+        self.phase = phase
+        self._sampler = None
+
     def set_frame(self, time_index: int) -> None:
         """Target the phase images of frame ``time_index`` (prefilters them once)."""
         # the previous frame's sampler is done with: its tap buffer is reused

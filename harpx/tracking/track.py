@@ -381,12 +381,7 @@ def track_with(
         clock = _time.perf_counter()
         correction = blur_correction(phase, body, result.U)
         corrected = deblurred(phase, correction)
-        constraint = PhaseConstraint(
-            body, corrected, intorder=settings.intorder,
-            robust_scale=settings.effective_robust_scale,
-        )  # fmt: skip
-        constraint.observe(fixed)
-        problem = FrameProblem(body, constraint, settings, solver, dirichlet, terms, timings)
+        constraint.replace_images(corrected)  # frame 0 is uncorrected: its samples stay
         correction_mean = _mean_correction(correction)
         timings.blur += _time.perf_counter() - clock
         result = _track_frames(problem, corrected, _time.perf_counter(), result)

@@ -58,3 +58,21 @@ def test_predicted_blur_explains_the_phase_bias_of_a_thickening_wall():
         before = np.abs(wrap(grid_phase[n] - ideal))[wall].mean()
         after = np.abs(wrap(fixed[n] - ideal))[wall].mean()
         assert after < 0.45 * before, (n, before, after)
+
+
+def test_corrected_images_replace_later_frames_only():
+    from harpx.tracking.constraint import PhaseConstraint
+
+    scene = short_axis("small")
+    phase = extract_phase(scene.tagged)
+    constraint = PhaseConstraint(scene.body(), phase)
+    shifted = phase.copy()
+    shifted["phase"] = phase["phase"].copy()
+    shifted["phase"][:, 1:] = wrap(phase["phase"].values[:, 1:] + 0.1)
+    constraint.replace_images(shifted)  # frame 0 kept: accepted
+    assert constraint.phase is shifted
+    moved = shifted.copy()
+    moved["phase"] = shifted["phase"].copy()
+    moved["phase"][:, 0] = wrap(phase["phase"].values[:, 0] + 0.1)
+    with pytest.raises(ValueError, match="frame 0 unchanged"):
+        constraint.replace_images(moved)
