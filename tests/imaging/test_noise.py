@@ -102,10 +102,14 @@ def test_tracker_noise_floor_is_the_residual_of_noise_at_the_true_motion():
         still_u = np.zeros(body.ndof)
         floor, actual = constraint.epsilon_floor(still_u), constraint.epsilon_at(still_u)
         assert 0.9 * actual < floor < 1.5 * actual, (sequence, floor, actual)
-        # without the noise estimate (an older archive) the affine-fit estimate is used
+        # without the noise estimate (an older archive) the affine-fit estimate is used: in
+        # frame 0 the reference frame's residual per tag, weighted by each tag's data volume
         older = PhaseConstraint(body, phase.drop_vars("harmonic_noise"))
-        older.set_frame(1)
-        assert older.epsilon_floor(still_u) != pytest.approx(floor, rel=1e-3)
+        assert older.harmonic_noise is None
+        older.set_frame(0)
+        share = (older.volume[:, None] * older.reference_valid).sum(axis=0)
+        expected = float((share * older.reference_noise).sum() / share.sum())
+        assert older.epsilon_floor(still_u) == pytest.approx(expected, rel=1e-12)
         # noise-free images: no noise floor
         quiet = PhaseConstraint(body, extract_phase(clean))
         quiet.set_frame(1)
