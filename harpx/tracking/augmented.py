@@ -22,6 +22,7 @@ def track_frame_augmented(
     target: float,
     penalty: float,
     plateau: float | None = None,
+    warm: bool = False,
 ) -> FrameOutcome:
     """Track one frame with the augmented-Lagrangian method.
 
@@ -38,6 +39,9 @@ def track_frame_augmented(
         Relative penalty λ (dimensionless).
     plateau : float, optional
         Highest ε at which a levelled-off raise counts as reached, rad (default: the target).
+    warm : bool, default False
+        ``u`` is an earlier pass's result for this frame; accepted for the strategies' common
+        signature (this method has no ramp to skip: it starts at ``penalty`` anyway).
 
     Returns
     -------

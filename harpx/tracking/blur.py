@@ -47,8 +47,10 @@ from typing import Any
 
 import numpy as np
 import xarray as xr
+from scipy import sparse
 
 from harpx._typing import FloatArray
+from harpx.imaging.fft import fft2, ifft2
 from harpx.imaging.sample import wrap
 from harpx.schema import GRID_DIMS
 from harpx.tracking.resample import interpolate_displacement
@@ -56,6 +58,53 @@ from harpx.tracking.results import grid_points
 
 #: Splatted signal below this fraction of its largest modulus counts as outside the tissue.
 SIGNAL_FLOOR = 1e-3
+
+
+def splat_operator(
+    positions: FloatArray,
+    origin: FloatArray,
+    spacing: FloatArray,
+    shape: tuple[int, int, int],
+) -> sparse.csc_matrix:
+    """Trilinear spreading of values at ``positions`` onto a grid, as a sparse matrix.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (n, 3)
+        Positions (z, y, x), mm.
+    origin, spacing : ndarray, shape (3,)
+        First voxel centre and voxel spacing (z, y, x), mm.
+    shape : (int, int, int)
+        Grid size (z, y, x).
+
+    Returns
+    -------
+    scipy.sparse.csc_matrix, shape (nz * ny * nx, n)
+        Column ``j`` holds the 8 trilinear weights of point ``j`` at its cell's corners
+        (row-major voxel index); corners beyond the grid get weight 0. ``P @ values`` spreads
+        values of shape (n,) or (n, k) at once.
+    """
+    f = (np.asarray(positions, dtype=np.float64) - origin) / spacing
+    base = np.floor(f).astype(np.int64)
+    t = f - base
+    n = f.shape[0]
+    flat = np.zeros((n, 1), dtype=np.int64)
+    weight = np.ones((n, 1))
+    inside = np.ones((n, 1), dtype=bool)
+    stride = 1
+    for axis in (2, 1, 0):  # x, y, z: corner index (dz, dy, dx) in row-major order
+        index = base[:, axis, None] + np.arange(2)  # (n, 2)
+        w = np.stack([1.0 - t[:, axis], t[:, axis]], axis=1)
+        ok = (index >= 0) & (index < shape[axis])
+        flat = (index[:, :, None] * stride + flat[:, None, :]).reshape(n, -1)
+        weight = (w[:, :, None] * weight[:, None, :]).reshape(n, -1)
+        inside = (ok[:, :, None] & inside[:, None, :]).reshape(n, -1)
+        stride *= shape[axis]
+    return sparse.csc_matrix(
+        (np.where(inside, weight, 0.0).ravel(), np.where(inside, flat, 0).ravel(),
+         np.arange(0, 8 * n + 1, 8)),
+        shape=(stride, n),
+    )  # fmt: skip
 
 
 def splat(
@@ -90,27 +139,13 @@ def splat(
     >>> out.real.round(3).tolist()
     [[[0.375, 0.125], [0.375, 0.125]]]
     """
-    f = (np.asarray(positions, dtype=np.float64) - origin) / spacing
-    base = np.floor(f).astype(np.int64)
-    t = f - base
-    size = int(np.prod(shape))
-    real = np.zeros(size)
-    imag = np.zeros(size)
-    limit = np.asarray(shape)
-    for corner in np.ndindex(2, 2, 2):  # the 8 corners of each point's cell
-        offset = np.asarray(corner)
-        index = base + offset
-        weight = np.prod(np.where(offset == 1, t, 1.0 - t), axis=1)
-        inside = np.all((index >= 0) & (index < limit), axis=1)
-        flat = np.ravel_multi_index(index[inside].T, shape)
-        w = weight[inside] * values[inside]
-        real += np.bincount(flat, w.real, size)
-        imag += np.bincount(flat, w.imag, size)
-    return (real + 1j * imag).reshape(shape)
+    P = splat_operator(positions, origin, spacing, shape)
+    return np.asarray(P @ np.asarray(values, dtype=np.complex128)).reshape(shape)
 
 
 def _disk(phase: xr.Dataset, tag: Any, shape: tuple[int, ...], spacing: FloatArray) -> tuple:
-    """Low-pass disk of a tag in its slice plane on the grid, and the plane's grid axes."""
+    """Low-pass disk of a tag in its slice plane, shape (plane axis 1, plane axis 2), and the
+    grid axis normal to the plane."""
     one = phase.sel(tag=tag)
     normal = str(one["slice_axis"].values)
     plane = [a for a, d in enumerate(GRID_DIMS) if d != normal]
@@ -119,7 +154,13 @@ def _disk(phase: xr.Dataset, tag: Any, shape: tuple[int, ...], spacing: FloatArr
     radius = float(phase.attrs["radius"]) * f_plane
     nu = [np.fft.fftfreq(shape[a], spacing[a]) for a in plane]
     disk = (nu[0][:, None] ** 2 + nu[1][None, :] ** 2) <= radius**2
-    return disk.reshape([shape[a] if a in plane else 1 for a in range(3)]), plane
+    return disk, GRID_DIMS.index(normal)
+
+
+def _lowpass(S: np.ndarray, disk: np.ndarray, normal: int) -> np.ndarray:
+    """``S`` filtered slice by slice (planes normal to grid axis ``normal``) with ``disk``."""
+    stack = np.moveaxis(S, normal, 0)  # (slices, plane 1, plane 2): the plane axes keep order
+    return np.moveaxis(ifft2(fft2(stack) * disk), 0, normal)
 
 
 def blur_correction(phase: xr.Dataset, body: Any, U: FloatArray) -> np.ndarray:
@@ -149,39 +190,42 @@ def blur_correction(phase: xr.Dataset, body: Any, U: FloatArray) -> np.ndarray:
     points = grid_points(phase)  # (n, 3) x, y, z of the voxel centres
     lo = body.dof_points.min(axis=0) - 1e-9
     hi = body.dof_points.max(axis=0) + 1e-9
-    near = np.all((points >= lo) & (points <= hi), axis=1)
-    u = np.full((U.shape[0], points.shape[0], 3), np.nan)
-    if near.any():
-        u[:, near], _ = interpolate_displacement(body, U, points[near])
+    voxels = np.nonzero(np.all((points >= lo) & (points <= hi), axis=1))[0]
     if "body" in phase.variables:
         density = np.asarray(phase["body"].transpose(*GRID_DIMS).values, dtype=np.float64)
-        density = density.reshape(-1)
+        voxels = voxels[density.reshape(-1)[voxels] > 0]
+        density = density.reshape(-1)[voxels]
     else:
-        density = np.ones(points.shape[0])
-    tissue = np.isfinite(u[0]).all(axis=1) & (density > 0)
+        density = np.ones(voxels.size)
+    u = np.zeros((U.shape[0], 0, 3))
+    if voxels.size:
+        u, _ = interpolate_displacement(body, U, points[voxels])  # (time, voxel, 3)
+    tissue = np.isfinite(u[0]).all(axis=1)  # voxel centres inside the body's reference
+    reference, u, density = points[voxels[tissue]], u[:, tissue], density[tissue]
     wavevector = (
         2.0
         * np.pi
         * np.asarray(phase["tag_frequency"].values, dtype=np.float64)[:, None]
         * np.asarray(phase["tag_direction"].transpose("tag", "axis").sel(axis=["x", "y", "z"]))
+    )  # (tag, 3) rad/mm
+    tags = list(phase["tag"].values)
+    disks = [_disk(phase, tag, shape, spacing) for tag in tags]
+    # a tag's images hold only the tissue inside its acquisition (slab, field of view)
+    acquired = (
+        np.asarray(phase["mask"].transpose("tag", *GRID_DIMS).values, dtype=bool)
+        if "mask" in phase.variables
+        else np.ones((len(tags), *shape), dtype=bool)
     )
-    out = np.zeros((phase.sizes["tag"], phase.sizes["time"], *shape), dtype=np.float32)
-    reference = points[tissue]
-    for t, tag in enumerate(phase["tag"].values):  # ≤ 3 tags
-        disk, plane = _disk(phase, tag, shape, spacing)
-        # a tag's images hold only the tissue inside its acquisition (slab, field of view)
-        acquired = (
-            np.asarray(phase["mask"].sel(tag=tag).transpose(*GRID_DIMS).values, dtype=bool)
-            if "mask" in phase.variables
-            else np.ones(shape, dtype=bool)
-        )
-        for n in range(1, U.shape[0]):  # one splat and one filter per frame
-            un = u[n, tissue]
-            ok = np.isfinite(un).all(axis=1)
-            signal = density[tissue][ok] * np.exp(-1j * (un[ok] @ wavevector[t]))
-            moved = (reference[ok] + un[ok])[:, ::-1]  # (z, y, x)
-            S = splat(signal, moved, origin, spacing, shape) * acquired
-            blurred = np.fft.ifftn(np.fft.fftn(S, axes=plane) * disk, axes=plane)
+    out = np.zeros((len(tags), phase.sizes["time"], *shape), dtype=np.float32)
+    for n in range(1, U.shape[0]):  # one splat of every tag and one filter per tag and frame
+        un = u[n]
+        ok = np.isfinite(un).all(axis=1)
+        moved = (reference[ok] + un[ok])[:, ::-1]  # (z, y, x)
+        signals = density[ok, None] * np.exp(-1j * (un[ok] @ wavevector.T))  # (point, tag)
+        spread = splat_operator(moved, origin, spacing, shape) @ signals  # (voxel, tag)
+        for t, (disk, normal) in enumerate(disks):  # ≤ 3 tags
+            S = np.asarray(spread[:, t]).reshape(shape) * acquired[t]
+            blurred = _lowpass(S, disk, normal)
             has = np.abs(S) > SIGNAL_FLOOR * np.abs(S).max()
             out[t, n] = np.where(has, np.angle(blurred * np.conj(S)), 0.0)
     return out
@@ -190,7 +234,9 @@ def blur_correction(phase: xr.Dataset, body: Any, U: FloatArray) -> np.ndarray:
 def deblurred(phase: xr.Dataset, correction: np.ndarray) -> xr.Dataset:
     """``phase`` with ``correction`` (rad, as from :func:`blur_correction`) removed, wrapped."""
     values = np.asarray(phase["phase"].transpose("tag", "time", *GRID_DIMS).values)
-    corrected = wrap(values - correction).astype(values.dtype)
+    corrected = values.copy()
+    moved = correction != 0  # the correction is zero outside the tissue
+    corrected[moved] = wrap(values[moved] - correction[moved])
     out = phase.copy()
     out["phase"] = (("tag", "time", *GRID_DIMS), corrected, phase["phase"].attrs)
     return out

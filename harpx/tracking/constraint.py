@@ -49,7 +49,7 @@ import skfem
 import xarray as xr
 from scipy import sparse
 
-from harpx._typing import FloatArray
+from harpx._typing import FloatArray, IntArray
 from harpx.imaging.sample import PhaseSampler, wrap
 from harpx.mechanics.assembly import sparsity
 from harpx.tracking.noise import epsilon_floor, noise_floor, reference_residual
@@ -282,6 +282,7 @@ class PhaseConstraint:
         self.shape_values = np.stack([np.asarray(basis.basis[a][0]) for a in range(nb)], axis=-1)
         ncell, npc = self.shape_values.shape[:2]
         self.points_per_cell = npc
+        self._shared_products = _shared_shape_products(self.shape_values, body)
         self.points = np.ascontiguousarray(
             np.asarray(basis.global_coordinates()).transpose(1, 2, 0).reshape(-1, 3)
         )
@@ -485,6 +486,16 @@ class PhaseConstraint:
         G_w = G if st.robust_weight is None else G * st.robust_weight[..., None]
         M = np.matmul(G_w.transpose(0, 2, 1), G) * (lam * st.weight)[:, None, None]
         M = M.reshape(ncell, npc, 9)
+        pat = sparsity(self.body)
+        if self._shared_products is not None:
+            # every cell has the same N at its points: K[ab, (c, ik)] = Σ_q NN[q, ab] M[c, q, ik]
+            # is one matrix product, scattered in its own layout (a, b, c, i, k)
+            NN, positions = self._shared_products
+            K = NN.T @ M.transpose(1, 0, 2).reshape(npc, ncell * 9)
+            data: FloatArray = np.bincount(  # type: ignore[assignment]
+                positions, weights=K.ravel(), minlength=pat.nnz
+            )
+            return r, pat.matrix(data)
         # K_e[a, i, k, b] = Σ_q N_a N_b M_q[i, k], as (c, ab, q) @ (c, q, ik) in cell blocks
         Ke = np.empty((ncell, nb, 3, 3, nb))
         block = max(1, _BLOCK_FLOATS // (npc * nb * nb))
@@ -493,9 +504,8 @@ class PhaseConstraint:
             NN = (N[sl, :, :, None] * N[sl, :, None, :]).reshape(-1, npc, nb * nb)
             K = np.matmul(NN.transpose(0, 2, 1), M[sl])  # (c, ab, ik)
             Ke[sl] = K.reshape(-1, nb, nb, 3, 3).transpose(0, 1, 3, 4, 2)
-        pat = sparsity(self.body)
         # numpy's stub types every bincount as int; with float weights it is float64
-        data: FloatArray = np.bincount(  # type: ignore[assignment]
+        data = np.bincount(  # type: ignore[assignment]
             pat.element_positions.ravel(), weights=Ke.ravel(), minlength=pat.nnz
         )
         return r, pat.matrix(data)
@@ -518,3 +528,18 @@ class PhaseConstraint:
         total = w.sum(axis=1)
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(total > 0, (w * e).sum(axis=1) / total, np.nan)
+
+
+def _shared_shape_products(
+    shape_values: FloatArray, body: Body
+) -> tuple[FloatArray, IntArray] | None:
+    """``(N_a N_b per point, CSR positions in (a, b, cell, i, k) order)`` when every cell has
+    the same shape values at its constraint points (a mesh-wide quadrature on one element
+    type), else None; :meth:`PhaseConstraint.assemble` then needs one matrix product."""
+    first = shape_values[0]
+    if not np.array_equal(shape_values, np.broadcast_to(first, shape_values.shape)):
+        return None
+    npc, nb = first.shape
+    NN = (first[:, :, None] * first[:, None, :]).reshape(npc, nb * nb)
+    positions = sparsity(body).element_positions.transpose(1, 4, 0, 2, 3)  # (a, b, c, i, k)
+    return NN, np.ascontiguousarray(positions).ravel()

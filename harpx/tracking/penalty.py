@@ -32,6 +32,7 @@ def track_frame_penalty(
     target: float,
     penalty: float,
     plateau: float | None = None,
+    warm: bool = False,
 ) -> FrameOutcome:
     """Track one frame with the penalty method.
 
@@ -60,7 +61,7 @@ def track_frame_penalty(
     outcome = FrameOutcome.start(u)
     lam_max = float(penalty)
     ramp = settings.ramp
-    levels = list(lam_max * np.arange(1, ramp + 1) / ramp)
+    levels = [lam_max] if warm else list(lam_max * np.arange(1, ramp + 1) / ramp)
     best = np.inf
     while True:
         for stage, lam in enumerate(levels):

@@ -325,7 +325,7 @@ def _track_frames(
         timings.prediction += _time.perf_counter() - clock
         outcome: FrameOutcome = strategy(
             problem, u0, target=out.target[n], penalty=lam,
-            plateau=settings.accepted_plateau(out.floor[n]),
+            plateau=settings.accepted_plateau(out.floor[n]), warm=earlier is not None,
         )  # fmt: skip
         if not np.isfinite(outcome.epsilon) or outcome.state is None:
             raise SchemaError(

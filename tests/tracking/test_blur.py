@@ -26,6 +26,24 @@ def test_splat_conserves_the_sum_and_puts_it_at_the_centre_of_mass(rng):
     np.testing.assert_allclose(centre, [2.3, 1.1, 4.9], atol=1e-12)
 
 
+def test_splat_drops_the_corners_beyond_the_grid_and_spreads_columns_at_once():
+    from harpx.tracking.blur import splat_operator
+
+    # a point half a voxel outside the first z plane keeps only its in-grid half
+    edge = splat(np.array([2.0 + 0j]), np.array([[-0.5, 1.0, 1.0]]), np.zeros(3), np.ones(3),
+                 (3, 3, 3))  # fmt: skip
+    assert edge.sum() == pytest.approx(1.0, abs=1e-15)
+    assert edge[0, 1, 1] == pytest.approx(1.0, abs=1e-15)
+    positions = np.array([[0.2, 1.7, 0.4], [1.5, 0.5, 2.5], [-2.0, 0.0, 0.0]])
+    values = np.array([[1.0, 2j], [3.0, -1.0], [5.0, 5.0]])
+    P = splat_operator(positions, np.zeros(3), np.ones(3), (3, 3, 3))
+    both = (P @ values).reshape(3, 3, 3, 2)
+    for column in range(2):
+        one = splat(values[:, column], positions, np.zeros(3), np.ones(3), (3, 3, 3))
+        np.testing.assert_allclose(both[..., column], one, atol=1e-15)
+    assert P[:, 2].sum() == 0.0  # wholly outside: nothing lands
+
+
 def test_predicted_blur_explains_the_phase_bias_of_a_thickening_wall():
     # noise-free short-axis images of the known motion: the measured phase minus the ideal
     # k·X(x) is the band-pass's bias; the correction predicted from the true motion removes

@@ -187,6 +187,16 @@ def test_penalty_ramps_then_doubles_until_the_target():
     assert out.reached and out.penalty == 16.0 and out.stages == 4 and out.epsilon == 0.09
 
 
+def test_a_warm_frame_starts_at_the_top_of_the_ramp():
+    from harpx.tracking.penalty import track_frame_penalty
+
+    # an earlier pass's result: no relaxed stage, straight to λ_max, then the usual doubling
+    problem = _Scripted([0.3, 0.09], TrackingSettings(ramp=2, penalty_limit=100.0))
+    out = track_frame_penalty(problem, np.zeros(3), target=0.1, penalty=4.0, warm=True)
+    assert problem.penalties == [4.0, 8.0]
+    assert out.reached and out.stages == 2
+
+
 def test_penalty_stops_raising_at_the_noise_floor():
     from harpx.tracking.penalty import track_frame_penalty
 
@@ -216,6 +226,41 @@ def test_augmented_lagrangian_updates_multipliers_then_raises_the_penalty():
     assert problem.penalties == [2.0, 2.0, 4.0, 4.0]
     assert problem.constraint.multipliers[0, 0] == pytest.approx(2.0 + 2.0 + 4.0)
     assert out.reached and out.stages == 4
+
+
+def test_one_product_assembly_equals_the_cell_block_assembly(ideal, rng):
+    # every cell of a one-element-type mesh has the same N at its points: the tangent is one
+    # matrix product; the per-cell block path (kept for meshes without that) must agree
+    body, constraint = ideal
+    assert constraint._shared_products is not None
+    u = rng.normal(scale=0.2, size=body.ndof)
+    st = constraint.state(u)
+    r_fast, K_fast = constraint.assemble(st, 0.7)
+    shared, constraint._shared_products = constraint._shared_products, None
+    try:
+        r_block, K_block = constraint.assemble(st, 0.7)
+    finally:
+        constraint._shared_products = shared
+    np.testing.assert_array_equal(r_fast, r_block)
+    assert abs(K_fast - K_block).max() <= 1e-14 * abs(K_block).max()
+    np.testing.assert_array_equal(K_fast.indices, K_block.indices)
+
+
+def test_restriction_to_free_dofs_equals_slicing_and_follows_a_new_pattern(rng):
+    from scipy import sparse
+
+    from harpx.tracking.equilibrium import _Restriction
+
+    A = sparse.random(60, 60, density=0.1, format="csr", random_state=3)
+    A = (A + A.T + sparse.eye(60)).tocsr()
+    free = np.sort(rng.choice(60, 45, replace=False))
+    restrict = _Restriction(A, free)
+    B = A.copy()
+    B.data = rng.normal(size=B.nnz)  # same pattern, new values: gathered, not sliced
+    assert restrict.fits(B)
+    assert abs(restrict(B) - B[free][:, free]).max() == 0.0
+    C = (A + sparse.eye(60, k=7)).tocsr()  # a further term with its own entries
+    assert not restrict.fits(C)
 
 
 def test_multiplier_update_is_lambda_times_the_residual(ideal, rng):
