@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 import skfem
 from numpy.typing import ArrayLike
+from scipy import sparse
 from scipy.spatial import cKDTree
 
 from harpx._typing import FloatArray, IntArray
@@ -406,8 +407,16 @@ def displacement_at(body: Any, u: ArrayLike, points: ArrayLike) -> FloatArray:
     out = np.full((Ut.shape[0], cells.size, 3), np.nan)
     if inside.any():
         vals, _ = _shape_values(body.scalar_element, xi[inside].T, body.nbasis)
-        dofs = body.element_dofs[cells[inside]]  # (m, nb, 3)
-        out[:, inside] = np.einsum("ma,tmai->tmi", vals, Ut[:, dofs])
+        nodes = body.element_dofs[cells[inside], :, 0] // 3  # (m, nb): dof 3 s + i of node s
+        m, nb = nodes.shape
+        nnode = body.ndof // 3
+        # one sparse interpolation matrix for every frame (no (ntime, m, nb, 3) gather)
+        interpolate = sparse.csr_matrix(
+            (vals.ravel(), nodes.ravel(), np.arange(0, m * nb + 1, nb)), shape=(m, nnode)
+        )
+        nodal = Ut.reshape(-1, nnode, 3).transpose(1, 0, 2).reshape(nnode, -1)
+        values = np.asarray(interpolate @ nodal).reshape(m, -1, 3)  # (m, ntime, 3)
+        out[:, inside] = values.transpose(1, 0, 2)
     if U.ndim == 1:
         out = out[0]
     return out.reshape(X.shape) if U.ndim == 1 else out.reshape(Ut.shape[0], *X.shape)
