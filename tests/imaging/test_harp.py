@@ -157,7 +157,7 @@ def test_spamm_dc_peak_stays_out_of_the_filter():
 
     good, leaky = error(0.5), error(1.0)
     # noise free. SPAMM keeps the body's DC term, whose sharp-edge spectrum leaks into any
-    # band (REFERENCES §4.7.3): ~0.05-0.15 rad here, against ~0.01 for CSPAMM. A radius of
+    # band: ~0.05-0.15 rad here, against ~0.01 for CSPAMM. A radius of
     # |k| takes in the DC peak itself and the phase is lost (~1 rad).
     assert good < 0.15, f"SPAMM mean |phase error| with radius 0.5: {good:.4f} rad"
     assert leaky > 5 * good, f"radius 1.0: {leaky:.4f} rad vs radius 0.5: {good:.4f} rad"

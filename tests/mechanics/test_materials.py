@@ -1,6 +1,6 @@
 """Tests of harpx.mechanics.materials at material-point level.
 
-Energy conventions (REFERENCES section 2.1): ``NeoHookean(c1, kappa)`` is the *uncoupled*
+Energy conventions: ``NeoHookean(c1, kappa)`` is the *uncoupled*
 neo-Hookean solid W = C1 (J^(-2/3) I1 - 3) + kappa/2 (ln J)^2 (FEBio ``Mooney-Rivlin`` with
 c2 = 0, pressure_model 0), mu = 2 C1. ``Guccione`` is uncoupled in Ebar = (J^(-2/3) C - I)/2
 with the same log volumetric term.
@@ -138,7 +138,7 @@ def test_response_broadcasts_cell_fibers_over_quadrature_points(rng):
 
 
 # --------------------------------------------------------------------------------------
-# closed forms (REFERENCES sections 2.2-2.5)
+# closed forms of homogeneous stress states
 # --------------------------------------------------------------------------------------
 
 
@@ -151,7 +151,7 @@ def test_response_broadcasts_cell_fibers_over_quadrature_points(rng):
     ],
 )
 def test_neo_hookean_uniaxial_free_lateral_faces(lam, lt_table, sigma_table, P_table):
-    """F = diag(lam, lt, lt), sigma_yy = sigma_zz = 0 (REFERENCES 2.2, log U row).
+    """F = diag(lam, lt, lt), sigma_yy = sigma_zz = 0 (closed form with the log volumetric energy).
 
     For any uncoupled energy, sigma_yy = 0 and tr(dev sigma) = 0 give sigma_xx = 3 U'(J).
     """
@@ -174,7 +174,7 @@ def test_neo_hookean_uniaxial_free_lateral_faces(lam, lt_table, sigma_table, P_t
 
 @pytest.mark.parametrize("gamma", [0.1, 0.5, 2.0])
 def test_neo_hookean_simple_shear(gamma):
-    """F = I + gamma e1 (x) e2, J = 1 (REFERENCES 2.3): exact for the uncoupled energy."""
+    """F = I + gamma e1 (x) e2, J = 1: exact for the uncoupled energy."""
     F = np.eye(3)
     F[0, 1] = gamma
     s = NH.cauchy_stress(F)
@@ -227,7 +227,7 @@ def test_neo_hookean_equibiaxial(lam):
     ],
 )
 def test_guccione_fiber_uniaxial_at_unit_jacobian(rng, lam, sigma_table):
-    """F = diag(lam, lam^-1/2, lam^-1/2) in the fiber basis (f, s, n), J = 1 (REFERENCES 2.5).
+    """F = diag(lam, lam^-1/2, lam^-1/2) in the fiber basis (f, s, n), J = 1.
 
     The incompressible table value is sigma_ff = sigma~_ff - p with the pressure p fixed by
     the free lateral faces, sigma_ss = sigma~_ss - p = 0, i.e. sigma_ff = sigma~_ff - sigma~_ss
@@ -344,7 +344,8 @@ ACTIVE_LAWS = [pytest.param("prescribed", id="prescribed"), pytest.param("calciu
     [(0.8, 29.6992), (0.9, 95.4767), (1.0, 120.4368), (1.1, 129.9082), (1.2, 133.5022)],
 )
 def test_calcium_law_reproduces_reference_table(lam, expected):
-    # REFERENCES 4.2 table, FEBio "typical" parameters; 4 decimals -> 1e-4 kPa
+    # the calcium law with FEBio's "typical" parameters (Guccione et al. 1993);
+    # 4 decimals -> 1e-4 kPa
     act = ActiveContraction()
     assert act.t_max == 135.7
     np.testing.assert_allclose(act.tension(lam), expected, atol=1e-4)

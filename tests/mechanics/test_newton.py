@@ -1,6 +1,6 @@
 """Newton solver: patch test, closed-form stress states, rotations, convergence, cut-back.
 
-Energy convention of every test here (REFERENCES §2.1): uncoupled neo-Hookean with log
+Energy convention of every test here: uncoupled neo-Hookean with log
 volumetric energy, W = C1(Ī1 − 3) + κ/2 (ln J)², C1 = 1 kPa, κ = 120 kPa unless stated.
 Coarse meshes so the tests are fast.
 """
@@ -67,7 +67,8 @@ def test_patch_test(element, rng):
 
 
 # ----------------------------------------------------------------------------- uniaxial
-TABLE_22 = {1.1: 0.597139, 1.5: 3.109513, 2.0: 6.761447}  # REFERENCES §2.2, log U, σ_xx kPa
+# uniaxial stress, closed form with log U: σ_xx kPa by stretch
+TABLE_22 = {1.1: 0.597139, 1.5: 3.109513, 2.0: 6.761447}
 
 
 def _uniaxial_closed_form(lam):
@@ -115,7 +116,7 @@ def test_simple_shear(element):
     shear = Prescribed(_all_boundary(body), lambda X, s: s * gamma * X[:, [1]] * ex)
     res = solve(body, [shear], steps=2, tol=1e-12)
     sigma = cauchy_stress(body, res.u)
-    # REFERENCES §2.3: J = 1, σ_xy = 2C1γ, σ_xx = 4/3 C1γ², σ_yy = σ_zz = −2/3 C1γ² (exact)
+    # simple shear, exact: J = 1, σ_xy = 2C1γ, σ_xx = 4/3 C1γ², σ_yy = σ_zz = −2/3 C1γ² (exact)
     np.testing.assert_allclose(sigma[..., 0, 1], 2 * C1 * gamma, rtol=1e-8)
     np.testing.assert_allclose(sigma[..., 0, 0], 4 / 3 * C1 * gamma**2, rtol=1e-8)
     np.testing.assert_allclose(sigma[..., 1, 1], -2 / 3 * C1 * gamma**2, rtol=1e-8)
