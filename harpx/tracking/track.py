@@ -375,6 +375,7 @@ def track_with(
     problem = FrameProblem(body, constraint, settings, solver, dirichlet, terms, timings)
     result = _track_frames(problem, phase, setup_start)
     wall = result.wall.copy()  # per frame, over every pass
+    pass_iterations = [int(result.iterations.sum())]
     correction_mean = np.zeros(phase.sizes["time"])
     passes = settings.effective_blur_passes if phase.attrs.get("bandpass") == "disk" else 0
     for _ in range(passes):
@@ -386,6 +387,7 @@ def track_with(
         timings.blur += _time.perf_counter() - clock
         result = _track_frames(problem, corrected, _time.perf_counter(), result)
         wall[1:] += result.wall[1:]
+        pass_iterations.append(int(result.iterations.sum()))
     wall[0] = timings.setup + timings.blur  # frame 0: every pass's set-up and the corrections
     _warn_frames(phase, result.reached, result.converged, result.eps, result.target, result.floor)
     clock = _time.perf_counter()
@@ -403,6 +405,7 @@ def track_with(
         "unseen_directions": "; ".join(seen.unseen_directions) or "none",
         "rigid_modes_removed": int(seen.unseen_modes.shape[0]),
         "blur_passes_applied": int(passes),
+        "iterations_per_pass": np.asarray(pass_iterations, dtype=np.int64),
         **timings.as_attrs(),
     }
     diagnostics: dict[str, Any] = {
