@@ -57,3 +57,23 @@ def test_auto_bar_waits_before_it_appears(monkeypatch):
     with progress_bar(range(3), progress=True, file=stream) as bar:
         list(bar)
     assert "3/3" in stream.getvalue()  # forced on: shown at once
+
+
+def test_solve_shows_the_load_factor_reached_with_iterations_and_cutbacks(monkeypatch):
+    import numpy as np
+
+    from harpx.mechanics import Body, Fixed, NeoHookean, Prescribed, box, solve
+
+    body = Body(box((1.0, 1.0, 1.0), (1, 1, 1)), NeoHookean(c1=1.0, kappa=120.0))
+    pull = Prescribed("right", lambda X, s: 0.1 * s * np.ones_like(X), components=(0,))
+    loads = [Fixed("left", (0,)), Fixed("front", (1,)), Fixed("bottom", (2,)), pull]
+    stream = _Stream(False)
+    monkeypatch.setattr(sys, "stderr", stream)
+    result = solve(body, loads, steps=4, progress=True)
+    text = stream.getvalue()
+    assert result.converged
+    assert "load" in text and "100%" in text and "cutbacks=0" in text, text
+    quiet = _Stream(False)
+    monkeypatch.setattr(sys, "stderr", quiet)
+    solve(body, loads, steps=4, progress=False)
+    assert quiet.getvalue() == ""

@@ -50,6 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import sparse
 
+from harpx._progress import progress_bar
 from harpx._typing import FloatArray, IntArray
 from harpx.errors import ConvergenceError, ElementInversionError
 from harpx.mechanics.assembly import Pattern, internal_forces, sparsity
@@ -504,6 +505,7 @@ def solve(
     linear_solver: str | LinearSolver = "auto",
     raise_on_failure: bool = True,
     t_max: Any = None,
+    progress: bool | None = None,
 ) -> SolveResult:
     """Static equilibrium under loads ramped over load steps, with cut-back on failure.
 
@@ -544,6 +546,9 @@ def solve(
         loads: ``t_max(s) = s · t_max`` at load factor ``s`` (cut-backs included). The
         body keeps the full level afterwards. Needs a body with an active law; by
         default the body's current level is held fixed.
+    progress : bool or None, default None
+        A bar of the load factor reached (in %), with the Newton iterations and cut-backs
+        so far; None: shown in a terminal or notebook once the solve has run two seconds.
 
     Returns
     -------
@@ -581,9 +586,25 @@ def solve(
         t_max=t_max,
     )
     nominal = 1.0 / int(steps)
+    res = SolveResult(u=u, converged=False)
+    with progress_bar(progress=progress, total=100, desc="load", unit="%") as bar:
+        return _ramp(nt, u, res, bar, nominal=nominal, max_cutbacks=max_cutbacks,
+                     raise_on_failure=raise_on_failure)  # fmt: skip
+
+
+def _ramp(
+    nt: _Newton,
+    u: FloatArray,
+    res: SolveResult,
+    bar: Any,
+    *,
+    nominal: float,
+    max_cutbacks: int,
+    raise_on_failure: bool,
+) -> SolveResult:
+    """The load stepping of :func:`solve`: increments of ``nominal``, halved on failure."""
     ds = nominal
     s_done = 0.0
-    res = SolveResult(u=u, converged=False)
     consecutive = 0
     inverted: tuple[IntArray, float, list[float]] | None = None
     min_j = float("nan")
@@ -592,7 +613,9 @@ def solve(
         if 1.0 - s < 1e-9:
             s = 1.0
         out = nt.run(u, s)
+        bar.set_postfix(iterations=nt.iterations, cutbacks=res.cutbacks + (not out.ok))
         if out.ok:
+            bar.update(round(100 * s) - bar.n)
             u = out.u
             s_done = s
             consecutive = 0
