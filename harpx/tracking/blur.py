@@ -120,12 +120,8 @@ def splat(
     ----------
     values : ndarray of complex, shape (n,)
         Values to spread.
-    positions : ndarray, shape (n, 3)
-        Positions (z, y, x), mm.
-    origin, spacing : ndarray, shape (3,)
-        First voxel centre and voxel spacing (z, y, x), mm.
-    shape : (int, int, int)
-        Grid size (z, y, x).
+    positions, origin, spacing, shape
+        The points (z, y, x, mm) and the grid, as for :func:`splat_operator`.
 
     Returns
     -------
