@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import sparse
 
 from harpx._typing import FloatArray
 from harpx.errors import ElementInversionError
@@ -84,34 +83,6 @@ class EquilibriumResult:
     iterations: int
     step_norms: list[float] = field(default_factory=list)
     converged: bool = False
-
-
-class _Restriction:
-    """The rows and columns ``free`` of CSR matrices on one sparsity pattern.
-
-    Slicing a sparse matrix twice per Gauss–Newton iteration costs as much as assembling
-    it; the sub-pattern is found once (by slicing a matrix whose data are the entry numbers)
-    and every later matrix on the same pattern is restricted by gathering its data.
-    """
-
-    def __init__(self, K: sparse.csr_matrix, free: np.ndarray) -> None:
-        numbered = sparse.csr_matrix(
-            (np.arange(1, K.nnz + 1, dtype=np.float64), K.indices, K.indptr), shape=K.shape
-        )
-        sub = numbered[free][:, free].tocsr()
-        self.pattern = (K.indptr, K.indices)
-        self.source = np.rint(sub.data).astype(np.int64) - 1
-        self.indices, self.indptr, self.shape = sub.indices, sub.indptr, sub.shape
-
-    def fits(self, K: sparse.csr_matrix) -> bool:
-        """Whether ``K`` has the pattern this restriction was built on."""
-        indptr, indices = self.pattern
-        if indptr is K.indptr and indices is K.indices:
-            return True
-        return bool(np.array_equal(indptr, K.indptr) and np.array_equal(indices, K.indices))
-
-    def __call__(self, K: sparse.csr_matrix) -> sparse.csr_matrix:
-        return sparse.csr_matrix((K.data[self.source], self.indices, self.indptr), shape=self.shape)
 
 
 def split_dirichlet(body: Any, dirichlet: Sequence[Any]) -> tuple[np.ndarray, FloatArray]:
@@ -234,7 +205,6 @@ def equilibrate(
     if max_step is None:
         max_step = 0.5 * np.pi / constraint.max_wavenumber
     free = np.setdiff1d(np.arange(body.ndof), held) if held.size else None
-    restrict: _Restriction | None = None
     damping = 1.0
     tic = time.perf_counter()
     result = EquilibriumResult(u, constraint.state(u), 0)
@@ -268,9 +238,7 @@ def equilibrate(
             du = solver.solve(K, -R)
         else:
             du = np.zeros_like(u)
-            if restrict is None or not restrict.fits(K):  # further terms may change the pattern
-                restrict = _Restriction(K, free)
-            du[free] = solver.solve(restrict(K), -R[free])
+            du[free] = solver.solve(K[free][:, free].tocsr(), -R[free])
         clock.solve += time.perf_counter() - tic
         tic = time.perf_counter()
         largest = float(np.abs(du).max())

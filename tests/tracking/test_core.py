@@ -246,23 +246,6 @@ def test_one_product_assembly_equals_the_cell_block_assembly(ideal, rng):
     np.testing.assert_array_equal(K_fast.indices, K_block.indices)
 
 
-def test_restriction_to_free_dofs_equals_slicing_and_follows_a_new_pattern(rng):
-    from scipy import sparse
-
-    from harpx.tracking.equilibrium import _Restriction
-
-    A = sparse.random(60, 60, density=0.1, format="csr", random_state=3)
-    A = (A + A.T + sparse.eye(60)).tocsr()
-    free = np.sort(rng.choice(60, 45, replace=False))
-    restrict = _Restriction(A, free)
-    B = A.copy()
-    B.data = rng.normal(size=B.nnz)  # same pattern, new values: gathered, not sliced
-    assert restrict.fits(B)
-    assert abs(restrict(B) - B[free][:, free]).max() == 0.0
-    C = (A + sparse.eye(60, k=7)).tocsr()  # a further term with its own entries
-    assert not restrict.fits(C)
-
-
 def test_multiplier_update_is_lambda_times_the_residual(ideal, rng):
     body, constraint = ideal
     u = rng.normal(0.0, 0.3, body.ndof)
