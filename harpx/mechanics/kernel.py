@@ -16,7 +16,10 @@ traffic and a batched product per point. The hyperelastic laws of
     \mathbb A_{iJkL} = \sum_{r=1}^{m} Y^r_{iJ} Z^r_{kL} + s\, \delta_{ik}\delta_{JL}
                      + c\, H_{iL} H_{kJ}, \qquad H = F^{-T},
 
-(:class:`TangentFactors`; the neo-Hookean law has :math:`m = 2`, :math:`Y = (F, H)`). With
+(:class:`TangentFactors`; the neo-Hookean law has :math:`m = 2`, :math:`Y = (F, H)`; the
+Guccione law has :math:`m = 9` and an extra initial-stress term
+:math:`\delta_{ik} S_{JL}` with a matrix :math:`S`, contracted as
+:math:`\partial_J N_a S_{JL} \partial_L N_b`). With
 the vectors :math:`y^r_{ai} = Y^r_{iJ}\partial_J N_a`, :math:`z^r_{bk} = Z^r_{kL}\partial_L
 N_b` and :math:`h_{ai} = H_{iJ}\partial_J N_a` the element matrix is
 
@@ -87,6 +90,10 @@ class TangentFactors:
     h_index : int or None
         ``r`` with :math:`Y^r = H` exactly (the assembly adds its volumetric
         :math:`H \otimes H` weight to that :math:`Z^r`), or None.
+    S : ndarray, shape (..., 3, 3), or None
+        A symmetric matrix coefficient of :math:`\delta_{ik}`: the term
+        :math:`\delta_{ik} S_{JL}` is added (the initial-stress term of an anisotropic
+        law, e.g. Guccione's :math:`J^{-2/3} \bar S`), kPa.
     """
 
     Y: FloatArray
@@ -95,6 +102,7 @@ class TangentFactors:
     c: FloatArray
     H: FloatArray
     h_index: int | None = None
+    S: FloatArray | None = None
 
     def dense(self) -> FloatArray:
         """The tensor itself, ``A[..., i, J, k, L]`` (kPa), shape ``(..., 3, 3, 3, 3)``."""
@@ -107,9 +115,11 @@ class TangentFactors:
         A += self.c[..., None, None, None, None] * (
             H[..., :, None, None, :] * np.swapaxes(H, -1, -2)[..., None, :, :, None]
         )
-        s = self.s[..., None, None]
+        s = self.s[..., None, None] * np.eye(3)
+        if self.S is not None:
+            s = s + self.S
         for i in range(3):
-            A[..., i, :, i, :] += s * np.eye(3)
+            A[..., i, :, i, :] += s
         return A
 
 
@@ -259,6 +269,11 @@ def factored_tangent(
         # s δ_ik ∇N_a·∇N_b
         Gns = Gn[sl]
         lap = np.matmul(Gns, np.swapaxes(Gns * ws[sl, None, :], 1, 2))  # (n, a, b)
+        if factors.S is not None:  # δ_ik ∂_J N_a S_JL ∂_L N_b
+            GS = np.matmul(G[sl], factors.S[sl] * dV[sl, :, None, None])  # (n, q, a, L)
+            lap += np.matmul(
+                GS.transpose(0, 2, 1, 3).reshape(n, nb, 3 * nq), np.swapaxes(Gns, 1, 2)
+            )
         S.reshape(n, nb, 9, nb)[:, :, ::4, :] += lap[:, :, None, :]
         Ke = K.reshape(n, nb, 3, 3, nb)
         Ke += S.reshape(n, nb, 3, 3, nb).transpose(0, 1, 3, 2, 4)

@@ -540,6 +540,62 @@ class Guccione(_Uncoupled):
             If ``fiber`` is None.
         """
         F = _as_F(F)
+        P, K, MK, pbar, Hbar, Sbar, j, _ = self._tangent_parts(F, fiber)
+        batch = j.shape
+        A = np.matmul(
+            np.swapaxes(K.reshape(batch + (9, 9)), -1, -2), MK.reshape(batch + (9, 9))
+        ).reshape(batch + (3, 3, 3, 3))
+        A += (pbar / 3.0)[..., None, None, None, None] * _cross_outer(Hbar)
+        for i in range(3):
+            A[..., i, :, i, :] += Sbar
+        A *= (j * j)[..., None, None, None, None]
+        return P, A
+
+    def isochoric_factors(
+        self,
+        F: ArrayLike,
+        fiber: ArrayLike | None = None,
+        *,
+        det_cof: tuple[FloatArray, FloatArray] | None = None,
+    ) -> tuple[FloatArray, TangentFactors]:
+        r"""Stress and the factored tangent of the isochoric energy (no 4th-order array).
+
+        Parameters
+        ----------
+        F : array_like, shape (..., 3, 3)
+            Deformation gradients (dimensionless, ``det F > 0``).
+        fiber : array_like, shape (..., 3)
+            Unit reference fiber directions, broadcast against the batch of ``F``.
+        det_cof : (ndarray, ndarray), optional
+            Accepted for the common signature; ``det F`` and ``cof F`` are recomputed with
+            the local basis.
+
+        Returns
+        -------
+        P : ndarray, shape (..., 3, 3)
+            ``dWbar/dF`` (kPa).
+        factors : TangentFactors
+            The nine rank-one factors of :meth:`isochoric_response`'s low-rank part
+            (:math:`Y^r = K^r`, :math:`Z^r = J^{-2/3} (MK)^r`, the last one written with
+            :math:`Y = H = F^{-T}`, ``h_index = 8``), :math:`c = \bar p/3`,
+            :math:`S = J^{-2/3} \bar S` and :math:`s = 0`; ``factors.dense()`` is the
+            tangent of :meth:`isochoric_response`.
+        """
+        F = _as_F(F)
+        P, K, MK, pbar, Hbar, Sbar, j, H = self._tangent_parts(F, fiber)
+        jj = (j * j)[..., None, None, None]
+        Y = K
+        Z = MK * jj
+        # factor 8 is Hbar = H / j: carried as Y = H exactly (the assembly adds its H ⊗ H
+        # weight there), so its Z takes the 1/j
+        Y[..., 8, :, :] = H
+        Z[..., 8, :, :] /= j[..., None, None]
+        S = (j * j)[..., None, None] * Sbar
+        return P, TangentFactors(Y=Y, Z=Z, s=np.zeros_like(j), c=pbar / 3.0, H=H, h_index=8, S=S)
+
+    def _tangent_parts(self, F: FloatArray, fiber: ArrayLike | None) -> tuple[FloatArray, ...]:
+        """Stress and the pieces of the tangent (module docstring):
+        ``(P, K, MK, pbar, Hbar, Sbar, j, H)`` with ``K`` and ``MK`` of shape (..., 9, 3, 3)."""
         F, J, cof, R, G, Ct, Q = self._local(F, fiber)
         batch = J.shape
         B = self._weights()
@@ -571,14 +627,7 @@ class Guccione(_Uncoupled):
         K[..., 8, :, :] = Hbar
         MK[..., 7, :, :] = (-2.0 / 3.0) * Hbar
         MK[..., 8, :, :] = (-2.0 / 3.0) * Pbar + ((2.0 / 9.0) * pbar)[..., None, None] * Hbar
-        K = K.reshape(batch + (9, 9))
-        MK = MK.reshape(batch + (9, 9))
-        A = np.matmul(np.swapaxes(K, -1, -2), MK).reshape(batch + (3, 3, 3, 3))
-        A += (pbar / 3.0)[..., None, None, None, None] * _cross_outer(Hbar)
-        for i in range(3):
-            A[..., i, :, i, :] += Sbar
-        A *= (j * j)[..., None, None, None, None]
-        return P, A
+        return P, K, MK, pbar, Hbar, Sbar, j, cof / J[..., None, None]
 
 
 # --------------------------------------------------------------------------------------

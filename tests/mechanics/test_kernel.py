@@ -160,3 +160,19 @@ def test_neo_hookean_factors_are_the_closed_form_tangent(rng):
     np.testing.assert_allclose(
         P, a[..., None, None] * (F - (I1 / 3.0)[..., None, None] * H), rtol=0.0, atol=1e-13
     )
+
+
+def test_guccione_factors_are_its_tangent_and_keep_y_h_exact(rng):
+    # the factored Guccione tangent (nine rank-one factors, c H⊙H, δ_ik S_JL) is the dense
+    # tangent of isochoric_response; the factor the assembly adds its H ⊗ H weight to is H
+    F = np.eye(3) + 0.15 * rng.standard_normal((6, 4, 3, 3))
+    F[np.linalg.det(F) <= 0] = np.eye(3)
+    fibers = rng.standard_normal((6, 4, 3))
+    fibers /= np.linalg.norm(fibers, axis=-1, keepdims=True)
+    P_ref, A_ref = GUC.isochoric_response(F, fibers)
+    P, fac = GUC.isochoric_factors(F, fibers)
+    np.testing.assert_allclose(P, P_ref, rtol=0.0, atol=1e-13 * np.abs(P_ref).max())
+    np.testing.assert_allclose(fac.dense(), A_ref, rtol=0.0, atol=RTOL * np.abs(A_ref).max())
+    H = np.linalg.inv(F).swapaxes(-1, -2)
+    np.testing.assert_allclose(fac.Y[..., fac.h_index, :, :], H, rtol=0.0, atol=1e-12)
+    assert fac.S is not None and np.all(fac.s == 0.0)
