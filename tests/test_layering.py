@@ -1,6 +1,6 @@
 """Dependencies point one way, for every subpackage and top-level module of harpx.
 
-    _typing, errors, schema                 foundation (no harpx imports above it)
+    _typing, _blas, errors, schema          foundation (no harpx imports above it)
     imaging        mechanics                independent of each other
     tracking                                joins them (images pull the mechanics)
     scenes, inverse, io, plotting, batch    built on the layers below
@@ -20,10 +20,11 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "harpx"
 
-FOUNDATION = {"_typing", "errors", "schema", "_progress"}
+FOUNDATION = {"_typing", "_blas", "errors", "schema", "_progress"}
 # unit -> the harpx units it may import
 ALLOWED: dict[str, set[str]] = {
     "_typing": set(),
+    "_blas": set(),
     "_progress": set(),
     "errors": set(),
     "schema": {"_typing", "errors"},

@@ -39,6 +39,7 @@ import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
+from harpx._blas import column_block
 from harpx.errors import SchemaError
 from harpx.imaging._kernels import wrap
 from harpx.schema import AXES, GRID_DIMS
@@ -56,23 +57,32 @@ _EDGE = 4
 _REGION_MARGIN = 20
 #: A leading grid axis at most this long is prefiltered by a matrix product (see _prefilter).
 _MATRIX_MAX = 64
-#: Multiply-adds of one block of that product: below OpenBLAS's threshold for threading
-#: (65536 x 4), whose spinning threads would cost more CPU time than they save.
-_SINGLE_THREAD_FLOPS = 65536 * 4 - 1
 #: The cubic B-spline prefilter's pole, √3 − 2.
 _POLE = float(np.sqrt(3.0) - 2.0)
 
 
-def _tap_array(shape: tuple[int, ...], buffer: NDArray[np.float64] | None) -> NDArray[np.float64]:
-    """An uninitialised float64 array of ``shape``, a view of ``buffer`` where it is big enough.
+def _tap_dtype(*arrays: NDArray[np.floating]) -> np.dtype[np.floating]:
+    """Precision of the spline coefficients: that of the data (float32 or float64).
+
+    float32 data (the :func:`~harpx.imaging.harp.extract_phase` default) holds ~7 digits, so
+    coefficients in float32 lose nothing it has (phase rounding ~1e-7 rad, far below any
+    tracking tolerance) and halve the memory traffic of the prefilter and of every gather.
+    """
+    return np.result_type(*arrays)
+
+
+def _tap_array(
+    shape: tuple[int, ...], buffer: NDArray[np.floating] | None, dtype: np.dtype[np.floating]
+) -> NDArray[np.floating]:
+    """An uninitialised ``dtype`` array of ``shape``, a view of ``buffer`` where it fits.
 
     Reusing one buffer across frames avoids allocating (and the kernel zero-filling) some
     hundred MB of fresh pages per frame.
     """
     size = int(np.prod(shape))
-    if buffer is not None and buffer.size >= size and buffer.dtype == np.float64:
+    if buffer is not None and buffer.size >= size and buffer.dtype == dtype:
         return buffer.reshape(-1)[:size].reshape(shape)
-    return np.empty(shape)
+    return np.empty(shape, dtype=dtype)
 
 
 def _demodulated_taps(
@@ -80,8 +90,8 @@ def _demodulated_taps(
     magnitude: NDArray[np.floating],
     carrier: NDArray[np.floating],
     squeeze: tuple[int, ...],
-    buffer: NDArray[np.float64] | None = None,
-) -> NDArray[np.float64]:
+    buffer: NDArray[np.floating] | None = None,
+) -> NDArray[np.floating]:
     """Real and imaginary parts of ``|H| exp(i(φ − k·x))`` per tag, padded by one voxel.
 
     Returns an array of shape ``(*active grid shape + 2, 2 ntag)``: channels ``0..ntag-1``
@@ -91,7 +101,9 @@ def _demodulated_taps(
     ntag = phase.shape[0]
     keep = [a for a in range(3) if a + 1 not in squeeze]
     shape = tuple(phase.shape[a + 1] for a in keep)
-    out = _tap_array(tuple(n + 2 for n in shape) + (2 * ntag,), buffer)
+    out = _tap_array(
+        tuple(n + 2 for n in shape) + (2 * ntag,), buffer, _tap_dtype(phase, magnitude)
+    )
     inner: tuple[slice | int, ...] = (slice(1, -1),) * len(shape)
     _write_demodulated(phase, magnitude, carrier, squeeze, lambda c: out[(*inner, c)])
     if not _finite(phase, magnitude):
@@ -110,12 +122,12 @@ def _write_demodulated(
     magnitude: NDArray[np.floating],
     carrier: NDArray[np.floating],
     squeeze: tuple[int, ...],
-    channel: Callable[[int], NDArray[np.float64]],
+    channel: Callable[[int], NDArray[np.floating]],
 ) -> None:
     """Write Re and Im of ``|H| exp(i(φ − k·x))`` of tag ``t`` into channels ``t``, ``ntag + t``."""
     ntag = phase.shape[0]
     # scratch in the phase's precision, allocated once; |H| cos and |H| sin are formed in
-    # the channel's float64 (exact products of float32 factors)
+    # the channel's precision (that of the data, see _tap_dtype)
     theta = np.empty(phase.shape[1:], dtype=np.result_type(phase, carrier))
     part = np.empty_like(theta)
     drop = tuple(a - 1 for a in squeeze)
@@ -127,7 +139,7 @@ def _write_demodulated(
             np.multiply(mag, part.squeeze(axis=drop) if squeeze else part, out=channel(c))
 
 
-def _reflect_border(out: NDArray[np.float64], shape: tuple[int, ...]) -> None:
+def _reflect_border(out: NDArray[np.floating], shape: tuple[int, ...]) -> None:
     """Fill the one-voxel border of ``out`` (inner ``shape``) by reflection, axis by axis."""
     for axis, n in enumerate(shape):
         lead: list[slice | int] = [slice(None)] * out.ndim
@@ -145,8 +157,8 @@ def _cubic_taps(
     squeeze: tuple[int, ...],
     before: NDArray[np.int64],
     after: NDArray[np.int64],
-    buffer: NDArray[np.float64] | None = None,
-) -> NDArray[np.float64]:
+    buffer: NDArray[np.floating] | None = None,
+) -> NDArray[np.floating]:
     """Cubic B-spline coefficients of ``|H| exp(i(φ − k·x))`` per tag, tap-ready.
 
     Each tag's demodulated image is written (real and imaginary parts as separate channels,
@@ -163,7 +175,7 @@ def _cubic_taps(
     lead = [int(b) for b in before]
     trail = [int(e) for e in after]
     ext = tuple(n + b + e for n, b, e in zip(shape, lead, trail, strict=True))
-    out = _tap_array((*(n + 2 for n in ext), 2 * ntag), buffer)
+    out = _tap_array((*(n + 2 for n in ext), 2 * ntag), buffer, _tap_dtype(phase, magnitude))
     work = out[(slice(1, -1),) * d]
     core = tuple(slice(b, b + n) for n, b in zip(shape, lead, strict=True))
     # with float32 phase and carrier, cos/sin run in float32 (SIMD, about 3x faster)
@@ -176,7 +188,10 @@ def _cubic_taps(
         b, e, n = lead[a], trail[a], shape[a]
 
         def sl(start: int, stop: int | None, step: int = 1, axis: int = a) -> tuple:
+            # the axes after this one are not extended yet: only their core is written
+            # (the rest is uninitialised memory, which doubled could overflow)
             index: list[slice | int] = [slice(None)] * work.ndim
+            index[axis + 1 : d] = core[axis + 1 :]
             index[axis] = slice(start, stop, step)
             return tuple(index)
 
@@ -189,12 +204,17 @@ def _cubic_taps(
                 work[sl(b + n - 2, stop if stop >= 0 else None, -1)],
                 out=work[sl(b + n, b + n + e)],
             )
+    for a in range(1, d):  # the leading-axis product also runs over the borders of the
+        index: list[slice | int] = [slice(None)] * out.ndim  # others: keep them finite
+        for end in (0, -1):
+            index[a] = end
+            out[tuple(index)] = 0.0
     _prefilter(out, work)
     _reflect_border(out, ext)
     return out
 
 
-def _prefilter(out: NDArray[np.float64], work: NDArray[np.float64]) -> None:
+def _prefilter(out: NDArray[np.floating], work: NDArray[np.floating]) -> None:
     """Cubic B-spline prefilter (mirror boundary) of ``work`` in place along every grid axis.
 
     ``work`` is the interior (all but a one-voxel border per grid axis) of the C-contiguous
@@ -223,19 +243,19 @@ def _filter_matrix(n: int) -> NDArray[np.float64]:
     return matrix
 
 
-def _prefilter_leading_matrix(out: NDArray[np.float64], n: int) -> None:
+def _prefilter_leading_matrix(out: NDArray[np.floating], n: int) -> None:
     """Prefilter along axis 0 of ``out[1:-1]`` (``n`` samples) as a matrix product.
 
     ``out[1:-1]`` is contiguous, so it is an (n, rest) matrix; it is multiplied by the
-    filter matrix in column blocks small enough for OpenBLAS to stay on one thread (its
-    idle threads spin, which costs more CPU time than they save here). Its border columns
+    filter matrix in column blocks small enough for OpenBLAS to stay on one thread (see
+    :mod:`harpx._blas`; its idle threads spin, which costs more than they save). Its border columns
     (the other axes' one-voxel borders, not yet written) are transformed too and
     overwritten afterwards by :func:`_reflect_border`; each column is independent.
     """
-    matrix = _filter_matrix(n)
+    matrix = _filter_matrix(n).astype(out.dtype, copy=False)
     flat = out[1:-1].reshape(n, -1)
-    block = max(8, _SINGLE_THREAD_FLOPS // (n * n))
-    tmp = np.empty((n, block))
+    block = column_block(n, n)
+    tmp = np.empty((n, block), dtype=out.dtype)
     for start in range(0, flat.shape[1], block):
         part = flat[:, start : start + block]
         product = tmp[:, : part.shape[1]]
@@ -243,7 +263,7 @@ def _prefilter_leading_matrix(out: NDArray[np.float64], n: int) -> None:
         part[...] = product
 
 
-def _prefilter_recursive(work: NDArray[np.float64], axis: int) -> None:
+def _prefilter_recursive(work: NDArray[np.floating], axis: int) -> None:
     """scipy's cubic mirror prefilter along ``axis``, vectorised over everything else.
 
     The operations and their order are those of scipy's ``ni_splines.c`` (gain, causal
@@ -256,7 +276,7 @@ def _prefilter_recursive(work: NDArray[np.float64], axis: int) -> None:
         return
     z = _POLE
     c *= (1.0 - z) * (1.0 - 1.0 / z)
-    tmp = np.empty(c.shape[1:])
+    tmp = np.empty(c.shape[1:], dtype=c.dtype)
     z_n_1 = z ** (n - 1)
     first = c[0] + z_n_1 * c[n - 1]
     z_i = z
@@ -449,8 +469,8 @@ class PhaseSampler:
                 self._after,
                 buffer,
             )
-        self._padded: NDArray[np.float64] | None = padded
-        self._buffer: NDArray[np.float64] | None = padded if padded.base is None else padded.base
+        self._padded: NDArray[np.floating] | None = padded
+        self._buffer: NDArray[np.floating] | None = padded if padded.base is None else padded.base
 
         mask = None
         if "mask" in phase_ds.variables:
@@ -582,7 +602,7 @@ class PhaseSampler:
         hi = np.clip(hi, lo + 2, self._shape)  # samples nothing but stays well formed
         return lo, hi
 
-    def _release(self) -> NDArray[np.float64] | None:
+    def _release(self) -> NDArray[np.floating] | None:
         """Hand this sampler's tap buffer to a new sampler (this one cannot sample after)."""
         buffer, self._buffer, self._padded = self._buffer, None, None
         return buffer
@@ -683,7 +703,8 @@ class PhaseSampler:
         for s in range(0, u.shape[0], self.chunk_size):
             chunk = order[s : s + self.chunk_size]
             m = chunk.size
-            weights = _weights(frac[chunk], self.order)  # (m, d, 2, taps)
+            # weights in the coefficients' precision: no promoted copy of the gathered taps
+            weights = _weights(frac[chunk].astype(padded.dtype, copy=False), self.order)
             gathered = runs[linear[chunk, None] + offsets]  # (m, taps**(d-1)) runs
             gathered = gathered.view(padded.dtype).reshape(m, taps ** (d - 1), taps * nf)
             if d > 1:
@@ -699,13 +720,13 @@ class PhaseSampler:
         return out
 
 
-def _weights(t: NDArray[np.float64], order: int) -> NDArray[np.float64]:
+def _weights(t: NDArray[np.floating], order: int) -> NDArray[np.floating]:
     """B-spline tap weights (``[..., 0, :]``) and their derivatives (``[..., 1, :]``).
 
     ``t`` holds fractions in [0, 1) of any shape; the result has shape
-    ``(*t.shape, 2, order + 1)``.
+    ``(*t.shape, 2, order + 1)``, in the precision of ``t``.
     """
-    out = np.empty((*t.shape, 2, order + 1))
+    out = np.empty((*t.shape, 2, order + 1), dtype=t.dtype)
     if order == 1:
         out[..., 0, 0] = 1 - t
         out[..., 0, 1] = t
@@ -726,13 +747,13 @@ def _weights(t: NDArray[np.float64], order: int) -> NDArray[np.float64]:
     return out
 
 
-def _tensor_weights(weights: NDArray[np.float64], nq: int) -> NDArray[np.float64]:
+def _tensor_weights(weights: NDArray[np.floating], nq: int) -> NDArray[np.floating]:
     """Tensor-product weights (m, nq, taps**d) of ``weights`` (m, d, 2, taps).
 
     Output q=0 is the value, q=j the derivative along axis j-1.
     """
     m, d = weights.shape[:2]
-    tensor: NDArray[np.float64] | None = None
+    tensor: NDArray[np.floating] | None = None
     for a in range(d):
         # per output q: derivative weights along axis a when q == a + 1, else value weights
         select = [1 if q == a + 1 else 0 for q in range(nq)]

@@ -49,6 +49,7 @@ import skfem
 import xarray as xr
 from scipy import sparse
 
+from harpx._blas import matmul_one_thread
 from harpx._typing import FloatArray, IntArray
 from harpx.imaging.sample import PhaseSampler, wrap
 from harpx.mechanics.assembly import sparsity
@@ -491,7 +492,7 @@ class PhaseConstraint:
             # every cell has the same N at its points: K[ab, (c, ik)] = Σ_q NN[q, ab] M[c, q, ik]
             # is one matrix product, scattered in its own layout (a, b, c, i, k)
             NN, positions = self._shared_products
-            K = NN.T @ M.transpose(1, 0, 2).reshape(npc, ncell * 9)
+            K = matmul_one_thread(NN.T, M.transpose(1, 0, 2).reshape(npc, ncell * 9))
             data: FloatArray = np.bincount(  # type: ignore[assignment]
                 positions, weights=K.ravel(), minlength=pat.nnz
             )
