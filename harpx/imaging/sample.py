@@ -522,22 +522,25 @@ class PhaseSampler:
         values, size, valid_tags = self._evaluate(pts, derivatives=True)
         valid = valid_tags if per_tag else cast(NDArray[np.bool_], valid_tags.all(axis=1))
         ntag = self._ntag
-        re, im = values[:, 0, :ntag], values[:, 0, ntag:]
-        phi = self._remodulate(pts, re, im)
-        grad = np.zeros((pts.shape[0], ntag, 3))
-        power = size * size
-        # Im(conj(D) dD) / |D|^2 per voxel of each active axis (m, d, ntag), then per mm
-        scale = np.where(power > 0, power, 1.0)
-        d = self._columns.size
-        cross = re[:, None] * values[:, 1 : 1 + d, ntag:]
-        cross -= im[:, None] * values[:, 1 : 1 + d, :ntag]
-        cross /= scale[:, None]
-        cross *= (1.0 / self._spacing)[:, None]
-        cross += self._k_active.T
-        grad[:, :, self._columns] = cross.transpose(0, 2, 1)
         invalid = ~(valid_tags if per_tag else valid_tags.all(axis=1, keepdims=True))
-        phi[np.broadcast_to(invalid, phi.shape)] = 0.0
-        grad[np.broadcast_to(invalid, phi.shape)] = 0.0
+        re, im = values[0, :ntag], values[0, ntag:]  # (ntag, n) rows: contiguous
+        phi = self._remodulate(pts, re, im)
+        # Im(conj(D) dD) / |D|^2 per voxel of each active axis, per mm, plus k: one factor
+        # 1 / |D|^2 per tag and point (0 where invalid, which zeroes the derivative part)
+        power = size * size
+        inverse = np.divide(1.0, power, out=np.zeros_like(power), where=power > 0)
+        np.copyto(inverse, 0.0, where=np.broadcast_to(invalid, phi.shape).T)
+        grad = np.zeros((pts.shape[0], ntag, 3))  # invariant axes: no variation along them
+        cross = np.empty_like(re)
+        for j, column in enumerate(self._columns.tolist()):
+            np.multiply(re, values[1 + j, ntag:], out=cross)
+            cross -= im * values[1 + j, :ntag]
+            cross *= inverse
+            cross *= 1.0 / self._spacing[j]
+            cross += self._k_active[:, j, None]
+            grad[:, :, column] = cross.T
+        np.copyto(grad, 0.0, where=invalid[..., None])
+        np.copyto(phi, 0.0, where=invalid)
         return phi, grad, valid
 
     def phase(
@@ -550,9 +553,10 @@ class PhaseSampler:
         pts = _as_points(points)
         values, _, valid_tags = self._evaluate(pts, derivatives=False)
         valid = valid_tags if per_tag else cast(NDArray[np.bool_], valid_tags.all(axis=1))
-        phi = self._remodulate(pts, values[:, 0, : self._ntag], values[:, 0, self._ntag :])
-        invalid = ~(valid_tags if per_tag else valid_tags.all(axis=1, keepdims=True))
-        phi[np.broadcast_to(invalid, phi.shape)] = 0.0
+        phi = self._remodulate(pts, values[0, : self._ntag], values[0, self._ntag :])
+        np.copyto(
+            phi, 0.0, where=~(valid_tags if per_tag else valid_tags.all(axis=1, keepdims=True))
+        )
         return phi, valid
 
     def magnitude(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
@@ -563,7 +567,7 @@ class PhaseSampler:
         """
         pts = _as_points(points)
         _, size, valid_tags = self._evaluate(pts, derivatives=False)
-        return size, cast(NDArray[np.bool_], valid_tags.all(axis=1))
+        return np.ascontiguousarray(size.T), cast(NDArray[np.bool_], valid_tags.all(axis=1))
 
     def acquired(self, points: ArrayLike) -> NDArray[np.bool_]:
         """Which tags have data at points: inside the field of view and the tag's ``mask``.
@@ -610,18 +614,19 @@ class PhaseSampler:
     def _remodulate(
         self, pts: NDArray[np.float64], re: NDArray[np.float64], im: NDArray[np.float64]
     ) -> Any:
-        """W(arg D + k·x) (n, ntag), with the slice position along invariant axes."""
-        phase = np.arctan2(im, re)  # = np.angle(re + i im)
+        """W(arg D + k·x) (n, ntag) from Re and Im of D (ntag, n), with the slice position
+        along invariant axes."""
+        phase = np.arctan2(im, re)  # = np.angle(re + i im), (ntag, n)
         for c in range(3):  # k·x column by column (a (n, 3) @ (3, ntag) matmul is slower)
-            coordinate = pts[:, c, None] if c in self._columns.tolist() else self._fixed[c]
-            phase += coordinate * self.wavevectors[:, c]
-        return wrap(phase)
+            coordinate = pts[None, :, c] if c in self._columns.tolist() else self._fixed[c]
+            phase += self.wavevectors[:, c, None] * coordinate
+        return np.ascontiguousarray(wrap(phase).T)
 
     def _evaluate(
         self, pts: NDArray[np.float64], *, derivatives: bool
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
-        """Spline values (n, nq, 2 ntag): Re then Im of D and of its derivative along each
-        active axis (per voxel); ``|D|`` (n, ntag); validity per tag (n, ntag)."""
+        """Spline values (nq, 2 ntag, n): Re then Im of D and of its derivative along each
+        active axis (per voxel); ``|D|`` (ntag, n); validity per tag (n, ntag)."""
         n = pts.shape[0]
         d = len(self._active)
         ntag = self._ntag
@@ -631,16 +636,17 @@ class PhaseSampler:
         if needed.all():
             values = self._spline(u, nq)
         else:
-            values = np.zeros((n, nq, 2 * ntag))
+            values = np.zeros((nq, 2 * ntag, n))
             index = np.flatnonzero(needed)
             if index.size:
-                values[index] = self._spline(u[index], nq)
-        size = np.hypot(values[:, 0, :ntag], values[:, 0, ntag:])  # = |D|
+                values[..., index] = self._spline(u[index], nq)
+        re, im = values[0, :ntag], values[0, ntag:]
+        size = np.sqrt(re * re + im * im)  # = |D| (np.hypot guards overflow, 3x slower)
         # the masks say which tags were acquired where (per tag); the magnitude floor says
         # whether there is tissue signal at all, so it holds for every acquired tag at once
         # (near an edge one tag's magnitude can pass while another's fails: such a point
         # is background-contaminated for all of them)
-        signal = np.all(((size >= self._floor) & (size > 0)) | ~tag_ok, axis=1)
+        signal = np.all(((size >= self._floor[:, None]) & (size > 0)) | ~tag_ok.T, axis=0)
         if self._support is not None and needed.any():
             inside = np.zeros(n, dtype=bool)
             inside[needed] = self._support[tuple(np.rint(u[needed]).astype(np.int64).T)]
@@ -662,7 +668,12 @@ class PhaseSampler:
         return u, tag_ok
 
     def _spline(self, u: NDArray[np.float64], nq: int) -> NDArray[np.float64]:
-        """Spline value (q=0) and derivatives along each active axis (q=1..d) at ``u``."""
+        """Spline value (q=0) and derivatives along each active axis (q=1..d) at ``u``.
+
+        Returns shape (nq, channels, n): one contiguous row per quantity and channel, so that
+        the per-point algebra downstream runs on contiguous rows (on (n, 3) slices of an
+        (n, nq, channels) array numpy's inner loops are 3 long, several times slower).
+        """
         taps = self.order + 1
         d = u.shape[1]
         padded = self._padded
@@ -695,7 +706,8 @@ class PhaseSampler:
         # sort by voxel so gathers walk memory in order
         linear = (base_index + start) @ strides[:d]
         order = np.argsort(linear, kind="stable")
-        out = np.empty((u.shape[0], nq, nf))
+        n = u.shape[0]
+        ordered = np.empty((nq * nf, n))  # rows (q, channel); columns in the sorted order
         # separable contraction: the leading axes with their tensor-product weights (value,
         # and the derivative along each leading axis), then the last axis (value weights for
         # those, slope weights for the derivative along it)
@@ -714,10 +726,12 @@ class PhaseSampler:
             # (m, lead, taps, nf) -> (m, taps, lead * nf): the last axis's taps as rows
             rows = head.reshape(m, lead, taps, nf).transpose(0, 2, 1, 3).reshape(m, taps, -1)
             last = np.matmul(weights[:, -1, : 1 if nq == 1 else 2], rows)  # (m, 1|2, lead*nf)
-            out[chunk, :lead] = last[:, 0].reshape(m, lead, nf)
+            ordered[: lead * nf, s : s + m] = last[:, 0].T
             if nq > 1:
-                out[chunk, lead] = last[:, 1, :nf]
-        return out
+                ordered[lead * nf :, s : s + m] = last[:, 1, :nf].T
+        rank = np.empty_like(order)  # back to the points' own order
+        rank[order] = np.arange(n)
+        return np.take(ordered, rank, axis=1).reshape(nq, nf, n)
 
 
 def _weights(t: NDArray[np.floating], order: int) -> NDArray[np.floating]:
