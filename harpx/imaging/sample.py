@@ -522,9 +522,8 @@ class PhaseSampler:
         values, size, valid_tags = self._evaluate(pts, derivatives=True)
         valid = valid_tags if per_tag else cast(NDArray[np.bool_], valid_tags.all(axis=1))
         ntag = self._ntag
-        invalid: NDArray[np.bool_] = ~(
-            valid_tags if per_tag else valid_tags.all(axis=1, keepdims=True)
-        )
+        invalid = ~(valid_tags if per_tag else valid_tags.all(axis=1, keepdims=True))
+        invalid = cast(NDArray[np.bool_], invalid)
         re, im = values[0, :ntag], values[0, ntag:]  # (ntag, n) rows: contiguous
         phi = self._remodulate(pts, re, im)
         # Im(conj(D) dD) / |D|^2 per voxel of each active axis, per mm, plus k: one factor
