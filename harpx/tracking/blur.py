@@ -65,6 +65,7 @@ def splat_operator(
     origin: FloatArray,
     spacing: FloatArray,
     shape: tuple[int, int, int],
+    dtype: type[np.floating] = np.float64,
 ) -> sparse.csc_matrix:
     """Trilinear spreading of values at ``positions`` onto a grid, as a sparse matrix.
 
@@ -76,6 +77,8 @@ def splat_operator(
         First voxel centre and voxel spacing (z, y, x), mm.
     shape : (int, int, int)
         Grid size (z, y, x).
+    dtype : numpy floating type, default float64
+        Precision of the weights (float32 halves the memory traffic of the product).
 
     Returns
     -------
@@ -85,26 +88,29 @@ def splat_operator(
         values of shape (n,) or (n, k) at once.
     """
     f = (np.asarray(positions, dtype=np.float64) - origin) / spacing
-    base = np.floor(f).astype(np.int64)
+    base = np.floor(f)
     t = f - base
+    corner = base.astype(np.int64)
     n = f.shape[0]
-    flat = np.zeros((n, 1), dtype=np.int64)
-    weight = np.ones((n, 1))
-    inside = np.ones((n, 1), dtype=bool)
+    size = int(np.prod(shape))
+    index_type = np.int32 if size < np.iinfo(np.int32).max else np.int64
+    # corner (dz, dy, dx) of point j at [j, dz, dy, dx]: one broadcast axis per grid axis
+    flat = np.zeros((n, 1, 1, 1), dtype=index_type)
+    weight = np.ones((n, 1, 1, 1), dtype=dtype)
     stride = 1
-    for axis in (2, 1, 0):  # x, y, z: corner index (dz, dy, dx) in row-major order
-        index = base[:, axis, None] + np.arange(2)  # (n, 2)
-        w = np.stack([1.0 - t[:, axis], t[:, axis]], axis=1)
+    for axis in (2, 1, 0):
+        index = corner[:, axis, None] + np.arange(2)  # (n, 2)
         ok = (index >= 0) & (index < shape[axis])
-        flat = (index[:, :, None] * stride + flat[:, None, :]).reshape(n, -1)
-        weight = (w[:, :, None] * weight[:, None, :]).reshape(n, -1)
-        inside = (ok[:, :, None] & inside[:, None, :]).reshape(n, -1)
+        w = np.stack([1.0 - t[:, axis], t[:, axis]], axis=1)
+        along = [n, 1, 1, 1]
+        along[1 + axis] = 2
+        flat = flat + (np.where(ok, index, 0) * stride).astype(index_type).reshape(along)
+        weight = weight * np.where(ok, w, 0.0).astype(dtype).reshape(along)
         stride *= shape[axis]
     return sparse.csc_matrix(
-        (np.where(inside, weight, 0.0).ravel(), np.where(inside, flat, 0).ravel(),
-         np.arange(0, 8 * n + 1, 8)),
-        shape=(stride, n),
-    )  # fmt: skip
+        (weight.reshape(-1), flat.reshape(-1), np.arange(0, 8 * n + 1, 8, dtype=index_type)),
+        shape=(size, n),
+    )
 
 
 def splat(
@@ -167,9 +173,11 @@ def _filtered_phase(S: np.ndarray, disk: np.ndarray, normal: int, out: np.ndarra
     forward.execute()
     np.multiply(forward.output_array, disk, out=backward.input_array)
     backward.execute()
-    size = np.abs(stack)
-    has = size > SIGNAL_FLOOR * size.max()
-    np.moveaxis(out, normal, 0)[has] = np.angle(backward.output_array[has] * np.conj(stack[has]))
+    power = stack.real * stack.real + stack.imag * stack.imag  # |S|², no square roots
+    has = power > SIGNAL_FLOOR**2 * power.max()
+    product = backward.output_array * np.conj(stack)
+    angle = np.arctan2(product.imag, product.real)
+    np.copyto(np.moveaxis(out, normal, 0), angle, where=has)
 
 
 def blur_correction(phase: xr.Dataset, body: Any, U: FloatArray) -> np.ndarray:
@@ -226,19 +234,28 @@ def blur_correction(phase: xr.Dataset, body: Any, U: FloatArray) -> np.ndarray:
         else np.ones((len(tags), *shape), dtype=bool)
     )
     out = np.zeros((len(tags), phase.sizes["time"], *shape), dtype=np.float32)
+    outside = [None if a.all() else ~a for a in acquired]
     for n in range(1, U.shape[0]):  # one splat of every tag and one filter per tag and frame
-        un = u[n]
+        un, here, rho = u[n], reference, density
         ok = np.isfinite(un).all(axis=1)
-        moved = (reference[ok] + un[ok])[:, ::-1]  # (z, y, x)
-        angle = un[ok] @ wavevector.T  # (point, tag) rad
+        if not ok.all():
+            un, here, rho = un[ok], here[ok], rho[ok]
+        moved = (here + un)[:, ::-1]  # (z, y, x)
+        angle = np.einsum("pi,ti->pt", un, wavevector)  # (point, tag) rad
         # ρ0 e^{-ik·u} as real and imaginary columns: one real sparse product spreads all
-        signals = density[ok, None] * np.concatenate([np.cos(angle), -np.sin(angle)], axis=1)
-        spread = splat_operator(moved, origin, spacing, shape) @ signals  # (voxel, 2 tag)
+        # (in single precision, as S is filtered: the correction keeps ~1e-6 rad)
+        signals = np.empty((angle.shape[0], 2 * len(tags)), dtype=np.float32)
+        np.cos(angle, out=signals[:, : len(tags)])
+        np.sin(angle, out=signals[:, len(tags) :])
+        signals[:, len(tags) :] *= -1.0
+        signals *= rho[:, None]
+        spread = splat_operator(moved, origin, spacing, shape, np.float32) @ signals
         for t, (disk, normal) in enumerate(disks):  # ≤ 3 tags
             S = np.empty(shape, dtype=np.complex64)
             S.real = spread[:, t].reshape(shape)
             S.imag = spread[:, len(tags) + t].reshape(shape)
-            S *= acquired[t]
+            if outside[t] is not None:
+                np.copyto(S, 0.0, where=outside[t])
             _filtered_phase(S, disk, normal, out[t, n])
     return out
 
@@ -247,8 +264,11 @@ def deblurred(phase: xr.Dataset, correction: np.ndarray) -> xr.Dataset:
     """``phase`` with ``correction`` (rad, as from :func:`blur_correction`) removed, wrapped."""
     values = np.asarray(phase["phase"].transpose("tag", "time", *GRID_DIMS).values)
     corrected = values.copy()
-    moved = correction != 0  # the correction is zero outside the tissue
-    corrected[moved] = wrap(values[moved] - correction[moved])
+    for n in range(values.shape[1]):  # frame by frame: temporaries of one frame only
+        moved = correction[:, n] != 0  # the correction is zero outside the tissue
+        if moved.any():
+            target = corrected[:, n]
+            target[moved] = wrap(values[:, n][moved] - correction[:, n][moved])
     out = phase.copy()
     out["phase"] = (("tag", "time", *GRID_DIMS), corrected, phase["phase"].attrs)
     return out

@@ -432,7 +432,10 @@ def track_with(
 
 def _mean_correction(correction: np.ndarray) -> np.ndarray:
     """Mean |correction| per frame over the grid voxels that carry one, rad."""
-    moved = np.abs(correction) > 0
-    total = moved.sum(axis=(0, 2, 3, 4))
-    size = np.abs(correction).sum(axis=(0, 2, 3, 4), dtype=np.float64)
-    return np.where(total > 0, size / np.maximum(total, 1), 0.0)
+    mean = np.zeros(correction.shape[1])
+    for n in range(correction.shape[1]):  # frame by frame: no grid-sized temporaries
+        frame = correction[:, n]
+        total = np.count_nonzero(frame)
+        if total:
+            mean[n] = float(np.abs(frame).sum(dtype=np.float64)) / total
+    return mean
