@@ -56,7 +56,7 @@ def track_frame_augmented(
     while True:
         constraint.penalty = lam * scale
         for _ in range(settings.max_updates):  # max_updates ≥ 1 (TrackingSettings)
-            outcome.add(problem.solve(outcome.u, settings.max_iterations), lam, True)
+            outcome.add(problem.solve(outcome.u, settings.max_iterations, outcome.last), lam, True)
             if outcome.epsilon <= target:
                 return outcome.finish(reached=True)
             assert outcome.state is not None  # set by add()

@@ -54,8 +54,14 @@ class FrameProblem:
     timings: Timings = field(default_factory=Timings)
     offset: FloatArray | None = None
 
-    def solve(self, u: FloatArray, max_iterations: int) -> EquilibriumResult:
-        """Gauss–Newton equilibrium from ``u`` at the constraint's current λ and Λ."""
+    def solve(
+        self, u: FloatArray, max_iterations: int, start: EquilibriumResult | None = None
+    ) -> EquilibriumResult:
+        """Gauss–Newton equilibrium from ``u`` at the constraint's current λ and Λ.
+
+        ``start``: the frame's previous solve, if it ended at ``u`` (its evaluations there
+        are reused).
+        """
         return equilibrate(
             self.body,
             self.constraint,
@@ -67,6 +73,7 @@ class FrameProblem:
             max_iterations=max_iterations,
             offset=self.offset,
             timings=self.timings,
+            start=start,
         )
 
 
@@ -80,6 +87,8 @@ class FrameOutcome:
         Tracked displacement, mm.
     state : ConstraintState or None
         Constraint at ``u`` (None before the first solve).
+    last : EquilibriumResult or None
+        The last solve of this frame (None before the first), which ended at ``u``.
     epsilon : float
         Tracking residual ε reached, rad.
     penalty : float
@@ -103,6 +112,7 @@ class FrameOutcome:
 
     u: FloatArray
     state: ConstraintState | None = None
+    last: EquilibriumResult | None = None
     epsilon: float = float("inf")
     penalty: float = 0.0
     iterations: int = 0
@@ -119,7 +129,7 @@ class FrameOutcome:
 
     def add(self, result: EquilibriumResult, penalty: float, final_stage: bool) -> None:
         """Take in one equilibrium solve at relative penalty ``penalty``."""
-        self.u, self.state = result.u, result.state
+        self.u, self.state, self.last = result.u, result.state, result
         self.epsilon = result.state.epsilon()
         self.penalty = float(penalty)
         self.iterations += result.iterations

@@ -70,7 +70,11 @@ def track_frame_penalty(
             last = stage == len(levels) - 1
             iterations = settings.max_iterations
             outcome.add(
-                problem.solve(outcome.u, iterations if last else min(iterations, RAMP_ITERATIONS)),
+                problem.solve(
+                    outcome.u,
+                    iterations if last else min(iterations, RAMP_ITERATIONS),
+                    outcome.last,
+                ),
                 lam,
                 last,
             )

@@ -148,7 +148,7 @@ class _Scripted(FrameProblem):
         self.penalties = []
         self.constraint = _StubConstraint(self)
 
-    def solve(self, u, max_iterations):
+    def solve(self, u, max_iterations, start=None):
         self.penalties.append(self.constraint.penalty)
         return EquilibriumResult(u, _StubState(self.epsilons.pop(0)), 2, [0.0], True)
 
@@ -287,3 +287,46 @@ def test_robust_weight_is_for_the_penalty_method_only():
     assert TrackingSettings().effective_robust_scale == 0.5
     assert TrackingSettings(method="augmented-lagrangian").effective_robust_scale is None
     assert TrackingSettings(robust_scale=None).effective_robust_scale is None
+
+
+def test_remaining_increments_are_bounded_by_a_geometric_tail():
+    from harpx.tracking.equilibrium import FAST, _remaining
+
+    # increments s0 ρ^k: the tail after s_k sums to exactly ρ s_k / (1 - ρ)
+    rho = 0.2
+    steps = [0.5 * rho**k for k in range(3)]
+    tail = sum(0.5 * rho**k for k in range(3, 200))
+    assert _remaining(steps) == pytest.approx(tail, rel=1e-12)
+    # no bound from one increment, nor from a contraction slower than FAST
+    assert _remaining([0.1]) == np.inf
+    assert _remaining([0.1, FAST * 0.1]) == np.inf
+
+
+def test_a_solve_started_from_the_last_reuses_its_evaluations(ideal, rng, monkeypatch):
+    import harpx.tracking.equilibrium as eq
+    from harpx.mechanics.linsolve import LinearSolver
+
+    body, constraint = ideal
+    u0 = 0.3 * rng.standard_normal(body.ndof)
+    calls = []
+    counted = eq.internal_forces
+    monkeypatch.setattr(eq, "internal_forces", lambda *a, **k: calls.append(1) or counted(*a, **k))
+
+    def solve(u, start=None, iterations=2):
+        return eq.equilibrate(body, constraint, u, solver=LinearSolver(), max_iterations=iterations,
+                              tolerance=1e-9, start=start)  # fmt: skip
+
+    first = solve(u0)
+    assert not first.converged and first.internal is not None
+    calls.clear()
+    again = solve(first.u)
+    fresh = len(calls)
+    calls.clear()
+    reused = solve(first.u, start=first)
+    # one evaluation of the internal forces fewer, and the same iterates to rounding
+    assert len(calls) == fresh - 1
+    np.testing.assert_allclose(reused.u, again.u, rtol=0, atol=1e-12)
+    # a start that did not end at u is not reused
+    calls.clear()
+    solve(u0, start=first)
+    assert len(calls) == fresh
