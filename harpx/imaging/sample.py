@@ -470,6 +470,7 @@ class PhaseSampler:
                 buffer,
             )
         self._padded: NDArray[np.floating] | None = padded
+        self._padded_dtype = padded.dtype
         self._buffer: NDArray[np.floating] | None = padded if padded.base is None else padded.base
 
         mask = None
@@ -617,7 +618,8 @@ class PhaseSampler:
     ) -> Any:
         """W(arg D + k·x) (n, ntag) from Re and Im of D (ntag, n), with the slice position
         along invariant axes."""
-        phase = np.arctan2(im, re)  # = np.angle(re + i im), (ntag, n)
+        # = np.angle(re + i im), (ntag, n); k·x (hundreds of rad) is added in float64
+        phase = np.arctan2(im, re).astype(np.float64, copy=False)
         for c in range(3):  # k·x column by column (a (n, 3) @ (3, ntag) matmul is slower)
             coordinate = pts[None, :, c] if c in self._columns.tolist() else self._fixed[c]
             phase += self.wavevectors[:, c, None] * coordinate
@@ -637,7 +639,7 @@ class PhaseSampler:
         if needed.all():
             values = self._spline(u, nq)
         else:
-            values = np.zeros((nq, 2 * ntag, n))
+            values = np.zeros((nq, 2 * ntag, n), dtype=self._padded_dtype)
             index = np.flatnonzero(needed)
             if index.size:
                 values[..., index] = self._spline(u[index], nq)
@@ -708,7 +710,8 @@ class PhaseSampler:
         linear = (base_index + start) @ strides[:d]
         order = np.argsort(linear, kind="stable")
         n = u.shape[0]
-        ordered = np.empty((nq * nf, n))  # rows (q, channel); columns in the sorted order
+        # rows (q, channel), columns in the sorted order; in the coefficients' precision
+        ordered = np.empty((nq * nf, n), dtype=padded.dtype)
         # separable contraction: the leading axes with their tensor-product weights (value,
         # and the derivative along each leading axis), then the last axis (value weights for
         # those, slope weights for the derivative along it)
