@@ -116,6 +116,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import sparse
 
+from harpx._blas import matmul_one_thread
 from harpx._typing import FloatArray, IntArray
 from harpx.mechanics import kernel, kinematics
 
@@ -402,7 +403,7 @@ def _volumetric(
         Jn[used] = v[used] / G[used]
         _, dU, d2U = mat.volumetric(Jn)
         dU = np.broadcast_to(np.asarray(dU, dtype=np.float64), (ns,))
-        p = np.ascontiguousarray(dU[sd] @ body.vertex_weights.T)  # (ncell, nqp)
+        p = matmul_one_thread(dU[sd], body.vertex_weights.T)  # (ncell, nqp)
         c = np.zeros(ns)
         c[used] = np.broadcast_to(np.asarray(d2U, dtype=np.float64), (ns,))[used] / G[used]
         extra["nodal"] = c

@@ -50,6 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import sparse
 
+from harpx._blas import dot_one_thread, norm_one_thread
 from harpx._progress import progress_bar
 from harpx._typing import FloatArray, IntArray
 from harpx.errors import ConvergenceError, ElementInversionError
@@ -289,13 +290,13 @@ class _Newton:
             R = asm.R
             RF = R.copy()
             RF[self.D] = 0.0
-            rn = float(np.linalg.norm(RF))
+            rn = norm_one_thread(RF)
             history.append(rn)
             if not np.isfinite(rn):
                 return _Outcome(False, u, history, it, "nan", min_jacobian=asm.min_jacobian)
             if it == 0:
                 scale = rn
-            scale = max(scale, float(np.linalg.norm(R[self.D])))
+            scale = max(scale, norm_one_thread(R[self.D]))
             if not pending and (rn <= self.tol * scale or rn <= self.atol):
                 return _Outcome(True, u, history, it, min_jacobian=asm.min_jacobian)
             if it == self.max_iterations:
@@ -339,7 +340,7 @@ class _Newton:
                 reason = "diverged" if growth >= 4 else "stalled"
                 return _Outcome(False, u, history, it, reason, min_jacobian=asm.min_jacobian)
             alpha = 1.0
-            slope0 = float(step @ RF)
+            slope0 = dot_one_thread(step, RF)
             last_bad = asm.inverted
             accepted = None
             fallback = None
@@ -362,7 +363,7 @@ class _Newton:
                     break
                 tf = trial.R.copy()
                 tf[self.D] = 0.0
-                slope = float(step @ tf)
+                slope = dot_one_thread(step, tf)
                 if slope <= 0.0 or abs(slope) <= self.ls_ratio * abs(slope0):
                     accepted = fallback
                     break
