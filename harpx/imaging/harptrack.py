@@ -32,6 +32,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
+from harpx._blas import matmul_one_thread
 from harpx.errors import HarpxWarning, SchemaError
 from harpx.imaging.sample import PhaseSampler, wrap
 from harpx.schema import AXES, GRID_DIMS, standard_attrs, validate
@@ -292,7 +293,7 @@ def _track_frame(
             well = det > 1e-10 * np.maximum(scale, 1e-300) ** rank
             healthy[moving] = well
             if well.any():
-                step = -(solve(well, rhs[well]) @ basis.T)
+                step = -matmul_one_thread(solve(well, rhs[well]), basis.T)
                 target = index[moving[well]]
                 position[target] += np.clip(step, -step_limit, step_limit)
         active[index[done | ~valid | ~healthy]] = False

@@ -151,12 +151,14 @@ class Observability:
         """``u`` with the amplitude of every unseen rigid mode set to zero, mm."""
         if not self.unseen_modes.shape[0]:
             return u
-        amplitude = self.unseen_modes @ (self.mode_weights * u)
-        return u - amplitude @ self.unseen_modes
+        amplitude = self.unseen_amplitude(u)
+        # einsum, not BLAS: OpenBLAS threads these long products (see harpx._blas)
+        return u - np.einsum("m,md->d", amplitude, self.unseen_modes)
 
     def unseen_amplitude(self, u: FloatArray) -> FloatArray:
         """Amplitudes of the unseen rigid modes in ``u`` (mass-weighted mean, mm)."""
-        return self.unseen_modes @ (self.mode_weights * u)
+        out: FloatArray = np.einsum("md,d->m", self.unseen_modes, self.mode_weights * u)
+        return out
 
 
 def describe_direction(v: FloatArray, unnamed: str = "") -> str:
