@@ -322,6 +322,25 @@ def test_region_samples_like_the_whole_grid(
         PhaseSampler(ds, 0, region=[[0.0, 0.0, np.nan], [1.0, 1.0, 1.0]])
 
 
+def test_float32_region_keeps_a_margin_to_float32_resolution(rng: np.random.Generator) -> None:
+    # float32 coefficients: a 13-voxel margin (0.268**13 ~ 4e-8 of the data) is below their
+    # resolution, so the cropped spline samples like the whole grid's to float32 rounding
+    double = phase_dataset(shape=(4, 64, 60), spacing=(1.5, 1.0, 1.0))
+    ds = double.assign(
+        phase=double.phase.astype(np.float32), magnitude=double.magnitude.astype(np.float32)
+    )
+    box = np.array([[30.0, 30.0, 2.0], [40.0, 40.0, 6.5]])
+    points = box[0] + (box[1] - box[0]) * rng.random((400, 3))
+    whole, part = PhaseSampler(ds, 0), PhaseSampler(ds, 0, region=box)
+    assert part._padded is not None and part._padded.dtype == np.float32
+    (phi_w, grad_w, ok_w), (phi_p, grad_p, ok_p) = whole.sample(points), part.sample(points)
+    assert ok_w.all() and np.array_equal(ok_w, ok_p)
+    assert np.abs(wrap(phi_w - phi_p)).max() < 2e-6
+    assert np.abs(grad_w - grad_p).max() < 2e-6 * np.abs(grad_w).max()
+    # the window reaches 13 voxels beyond the box, not 20 as for float64 data
+    assert part._lo[-1] == PhaseSampler(double, 0, region=box)._lo[-1] + 7
+
+
 def test_reuse_gives_the_same_samples_and_retires_the_old_sampler(
     rng: np.random.Generator,
 ) -> None:
