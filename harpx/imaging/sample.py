@@ -570,7 +570,8 @@ class PhaseSampler:
         """
         pts = _as_points(points)
         _, size, valid_tags = self._evaluate(pts, derivatives=False)
-        return np.ascontiguousarray(size.T), cast(NDArray[np.bool_], valid_tags.all(axis=1))
+        magnitude = np.ascontiguousarray(size.T, dtype=np.float64)
+        return magnitude, cast(NDArray[np.bool_], valid_tags.all(axis=1))
 
     def acquired(self, points: ArrayLike) -> NDArray[np.bool_]:
         """Which tags have data at points: inside the field of view and the tag's ``mask``.

@@ -108,7 +108,7 @@ SMALL_STEP = 0.1
 CONTRACTION = 0.8
 #: Contraction per iteration below which the increments still to come are bounded by a
 #: geometric series, so that a solve can stop one iteration before its increment itself
-#: falls below the tolerance (paper phantom: 141 → 109 iterations, same errors).
+#: falls below the tolerance (paper phantom: 141 → 109 iterations, mean error within 2e-5 mm).
 FAST = 0.5
 
 
