@@ -188,7 +188,10 @@ class LinearSolver:
             self._pardiso = _new_pardiso(mtype)
             self._pardiso.set_iparm(1, 1)  # supply iparm
             self._pardiso.set_iparm(2, 2)  # nested-dissection ordering (METIS)
-            self._pardiso.set_iparm(8, 2)  # iterative refinement steps
+            # no forced iterative refinement: PARDISO still refines (two steps) whenever it
+            # perturbed a pivot; forcing two steps always cost 10 % of every solve (phantom
+            # tangent: 0.075 against 0.068 s, both residuals 1.6e-15)
+            self._pardiso.set_iparm(8, 0)
             self._pardiso.set_iparm(10, 8 if symmetric else 13)  # pivot perturbation 1e-8 / 1e-13
             self._pardiso.set_iparm(11, 0 if symmetric else 1)  # scaling (non-symmetric)
             self._pardiso.set_iparm(13, 0 if symmetric else 1)  # weighted matching
