@@ -351,10 +351,17 @@ class PhaseSampler:
     is treated as invariant: the coordinate of a point along it is ignored, and so is the
     tag wave vector's component along it (the phase gradient component there is 0).
 
+    Precision: the spline coefficients keep the data's precision, float32 for float32
+    ``phase`` and ``magnitude`` (the :func:`~harpx.imaging.harp.extract_phase` default):
+    samples then agree with float64 data's within 2e-5 rad, far below any tracking tolerance,
+    at half the memory traffic. Phase and gradient are returned in float64 either way.
+
     Cost: one spline prefilter per tag at construction; per point ``(order+1)**d`` taps
     shared by all tags (``d`` grid axes with more than one sample). Measured on a 2-core
-    machine for 10**6 random points: about 2.3 s for 3 tags on a 13 × 320 × 320 grid
-    (construction 1.4 s) and about 0.7 s for 2 tags on one 320 × 320 slice.
+    machine (float64 data) for 10**6 random points: about 2.3 s for 3 tags on a
+    13 × 320 × 320 grid (construction 1.4 s) and about 0.7 s for 2 tags on one 320 × 320
+    slice; one evaluation of the paper phantom's 103 680 constraint points (float32, 3
+    tags, with gradients) takes ~60 ms.
 
     Examples
     --------
