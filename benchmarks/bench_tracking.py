@@ -11,8 +11,8 @@ once per revision with ``--label`` (e.g. ``PYTHONPATH`` pointing at each checkou
 * ``HARP``: :func:`harpx.imaging.harptrack.track_harp` on the voxel centres of the images;
 * ``FE``: :func:`harpx.tracking.track` with the hex8 paper mesh (4320 cells), neo-Hookean
   C1 = 1 kPa, κ = 120 kPa, penalty method, the tracker's default ε (``--epsilon`` to pin it;
-  as in ``benchmarks/error_vs_runtime.py``), with the tracker's own time split (``time_*``
-  attrs).
+  as in ``benchmarks/error_vs_runtime.py``; ``--epsilon-factor`` and ``--blur-passes`` set
+  those tracking settings), with the tracker's own time split (``time_*`` attrs).
 
 ``--steps`` picks the rows (e.g. ``--steps harp`` for conventional HARP alone). Each row also
 gives the process CPU time (user + system) of its step, which a shared machine distorts less
@@ -57,6 +57,8 @@ def main() -> None:
         "--steps", nargs="+", default=["phase", "harp", "fe"], choices=["phase", "harp", "fe"]
     )
     parser.add_argument("--epsilon", type=float, default=None)
+    parser.add_argument("--epsilon-factor", type=float, default=None)
+    parser.add_argument("--blur-passes", type=int, default=None)
     parser.add_argument(
         "--cache", type=Path, default=Path(tempfile.gettempdir()) / "harpx_phantom_paper.nc"
     )
@@ -93,6 +95,10 @@ def main() -> None:
 
         body = Body(_mesh("paper", False), NeoHookean(c1=1.0, kappa=120.0), element="hex8")
         pinned = {} if args.epsilon is None else {"epsilon": args.epsilon}
+        if args.epsilon_factor is not None:
+            pinned["epsilon_factor"] = args.epsilon_factor
+        if args.blur_passes is not None:
+            pinned["blur_passes"] = args.blur_passes
         t0, c0 = time.perf_counter(), _cpu()
         fe = track(phase, body, method="penalty", **pinned)
         t_fe, c_fe = time.perf_counter() - t0, _cpu() - c0
@@ -101,7 +107,9 @@ def main() -> None:
             f"{k[5:]} {float(v):.1f}" for k, v in fe.attrs.items() if k.startswith("time_")
         )
         rows.append(
-            f"| {label} | FE hex8 {body.ncell} cells (+ phase() = {t_fe + t_phase:.1f} s) | "
+            f"| {label} | FE hex8 {body.ncell} cells"
+            f"{''.join(f', {k}={v}' for k, v in pinned.items())} "
+            f"(+ phase() = {t_fe + t_phase:.1f} s) | "
             f"{t_fe:.1f} | {c_fe:.1f} | {_errors(err)} | {float(err.coverage):.3f} | {split} |"
         )
     print("| run | step | wall s | CPU s | error mean / p95 / max mm | coverage | time split s |")
