@@ -330,3 +330,37 @@ def test_a_solve_started_from_the_last_reuses_its_evaluations(ideal, rng, monkey
     calls.clear()
     solve(u0, start=first)
     assert len(calls) == fresh
+
+
+class _ScriptedSolver:
+    """Returns scripted Gauss–Newton increments: a rigid x translation of a given size."""
+
+    def __init__(self, body, sizes):
+        self.sizes = list(sizes)
+        self.unit = np.zeros((body.ndof // 3, 3))
+        self.unit[:, 0] = 1.0
+
+    def solve(self, K, b, **kwargs):
+        return self.sizes.pop(0) * self.unit.ravel()
+
+
+@pytest.mark.parametrize(
+    ("sizes", "expected"),
+    [
+        # small steps (< 0.1 of the 2 mm trust radius) that stop shrinking are damped from the
+        # fourth iteration on, and again whenever they stop shrinking at the damped size
+        ([0.15] + [0.1] * 6, [0.15, 0.1, 0.1, 0.05, 0.05, 0.025, 0.025]),
+        # large steps are what carry points into the right tag basin: undamped until the
+        # eleventh iteration
+        ([1.0] * 12, [1.0] * 10 + [0.5, 0.5]),
+    ],
+)
+def test_cycling_steps_are_damped_early_only_when_small(ideal, sizes, expected):
+    import harpx.tracking.equilibrium as eq
+
+    body, constraint = ideal
+    assert 0.5 * np.pi / constraint.max_wavenumber == pytest.approx(2.0)  # the trust radius
+    res = eq.equilibrate(body, constraint, np.zeros(body.ndof), max_iterations=len(sizes),
+                         tolerance=1e-9, solver=_ScriptedSolver(body, sizes))  # fmt: skip
+    np.testing.assert_allclose(res.step_norms, expected, rtol=1e-12)
+    assert not res.converged
