@@ -63,7 +63,7 @@ from harpx.mechanics import (
     tetrahedralize,
     ventricle,
 )
-from harpx.mechanics.body import curved_tet_mesh
+from harpx.mechanics.cells import curved_tet_mesh
 
 OUT = Path(__file__).parent / "results" / "community.md"
 #: project the ventricle's boundary edge nodes of tet10 onto the ellipsoids; off: with
@@ -197,8 +197,8 @@ def inflation(levels, elements):
 
 def contraction(levels, elements):
     """Problem 3 rows: apex z (endo, epi) and the endocardial equator radius."""
+    from harpx.anatomy.ventricle import VentricleGeometry
     from harpx.mechanics import ActiveContraction
-    from harpx.mechanics.ventricle import VentricleGeometry
 
     geometry = VentricleGeometry(inner=ENDO, outer=EPI, truncation=BASE)
 

@@ -1,6 +1,6 @@
 """Newton iteration and cut-back counts on a Guccione ventricle inflated to 10 kPa.
 
-Problem: the structured ventricle of :func:`harpx.mechanics.ventricle.ventricle` with
+Problem: the structured ventricle of :func:`harpx.anatomy.ventricle.ventricle` with
 ``n_circumferential=32, n_longitudinal=12, n_transmural=4`` (2176 hex8 cells), Guccione
 myocardium ``C = 0.88 kPa, bf = 18.5, bt = 3.58, bfs = 1.63`` with ``κ = 880 kPa``
 (``κ/C = 10³``), the base fixed (all components), a follower pressure on the endocardium
@@ -26,9 +26,9 @@ import numpy as np
 
 
 def ventricle_case(steps: int) -> dict:
+    from harpx.anatomy.ventricle import ventricle
     from harpx.mechanics import Body, Fixed, Pressure, solve
     from harpx.mechanics.materials import Guccione
-    from harpx.mechanics.ventricle import ventricle
 
     mesh = ventricle(n_circumferential=32, n_longitudinal=12, n_transmural=4, segments=False)
     c = 0.88

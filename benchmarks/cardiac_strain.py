@@ -32,12 +32,12 @@ from pathlib import Path
 
 import numpy as np
 
+from harpx.anatomy.segmentation import mesh_from_labels
+from harpx.anatomy.ventricle_fit import fit_ventricle_to_mask
 from harpx.cardiac.strain import COMPONENTS, cardiac_strain, lv_measures
 from harpx.imaging.harp import extract_phase
 from harpx.imaging.harptrack import track_harp
 from harpx.mechanics.body import Body
-from harpx.mechanics.segmentation import mesh_from_labels
-from harpx.mechanics.ventricle_fit import fit_ventricle_to_mask
 from harpx.scenes.lv import lv
 from harpx.tracking.results import tracking_error
 from harpx.tracking.track import track

@@ -33,7 +33,7 @@ from pathlib import Path
 
 from harpx.errors import HarpxError
 from harpx.imaging.harp import extract_phase
-from harpx.mechanics.cut import opening_angle
+from harpx.physiology.cut import opening_angle
 from harpx.scenes.lv import fiber_shortening, lv
 from harpx.tracking.results import tracking_error
 from harpx.tracking.settings import TrackingSettings

@@ -40,13 +40,12 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import contextlib
 import csv
 import multiprocessing as mp
 import sys
 import time
 import traceback
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -65,6 +64,7 @@ from harpx.mechanics.newton import solve
 from harpx.scenes._motion import RotationalImpact
 from harpx.scenes.phantom import GEOMETRIES, Scene, phantom
 from harpx.tracking.results import tracking_error
+from harpx.tracking.settings import SolverTuning
 from harpx.tracking.track import track
 
 # the analytic rigid/affine motions are shared with tests/test_stability.py: one copy, in
@@ -105,25 +105,6 @@ class _Halvings:
             return out
 
         eq.internal_forces = counted
-
-
-@contextlib.contextmanager
-def _pure_linear_predictor(active: bool) -> Iterator[None]:
-    """Ablation: the predictor extrapolates the full last velocity (α = 1 only).
-
-    The default ``predictor="linear"`` starts from u(n−1) + α (u(n−1) − u(n−2)) with the α
-    in {0, ½, 1} of smallest phase residual; this forces α = 1.
-    """
-    import harpx.tracking.track as tr
-
-    saved = getattr(tr, "PREDICTOR_FACTORS", None)
-    if active and saved is not None:
-        tr.PREDICTOR_FACTORS = (1.0,)
-    try:
-        yield
-    finally:
-        if saved is not None:
-            tr.PREDICTOR_FACTORS = saved
 
 
 def _finite(*arrays: Any) -> bool:
@@ -310,13 +291,14 @@ def motion_cases() -> Iterable[Case]:
                 phase = extract_phase(scene.tagged)
                 rows = []
                 for predictor in ("linear", "none", "linear α=1"):
-                    with _pure_linear_predictor(predictor == "linear α=1"):
-                        row, _ = run_fe(
-                            scene.tagged,
-                            phase,
-                            scene.body(),
-                            predictor="none" if predictor == "none" else "linear",
-                        )
+                    factors = (1.0,) if predictor == "linear α=1" else (0.0, 0.5, 1.0)
+                    row, _ = run_fe(
+                        scene.tagged,
+                        phase,
+                        scene.body(),
+                        predictor="none" if predictor == "none" else "linear",
+                        tuning=SolverTuning(predictor_factors=factors),
+                    )
                     rows.append(
                         _row(
                             "motion",

@@ -10,6 +10,7 @@ import importlib
 from typing import Any
 
 import harpx.accessor  # noqa: F401  (registers ds.harp)
+from harpx._moved import install as _install_moved
 from harpx.errors import (
     ArchiveError,
     ConvergenceError,
@@ -18,6 +19,8 @@ from harpx.errors import (
     HarpxWarning,
     SchemaError,
 )
+
+_install_moved()  # old module paths of harpx 0.1 still import, with a warning
 
 __version__ = "0.1.0"  # the only place the version is written (pyproject reads it)
 
@@ -35,6 +38,8 @@ _LAZY: dict[str, str] = {
     "FiberGrowth": "harpx.mechanics.materials",
     "solve": "harpx.mechanics.newton",
     "track": "harpx.tracking.track",
+    "TrackingSettings": "harpx.tracking.settings",
+    "SolverTuning": "harpx.tracking.settings",
     "scenes": "harpx.scenes",
     "datasets": "harpx.datasets",
 }

@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 
     from harpx._typing import PathLike
 
-from harpx.tracking.settings import Method, Predictor, Regularization, TrackingSettings
+from harpx.tracking.settings import TrackingSettings
 
 
 class PlotMethods:
@@ -122,30 +122,15 @@ class HarpAccessor:
         self,
         body: Any,
         *,
-        method: Method = "penalty",
-        epsilon: float | None = None,
-        epsilon_factor: float = 1.5,
-        plateau_factor: float = 2.0,
-        epsilon_min: float = 0.02,
-        penalty: float = 1.0,
-        penalty_limit: float = 1e4,
-        ramp: int = 2,
-        multiplier_tolerance: float = 0.1,
-        max_updates: int = 10,
-        predictor: Predictor = "linear",
-        robust_scale: float | None = 0.5,
-        regularization: Regularization = "total",
-        blur_passes: int | None = None,
-        tolerance: float = 0.01,
-        max_iterations: int = 20,
+        settings: TrackingSettings | None = None,
         dirichlet: Sequence[Any] = (),
         terms: Sequence[Any] = (),
-        intorder: int | None = None,
-        linear_solver: str = "auto",
-        progress: bool = False,
-        settings: TrackingSettings | None = None,
+        **overrides: Any,
     ) -> xr.Dataset:
         """Track a finite-element body through the phase images.
+
+        ``settings`` and the keyword ``overrides`` (any field of
+        :class:`~harpx.tracking.settings.TrackingSettings`) are forwarded unchanged.
 
         See Also
         --------
@@ -154,15 +139,8 @@ class HarpAccessor:
         from harpx.tracking.track import track
 
         return track(
-            self._ds, body, method=method, epsilon=epsilon, epsilon_factor=epsilon_factor,
-            plateau_factor=plateau_factor, epsilon_min=epsilon_min, penalty=penalty,
-            penalty_limit=penalty_limit, ramp=ramp,
-            multiplier_tolerance=multiplier_tolerance, max_updates=max_updates,
-            predictor=predictor, robust_scale=robust_scale, regularization=regularization,
-            blur_passes=blur_passes, tolerance=tolerance, max_iterations=max_iterations,
-            dirichlet=dirichlet, terms=terms,
-            intorder=intorder, linear_solver=linear_solver, progress=progress, settings=settings,
-        )  # fmt: skip
+            self._ds, body, settings=settings, dirichlet=dirichlet, terms=terms, **overrides
+        )
 
     def track_harp(
         self, *, points: ArrayLike | xr.Dataset | None = None, iterations: int = 10

@@ -459,10 +459,12 @@ def _check_arguments(
         )
     if not callable(body_factory):
         raise TypeError(f"body_factory must be callable, got {type(body_factory).__name__!r}")
+    from harpx.tracking.settings import TrackingSettings
     from harpx.tracking.track import track
 
     params = inspect.signature(track).parameters
     allowed = [n for n, p in params.items() if p.kind is inspect.Parameter.KEYWORD_ONLY]
+    allowed += [f.name for f in dataclasses.fields(TrackingSettings)]
     unknown = sorted(set(kwargs) - set(allowed))
     if unknown:
         raise TypeError(

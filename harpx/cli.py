@@ -83,7 +83,7 @@ def _demo(args: argparse.Namespace) -> int:
         results[f"FE {element}"] = fe
         rows.append(
             {
-                "method": f"FE {args.method} {element} ({body.ncell} cells)",
+                "method": f"FE {fe.attrs['method']} {element} ({body.ncell} cells)",
                 "seconds": time.perf_counter() - t + phase_time,
                 "result": fe,
             }
@@ -138,24 +138,53 @@ def _track(args: argparse.Namespace) -> int:
     _refuse_overwriting_input(args.output, [args.input, args.mesh])
     ds = open_dataset(args.input)
     body = read_body(args.mesh, NeoHookean(c1=args.c1, kappa=args.kappa), element=args.element)
-    options: dict[str, Any] = {"dirichlet": [_fixed(item, body) for item in args.fix]}
-    if args.penalty is not None:
-        options["penalty"] = args.penalty
-    result = track(ds, body, **_tracking(args), **options)
+    fixed = [_fixed(item, body) for item in args.fix]
+    result = track(ds, body, dirichlet=fixed, **_tracking(args))
     to_netcdf(result, args.output)
     print(f"wrote {args.output}")
     return 0
 
 
+#: TrackingSettings fields the ``demo`` and ``track`` commands expose, with their help
+_TRACKING_OPTIONS: dict[str, str] = {
+    "method": "constraint method",
+    "epsilon": "target tracking residual, rad (default: epsilon-factor times each frame's "
+    "noise floor, never below epsilon-min)",
+    "epsilon_factor": "default target relative to the estimated noise floor",
+    "epsilon_min": "lowest default target, rad",
+    "blur_passes": "band-pass blur-correction passes (default: 1 with the default target, 0 "
+    "with --epsilon)",
+    "penalty": "starting penalty relative to stiffness and tag wavenumber, raised "
+    "automatically until the target is met",
+    "max_iterations": "Gauss-Newton iterations per penalty stage",
+}
+
+
+def _tracking_options(parser: argparse.ArgumentParser) -> None:
+    """Add the tracking options; their defaults are :class:`TrackingSettings`'s own."""
+    from dataclasses import fields
+
+    from harpx.tracking.settings import METHODS, TrackingSettings
+
+    defaults = {f.name: f.default for f in fields(TrackingSettings)}
+    kinds = {"epsilon": float, "epsilon_factor": float, "epsilon_min": float, "penalty": float,
+             "blur_passes": int, "max_iterations": int}  # fmt: skip
+    for name, text in _TRACKING_OPTIONS.items():
+        default = defaults[name]
+        shown = "" if default is None else f" (default: {default})"
+        flag = "--" + name.replace("_", "-")
+        if name == "method":
+            parser.add_argument(flag, choices=METHODS, default=None, help=text + shown)
+        else:
+            parser.add_argument(flag, type=kinds[name], default=None, help=text + shown)
+
+
 def _tracking(args: argparse.Namespace) -> dict[str, Any]:
-    """Tracking options shared by ``demo`` and ``track``."""
+    """The tracking settings given on the command line (the rest stay the library's)."""
     from harpx._progress import show_progress
 
-    return {
-        "method": args.method,
-        "epsilon": args.epsilon,
-        "progress": show_progress(args.progress),
-    }
+    given = {k: getattr(args, k) for k in _TRACKING_OPTIONS if getattr(args, k) is not None}
+    return {**given, "progress": show_progress(args.progress)}
 
 
 def _fixed(item: str, body: Any) -> Any:
@@ -303,7 +332,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"harpx {__version__}")
     parser.add_argument("--debug", action="store_true", help="print full tracebacks on errors")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    methods = ["penalty", "augmented-lagrangian"]
 
     demo = sub.add_parser(
         "demo", help="track the synthetic brain phantom end to end", formatter_class=fmt
@@ -311,8 +339,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--output", default="harpx-demo", help="output folder")
     demo.add_argument("--size", choices=["paper", "small"], default="paper", help="scene size")
     demo.add_argument("--upsample", type=int, default=2, help="in-plane phase upsampling")
-    demo.add_argument("--method", choices=methods, default="penalty", help="constraint method")
-    demo.add_argument("--epsilon", type=float, default=0.05, help="target tracking residual, rad")
+    _tracking_options(demo)
     demo.add_argument(
         "--elements",
         nargs="+",
@@ -353,14 +380,7 @@ def build_parser() -> argparse.ArgumentParser:
     trk.add_argument("--element", choices=["hex8", "hex20"], default="hex8", help="element")
     trk.add_argument("--c1", type=float, default=1.0, help="neo-Hookean C1, kPa")
     trk.add_argument("--kappa", type=float, default=120.0, help="bulk modulus, kPa")
-    trk.add_argument("--method", choices=methods, default="penalty", help="constraint method")
-    trk.add_argument("--epsilon", type=float, default=0.05, help="target tracking residual, rad")
-    trk.add_argument(
-        "--penalty",
-        type=float,
-        help="starting penalty relative to stiffness and tag wavenumber, raised "
-        "automatically until epsilon is met (default: that of harpx.tracking.track, 1)",
-    )
+    _tracking_options(trk)
     trk.add_argument(
         "--fix",
         action="append",

@@ -75,6 +75,6 @@ class HarpxWarning(UserWarning):
 class CoincidentNodesWarning(HarpxWarning):
     """A mesh has coincident (unmerged duplicate) nodes: its cells there are not connected.
 
-    Intended for cut bodies (:func:`harpx.mechanics.cut.opening_angle`); anywhere else it
+    Intended for cut bodies (:func:`harpx.physiology.cut.opening_angle`); anywhere else it
     usually means a mesh export did not merge the nodes of its blocks.
     """

@@ -523,7 +523,7 @@ def opening_angle_view(result: Any, ax: Any = None, *, scale: float = 1.0) -> An
     Parameters
     ----------
     result : OpeningAngle
-        Output of :func:`harpx.mechanics.cut.opening_angle`.
+        Output of :func:`harpx.physiology.cut.opening_angle`.
     ax : matplotlib.axes.Axes, optional
         Axes to draw in (default: a new 4 × 4 in figure).
     scale : float, default 1

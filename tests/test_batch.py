@@ -25,10 +25,10 @@ from harpx.errors import HarpxError
 from harpx.imaging.harp import extract_phase
 from harpx.io.netcdf import open_dataset, to_netcdf
 from harpx.mechanics.body import Body
-from harpx.mechanics.cut import NodeFixed
 from harpx.mechanics.loads import Fixed
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import cylinder
+from harpx.physiology.cut import NodeFixed
 from harpx.scenes._motion import RotationalImpact
 from harpx.tracking.track import track
 from tests._ideal import ideal_phase

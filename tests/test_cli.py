@@ -107,7 +107,7 @@ def test_help_is_plain_text_with_defaults(command, capsys):
     assert "``" not in text and ":mod:" not in text and ":func:" not in text
     assert "(default: None)" not in text and "(default: [])" not in text
     expected = {
-        "track": "(default: 0.05)",
+        "track": "(default: 1.5)",  # --epsilon-factor: the library's own default
         "phase": "(default: 2)",
         "demo": "(default: harpx-demo)",
         "scene": "(default: harpx-scene)",
@@ -194,3 +194,22 @@ def test_scene_exports_an_input_archive_and_mesh(tmp_path, capsys):
     body = read_body(tmp_path / "try" / "mesh.vtu", NeoHookean(c1=1.0, kappa=120.0))
     assert body.ncell == 432 and sorted(body.boundaries) == ["bottom", "outer", "top"]
     assert f"harpx track {tmp_path / 'try' / 'phase.nc'}" in text and "--mesh" in text
+
+
+@pytest.mark.parametrize("command", ["track", "demo"])
+def test_tracking_defaults_are_the_librarys(command):
+    # no tracking option on the command line: the settings are TrackingSettings() (noise-floor
+    # target, blur correction), as in a notebook
+    import argparse
+
+    from harpx.cli import _tracking, build_parser
+    from harpx.tracking.settings import TrackingSettings
+
+    parser = build_parser()
+    argv = [command] if command == "demo" else ["track", "in.nc", "out.nc", "--mesh", "m.vtu"]
+    args = parser.parse_args([*argv, "--no-progress"])
+    assert isinstance(args, argparse.Namespace)
+    assert TrackingSettings.build(**_tracking(args)) == TrackingSettings()
+    given = parser.parse_args([*argv, "--epsilon", "0.1", "--blur-passes", "0", "--no-progress"])
+    chosen = TrackingSettings.build(**_tracking(given))
+    assert (chosen.epsilon, chosen.effective_blur_passes) == (0.1, 0)

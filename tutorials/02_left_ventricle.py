@@ -41,8 +41,8 @@ import numpy as np
 
 import harpx.accessor  # noqa: F401  (registers the ds.harp accessor)
 from harpx.io.netcdf import open_dataset, to_netcdf
-from harpx.mechanics.cut import opening_angle
-from harpx.mechanics.growth import fiber_prestretch
+from harpx.physiology.cut import opening_angle
+from harpx.physiology.growth import fiber_prestretch
 from harpx.plotting import opening_angle_view
 from harpx.scenes.lv import fiber_shortening, lv
 

@@ -41,12 +41,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import harpx.accessor  # noqa: F401  (registers the ds.harp accessor)
+from harpx.anatomy.segmentation import mesh_from_labels
+from harpx.anatomy.ventricle_fit import fit_ventricle_to_mask
 from harpx.cardiac.strain import lv_measures
 from harpx.io.dicom import read_tagged
 from harpx.io.dicom_write import write_tagged
+from harpx.io.labels import read_labels
 from harpx.mechanics.body import Body
-from harpx.mechanics.segmentation import mesh_from_labels, read_labels
-from harpx.mechanics.ventricle_fit import fit_ventricle_to_mask
 from harpx.plotting import bullseye
 from harpx.scenes.lv import lv, myocardium
 

@@ -2,7 +2,7 @@ r"""Strain in the ventricle's local frame, AHA 17 segments, twist and torsion.
 
 Local frame
 -----------
-At every point of the wall the fitted template (:class:`~harpx.mechanics.ventricle_fit.
+At every point of the wall the fitted template (:class:`~harpx.anatomy.ventricle_fit.
 VentricleTemplate`) gives the circumferential direction :math:`e_c` (counter-clockwise
 about the long axis, which points from the apex to the base), the longitudinal direction
 :math:`e_l` (the meridian of the ellipsoidal layer through the point, apex to base) and the
@@ -101,8 +101,8 @@ def aha_segments(points: ArrayLike, template: Any, *, anterior: float = 0.0) -> 
 
     Examples
     --------
-    >>> from harpx.mechanics.ventricle import VentricleGeometry
-    >>> from harpx.mechanics.ventricle_fit import VentricleTemplate
+    >>> from harpx.anatomy.ventricle import VentricleGeometry
+    >>> from harpx.anatomy.ventricle_fit import VentricleTemplate
     >>> from harpx.cardiac.strain import aha_segments
     >>> t = VentricleTemplate(VentricleGeometry((25.0, 70.0), (35.0, 78.0), 10.0))
     >>> aha_segments([[30.0, 1.0, 0.0], [-1.0, -30.0, -40.0], [0.0, 0.0, -74.0]], t).tolist()

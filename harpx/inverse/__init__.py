@@ -31,11 +31,13 @@ mean) but the element stretches carry the noise, and
 the estimates of the small tongue scene fell 20–73 % short (one muscle diverged); at twice
 the floor every muscle is within 11 %.
 
-The forward simulations they use live in :mod:`harpx.mechanics.active`
+The forward simulations they use live in :mod:`harpx.physiology.active`
 (``simulate_activation``, ``simulate_history``), the figure in :mod:`harpx.plotting`.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 from harpx.inverse.calibration import calibrate_activation
 from harpx.inverse.comparison import resimulate
@@ -56,3 +58,9 @@ __all__ = [
     "resimulate",
     "uniaxial_active_tension",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    from harpx._moved import moved_attribute
+
+    return moved_attribute(__name__, name)

@@ -1,6 +1,6 @@
 r"""Step 3: undo the measurement chain's attenuation of an activation estimate, per muscle.
 
-One forward simulation with the estimate (:func:`harpx.mechanics.active.simulate_history`),
+One forward simulation with the estimate (:func:`harpx.physiology.active.simulate_history`),
 one pass through the same chain of imaging, phase extraction and tracking, and a closed-form
 per-muscle scaling (:func:`calibrate_activation`); no optimisation loop.
 """
@@ -20,9 +20,9 @@ from harpx.inverse._common import (
 )
 from harpx.inverse.correction import correct_activation
 from harpx.inverse.estimate import estimate_activation
-from harpx.mechanics.active import default_law, fibred_body, simulate_history
 from harpx.mechanics.body import Body
 from harpx.mechanics.materials import ActiveContraction
+from harpx.physiology.active import default_law, fibred_body, simulate_history
 
 __all__ = ["calibrate_activation"]
 

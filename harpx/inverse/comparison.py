@@ -1,7 +1,7 @@
 """Re-simulation with estimated activations, compared with tracking element by element.
 
 :func:`resimulate` runs the tracking model forward with the per-muscle estimates
-(:func:`harpx.mechanics.active.simulate_activation`) and compares simulated and tracked
+(:func:`harpx.physiology.active.simulate_activation`) and compares simulated and tracked
 fibre stretch per element and per muscle (paper Fig. 3c;
 :func:`harpx.plotting.plot_stretch_agreement`).
 """
@@ -22,15 +22,15 @@ from harpx.inverse._common import (
     tracked_u,
     weighted_stats,
 )
-from harpx.mechanics.active import (
+from harpx.mechanics.body import Body
+from harpx.mechanics.materials import ActiveContraction
+from harpx.physiology.active import (
     default_law,
     fibred_body,
     region_values,
     simulate_activation,
     with_active_law,
 )
-from harpx.mechanics.body import Body
-from harpx.mechanics.materials import ActiveContraction
 from harpx.schema import standard_attrs
 
 __all__ = ["resimulate"]

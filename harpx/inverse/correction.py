@@ -40,10 +40,10 @@ from harpx.inverse._common import (
     time_index,
     tracked_u,
 )
-from harpx.mechanics.active import default_law, fibred_body, with_active_law
 from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.body import Body
 from harpx.mechanics.materials import ActiveContraction
+from harpx.physiology.active import default_law, fibred_body, with_active_law
 
 __all__ = ["correct_activation"]
 

@@ -73,10 +73,10 @@ from harpx.inverse._common import (
     tracked_u,
     weighted_stats,
 )
-from harpx.mechanics.active import default_law, fibred_body
 from harpx.mechanics.body import Body
 from harpx.mechanics.kinematics import split_growth
 from harpx.mechanics.materials import ActiveContraction
+from harpx.physiology.active import default_law, fibred_body
 
 __all__ = ["estimate_activation", "uniaxial_active_tension"]
 

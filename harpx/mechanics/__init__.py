@@ -1,13 +1,20 @@
-"""Hyperelastic finite-element mechanics: meshes, bodies, materials, loads, Newton solver.
+"""The hyperelastic finite-element engine: meshes, bodies, materials, loads, Newton solver.
 
 Public names::
 
     Body, NeoHookean, Guccione, ActiveContraction, FiberGrowth,
     solve, equilibrate, SolveResult, Fixed, Prescribed, Pressure, BodyForce, box, cylinder, tube,
-    tetrahedralize, ventricle, cavity_volume, displacement_at
+    tetrahedralize, displacement_at
+
+Anatomy built on it (segmentation mesher, ventricle and tongue templates, template fits)
+lives in :mod:`harpx.anatomy`, physiological experiments (active contraction, growth,
+cuts) in :mod:`harpx.physiology`. ``harpx.mechanics.ventricle`` and ``cavity_volume``
+still resolve, with a :class:`DeprecationWarning`.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 from harpx.mechanics.body import Body
 from harpx.mechanics.loads import BodyForce, Fixed, Prescribed, Pressure
@@ -15,7 +22,6 @@ from harpx.mechanics.locate import displacement_at
 from harpx.mechanics.materials import ActiveContraction, FiberGrowth, Guccione, NeoHookean
 from harpx.mechanics.mesh import MeshSpec, box, cylinder, tetrahedralize, tube
 from harpx.mechanics.newton import SolveResult, equilibrate, solve
-from harpx.mechanics.ventricle import cavity_volume, ventricle
 
 __all__ = [
     "ActiveContraction",
@@ -30,12 +36,16 @@ __all__ = [
     "Pressure",
     "SolveResult",
     "box",
-    "cavity_volume",
     "cylinder",
     "displacement_at",
     "equilibrate",
     "solve",
     "tetrahedralize",
     "tube",
-    "ventricle",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    from harpx._moved import moved_attribute
+
+    return moved_attribute(__name__, name)

@@ -30,8 +30,7 @@ import functools
 import os
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal, TypeAlias, TypeVar, cast
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import meshio
 import numpy as np
@@ -41,401 +40,27 @@ from scipy import sparse
 from skfem.io.meshio import HEX_MAPPING
 
 from harpx._typing import FloatArray, IntArray
-from harpx.errors import CoincidentNodesWarning, SchemaError
+from harpx.errors import CoincidentNodesWarning
 from harpx.mechanics import kinematics
+from harpx.mechanics.cells import (
+    _HEX20_MESHES,
+    _VOLUMETRIC,
+    ELEMENTS,
+    ElementName,
+    Volumetric,
+    _check_cells,
+    _orient_tets,
+    _skfem_mesh,
+    default_element,
+)
 from harpx.mechanics.mesh import MeshSpec, check_nodes, check_unused_nodes, coincident_nodes
 
-__all__ = [
-    "Body",
-    "ELEMENTS",
-    "ElementKind",
-    "check_fits_image",
-    "curved_tet_mesh",
-    "default_element",
-]
+__all__ = ["Body"]
 
 if TYPE_CHECKING:
-    from harpx.mechanics.segmentation import MeshQuality
+    from harpx.mechanics.quality import MeshQuality
 
 _T = TypeVar("_T")
-#: Element names a :class:`Body` accepts.
-ElementName: TypeAlias = Literal["hex8", "hex20", "tet4", "tet10"]
-#: Volumetric (incompressibility) formulations.
-Volumetric: TypeAlias = Literal[
-    "mean-dilatation", "linear-dilatation", "nodal-dilatation", "pointwise"
-]
-
-
-@dataclass(frozen=True)
-class ElementKind:
-    """What a :class:`Body` needs to know about one element type.
-
-    Attributes
-    ----------
-    factory : callable
-        The scalar scikit-fem element class.
-    intorder : int
-        skfem integration order of the cell quadrature.
-    nqp : int
-        Number of quadrature points per cell that order gives.
-    facet_intorder : int
-        Integration order on boundary facets (follower pressure, cavity volume).
-    meshes : tuple of type
-        skfem mesh classes the element accepts.
-    volumetric : tuple of str
-        Volumetric formulations offered; the first is the default.
-    vtk_edges : ndarray of int, shape (nedge, 2)
-        Corner pairs (VTK order) of the edge nodes, in VTK order (empty for linear cells).
-    """
-
-    factory: Any
-    intorder: int
-    nqp: int
-    facet_intorder: int
-    meshes: tuple[type, ...]
-    volumetric: tuple[Volumetric, ...]
-    vtk_edges: IntArray
-
-
-_NO_EDGES = np.zeros((0, 2), dtype=np.int64)
-# VTK hexahedron20 and tetra10 edges as pairs of VTK corner ids.
-_VTK_HEX_EDGES = np.array(
-    [[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4],
-     [0, 4], [1, 5], [2, 6], [3, 7]]
-)  # fmt: skip
-_VTK_TET_EDGES = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])
-_HEX_MESHES = (skfem.MeshHex1,)
-_HEX20_MESHES = (skfem.MeshHex1, skfem.MeshHex2)
-_TET_MESHES = (skfem.MeshTet1, skfem.MeshTet2)
-
-#: element name -> :class:`ElementKind`
-ELEMENTS: dict[str, ElementKind] = {
-    "hex8": ElementKind(
-        skfem.ElementHex1, 3, 8, 3, _HEX_MESHES, ("mean-dilatation", "pointwise"), _NO_EDGES
-    ),
-    "hex20": ElementKind(
-        skfem.ElementHexS2, 5, 27, 5, _HEX20_MESHES,
-        ("mean-dilatation", "linear-dilatation", "pointwise"), _VTK_HEX_EDGES,
-    ),
-    "tet4": ElementKind(
-        skfem.ElementTetP1, 1, 1, 2, (skfem.MeshTet1,), ("nodal-dilatation", "pointwise"),
-        _NO_EDGES,
-    ),
-    "tet10": ElementKind(
-        skfem.ElementTetP2, 5, 14, 4, _TET_MESHES,
-        ("nodal-dilatation", "mean-dilatation", "pointwise"),
-        _VTK_TET_EDGES,
-    ),
-}  # fmt: skip
-
-_VOLUMETRIC = ("mean-dilatation", "linear-dilatation", "nodal-dilatation", "pointwise")
-
-
-def default_element(mesh: Any) -> ElementName:
-    """The element a mesh implies: hex8 / hex20 for straight / curved (``MeshHex2``)
-    hexahedra, tet4 / tet10 for linear / quadratic tetrahedra."""
-    if isinstance(mesh, skfem.MeshHex2):
-        return "hex20"
-    if isinstance(mesh, skfem.MeshTet2):
-        return "tet10"
-    if isinstance(mesh, skfem.MeshTet1):
-        return "tet4"
-    return "hex8"
-
-
-def _skfem_mesh(m: meshio.Mesh, source: str) -> tuple[Any, FloatArray | None]:
-    """The scikit-fem mesh and cell fibres of a hexahedral or tetrahedral meshio mesh.
-
-    ``hexahedron``, ``hexahedron20`` (straight-edged geometry from the corners; the edge
-    nodes become element dofs again), ``tetra`` and ``tetra10`` (curved: the edge nodes
-    are kept as geometry, a ``skfem.MeshTet2``) cells are accepted; cell data ``fiber``
-    (one vector per cell) becomes the fibres. ``source`` names the mesh in errors.
-    """
-    kinds = m.cells_dict
-    known = ("hexahedron", "hexahedron20", "tetra", "tetra10")
-    present = [k for k in known if len(kinds.get(k, ()))]
-    if not present:
-        raise ValueError(
-            f"{source} has no hexahedra or tetrahedra (cell blocks "
-            f"{ {k: len(v) for k, v in kinds.items()}!r}); expected 'hexahedron', "
-            "'hexahedron20', 'tetra' or 'tetra10' cells"
-        )
-    kind = present[0]
-    k = [i for i, c in enumerate(m.cells) if c.type == kind][0]
-    fibers = None
-    if "fiber" in m.cell_data:
-        fibers = np.asarray(m.cell_data["fiber"][k], dtype=np.float64)
-    cell_data = {name: [np.asarray(v[k])] for name, v in m.cell_data.items()}
-    if kind == "hexahedron20":
-        corners = m.cells[k].data[:, :8]
-        used, inv = np.unique(corners, return_inverse=True)
-        m = meshio.Mesh(m.points[used], [("hexahedron", inv.reshape(-1, 8))], cell_data=cell_data)
-    elif kind == "tetra10":
-        # skfem numbers the vertices first; keep the corner points, rebuild the edge nodes
-        # from the file (so curved edges stay curved)
-        cells = m.cells[k].data
-        used, inv = np.unique(cells[:, :4], return_inverse=True)
-        t = inv.reshape(-1, 4)
-        base = skfem.MeshTet1(np.ascontiguousarray(m.points[used].T), np.ascontiguousarray(t.T))
-        base = _orient_tets(base)
-        return curved_tet_mesh(base, _edge_points(base, t, m.points[cells[:, 4:]])), fibers
-    else:  # keep these cells and their nodes (drop other cell blocks and stray points)
-        used, inv = np.unique(m.cells[k].data, return_inverse=True)
-        nv = m.cells[k].data.shape[1]
-        m = meshio.Mesh(m.points[used], [(kind, inv.reshape(-1, nv))], cell_data=cell_data)
-    mesh = skfem.io.meshio.from_meshio(m)
-    if isinstance(mesh, skfem.MeshTet1):
-        mesh = _orient_tets(mesh)
-    return mesh, fibers
-
-
-# VTK hexahedron edges grouped by the reference direction they run along (xi, eta, zeta)
-_EDGES_BY_DIRECTION = np.array(
-    [[[0, 1], [3, 2], [4, 5], [7, 6]], [[0, 3], [1, 2], [4, 7], [5, 6]],
-     [[0, 4], [1, 5], [2, 6], [3, 7]]]
-)  # fmt: skip
-# bytes held per constraint quadrature point and basis function (values, gradients, work
-# arrays), plus per point (positions, weights, phase samples): a generous estimate
-_BYTES_PER_POINT_BASIS = 64
-_BYTES_PER_POINT = 400
-
-
-def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> None:
-    """Raise before tracking if a body's size or position cannot match an image grid.
-
-    Cheap checks (a pass over nodes and cells) that catch a mesh in the wrong units or
-    with stray nodes before the tracker allocates its constraint quadrature, whose point
-    count grows with (cell size / voxel size)³:
-
-    * every node lies within one field of view (the largest extent of the grid) of the
-      image's field of view;
-    * the mesh is larger than one voxel;
-    * the constraint quadrature, points at most one acquired voxel apart as the tracker
-      places them, has at most ``max_points`` points.
-
-    Parameters
-    ----------
-    body : Body
-        The tracking body (mm).
-    grid : xarray.Dataset
-        A ``tagged/1`` or ``phase/1`` dataset: coordinates ``z``, ``y``, ``x`` (mm) and,
-        for phase images, the ``upsample`` attribute (the acquired voxel is ``upsample``
-        grid steps).
-    max_points : int, default 10_000_000
-        Largest constraint quadrature allowed (about 1 kB of memory per point).
-
-    Raises
-    ------
-    NotImplementedError
-        For a body on curved hexahedra (``skfem.MeshHex2``): tracking samples the body
-        through the straight-cell point locator.
-    ValueError
-        Naming the nodes far outside the field of view, the mesh and field-of-view sizes,
-        the estimated point count and memory, and a likely unit mix-up (µm or m instead
-        of mm) when the size ratio suggests one.
-
-    Examples
-    --------
-    >>> import numpy as np, xarray as xr
-    >>> from harpx.mechanics.mesh import box
-    >>> from harpx.mechanics.materials import NeoHookean
-    >>> grid = xr.Dataset(coords={d: np.arange(16.0) for d in "zyx"})
-    >>> body = Body(box((8.0, 8.0, 8.0), (2, 2, 2), origin=(4.0, 4.0, 4.0)), NeoHookean(1, 120))
-    >>> check_fits_image(body, grid)  # inside, in mm: nothing to say
-    >>> far = Body(box((8e3, 8e3, 8e3), (2, 2, 2)), NeoHookean(1, 120))  # micrometres
-    >>> try:
-    ...     check_fits_image(far, grid)
-    ... except ValueError as err:
-    ...     print(str(err).split(": ")[-1])
-    are its coordinates in micrometres (divide by 1000)?
-    """
-    if isinstance(body.mesh, skfem.MeshHex2):
-        raise NotImplementedError(
-            "tracking a body on curved hexahedra (skfem.MeshHex2) is not implemented: the "
-            "tracker locates points with the straight (trilinear) cell map; track with the "
-            "straight mesh (curved=False)"
-        )
-    low, high, step = [], [], []
-    for axis in ("x", "y", "z"):
-        if axis not in grid.coords:
-            raise SchemaError(f"grid has no coordinate {axis!r} (voxel centres in mm)")
-        values = np.asarray(grid[axis].values, dtype=np.float64)
-        if values.size == 0 or not np.all(np.isfinite(values)):
-            raise SchemaError(f"grid coordinate {axis!r} is empty or not finite")
-        d = float((values[-1] - values[0]) / (values.size - 1)) if values.size > 1 else 0.0
-        low.append(values[0] - d / 2)
-        high.append(values[-1] + d / 2)
-        if values.size > 1:
-            step.append(abs(d))
-    lo, hi = np.array(low), np.array(high)
-    fov = float((hi - lo).max())
-    voxel = float(grid.attrs.get("upsample", 1)) * min(step) if step else fov
-    nodes = np.asarray(body.nodes)
-    size = float(np.ptp(nodes, axis=0).max())
-    ratio = size / fov if fov > 0 else np.inf
-    hint = ""
-    if ratio > 20:
-        hint = (
-            f"; the mesh is {ratio:.3g} times larger than the image: are its coordinates in "
-            "micrometres (divide by 1000)?"
-        )
-    elif size < voxel:
-        hint = (
-            "; the mesh is smaller than one voxel: are its coordinates in metres (multiply "
-            "by 1000)?"
-        )
-    outside = np.maximum(lo - nodes, nodes - hi).max(axis=1)  # mm beyond the field of view
-    far = np.flatnonzero(outside > fov)
-    if far.size:
-        shown = ", ".join(str(int(i)) for i in far[:10]) + (", ..." if far.size > 10 else "")
-        raise SchemaError(
-            f"mesh nodes [{shown}] lie up to {outside.max():.4g} mm outside the image field "
-            f"of view ({lo.round(3).tolist()} to {hi.round(3).tolist()} mm, x/y/z); the mesh "
-            f"spans {size:.4g} mm, the field of view {fov:.4g} mm"
-            f"{hint if 2 * far.size > len(nodes) else '; move or fix those nodes'}"
-        )
-    if size < voxel:
-        raise SchemaError(
-            f"the mesh spans {size:.4g} mm but one acquired voxel is {voxel:.4g} mm{hint}"
-        )
-    count = 1
-    if body.element.startswith("tet"):  # the tracker's rule: m³ points, m from the longest edge
-        corners = nodes[body.cells[:, :4]]  # (ncell, 4, 3)
-        pairs = _VTK_TET_EDGES
-        length = np.linalg.norm(corners[:, pairs[:, 0]] - corners[:, pairs[:, 1]], axis=-1)
-        m = max(1, int(np.ceil(float(length.max()) / (1.5 * voxel))))
-        count = m**3
-        longest = (
-            f"its longest tetrahedron edge is {float(length.max()):.4g} mm, {m} points per "
-            f"edge at most 1.5 voxels ({1.5 * voxel:.4g} mm) apart, {count} points per cell"
-        )
-    else:
-        corners = nodes[body.cells[:, :8]]  # (ncell, 8, 3)
-        for edges in _EDGES_BY_DIRECTION:  # n points along the longest edge per direction
-            length = np.linalg.norm(corners[:, edges[:, 0]] - corners[:, edges[:, 1]], axis=-1)
-            count *= max(1, int(np.ceil(float(length.max()) / voxel)))
-        longest = f"its longest cells are {count ** (1 / 3):.3g} voxels ({voxel:.4g} mm) across"
-    points = count * body.ncell
-    if points > max_points:
-        gib = points * (_BYTES_PER_POINT + _BYTES_PER_POINT_BASIS * body.nbasis) / 2**30
-        raise SchemaError(
-            f"tracking this mesh would place {points:.3g} constraint points (~{gib:.3g} GiB; "
-            f"limit max_points={max_points:.3g}): {longest}{hint or ''}; refine the "
-            "mesh (smaller cells) or check its units (mm)"
-        )
-
-
-def _orient_tets(mesh: skfem.MeshTet1) -> skfem.MeshTet1:
-    """The same tetrahedra, each with a positive (right-handed) vertex order.
-
-    Swapping two vertices of a cell leaves ``mesh.edges`` (sorted vertex pairs) unchanged,
-    so the edge nodes of a ``MeshTet2`` stay where they are.
-    """
-    p, t = mesh.p, mesh.t
-    a, b, c, d = (p[:, t[i]] for i in range(4))
-    vol = np.einsum("ie,ie->e", np.cross(b - a, c - a, axis=0), d - a)
-    if np.all(vol > 0):
-        return mesh
-    t = t.copy()
-    neg = vol < 0
-    t[1, neg], t[2, neg] = mesh.t[2, neg], mesh.t[1, neg]
-    return dataclasses.replace(mesh, t=t)
-
-
-def _edge_points(mesh: skfem.MeshTet1, t: IntArray, nodes: FloatArray) -> FloatArray:
-    """Positions of the mesh edges' nodes from per-cell VTK tetra10 edge nodes.
-
-    ``t`` (ncell, 4) are the cells' corners as given (before orientation), ``nodes``
-    (ncell, 6, 3) their edge nodes in VTK order; returns (3, nedge) ordered like
-    ``mesh.edges``.
-    """
-    pairs = np.sort(t[:, _VTK_TET_EDGES], axis=-1).reshape(-1, 2)
-    n = mesh.p.shape[1]
-    keys = pairs[:, 0] * n + pairs[:, 1]
-    edges = np.sort(mesh.edges, axis=0)
-    ekeys = edges[0] * n + edges[1]
-    order = np.argsort(keys)
-    pos = order[np.searchsorted(keys[order], ekeys)]
-    return np.ascontiguousarray(nodes.reshape(-1, 3)[pos].T)
-
-
-def curved_tet_mesh(mesh: skfem.MeshTet1, edge_points: ArrayLike | None = None) -> skfem.MeshTet2:
-    """A quadratic (isoparametric) tetrahedral mesh from a linear one.
-
-    Parameters
-    ----------
-    mesh : skfem.MeshTet1
-        Vertices (mm) and cells.
-    edge_points : array_like, shape (3, nedge), optional
-        Position of the node of every edge of ``mesh.edges`` (mm), e.g. projected onto a
-        curved surface; the edge midpoints by default (straight edges).
-
-    Returns
-    -------
-    skfem.MeshTet2
-        Carries the boundaries and subdomains of ``mesh``.
-    """
-    mid = 0.5 * (mesh.p[:, mesh.edges[0]] + mesh.p[:, mesh.edges[1]])
-    pts = mid if edge_points is None else np.asarray(edge_points, dtype=np.float64)
-    if pts.shape != mid.shape:
-        raise ValueError(
-            f"edge_points has shape {pts.shape!r}; expected {mid.shape!r} (3, nedge), one "
-            "point per column of mesh.edges"
-        )
-    doflocs = np.hstack([mesh.p, pts])
-    mesh = _orient_tets(mesh)
-    return skfem.MeshTet2(
-        doflocs,
-        mesh.t,
-        _boundaries=mesh._boundaries,
-        _subdomains=mesh._subdomains,
-    )
-
-
-# reference corners and centre of the unit hexahedron / tetrahedron, where the geometry
-# Jacobian is checked
-_CHECK_POINTS = np.array(
-    [
-        [0, 0, 0],
-        [1, 0, 0],
-        [0, 1, 0],
-        [0, 0, 1],
-        [1, 1, 0],
-        [1, 0, 1],
-        [0, 1, 1],
-        [1, 1, 1],
-        [0.5, 0.5, 0.5],
-    ],
-    dtype=np.float64,
-).T
-_TET_CHECK_POINTS = np.array(
-    [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.25, 0.25, 0.25]], dtype=np.float64
-).T
-
-
-def _check_cells(mesh: Any) -> None:
-    """Raise if any cell is inverted, twisted or collapsed.
-
-    The Jacobian determinant of the cell map is evaluated at the corners and the centre of
-    every cell; a valid mesh has one sign everywhere (skfem's reference orientation makes
-    it negative for positively ordered hexahedra; tetrahedra are oriented positively on
-    input). A cell with the opposite sign somewhere (inverted or bow-tie) or with a
-    vanishing determinant (collapsed) is named.
-    """
-    tet = isinstance(mesh, skfem.MeshTet1)
-    det = mesh._mapping().detDF(_TET_CHECK_POINTS if tet else _CHECK_POINTS)  # (ncell, k), mm³
-    det = np.broadcast_to(det, (mesh.nelements, det.shape[-1]))
-    scale = np.abs(det).max()
-    negative = np.count_nonzero(det.mean(axis=1) < 0)
-    sign = -1.0 if 2 * negative >= det.shape[0] else 1.0  # the majority orientation
-    bad = np.nonzero(np.any(det * sign <= 1e-10 * scale, axis=1))[0]
-    if bad.size:
-        what = "tetrahedra" if tet else "hexahedra"
-        raise ValueError(
-            f"mesh has {bad.size} inverted or degenerate {what}: cells {bad[:10].tolist()} "
-            "(the Jacobian of the cell map changes sign or vanishes at a corner); fix the "
-            "vertex order or the geometry of those cells"
-        )
 
 
 class Body:
@@ -536,7 +161,7 @@ class Body:
         Volume average of ``det Fg`` per cell.
     mesh_quality : MeshQuality or None
         Quality report of a mesh made from a segmentation
-        (:func:`~harpx.mechanics.segmentation.body_from_segmentation`), else None.
+        (:func:`~harpx.anatomy.segmentation.body_from_segmentation`), else None.
 
     Examples
     --------
@@ -773,7 +398,7 @@ class Body:
         growth : FiberGrowth, GrowthField, array_like of shape (ncell,), or None
             A law or field with ``tensor(fibers_qp) -> Fg`` (e.g.
             :class:`~harpx.mechanics.materials.FiberGrowth`,
-            :class:`~harpx.mechanics.growth.GrowthField`), or one fibre stretch θ per cell
+            :class:`~harpx.physiology.growth.GrowthField`), or one fibre stretch θ per cell
             (``Fg = I + (θ - 1) f0 ⊗ f0``, dimensionless, > 0).
 
         Notes
@@ -1098,3 +723,9 @@ class Body:
             f"Body({self.element}, ncell={self.ncell}, ndof={self.ndof}, "
             f"material={type(self.material).__name__}, volumetric={self.volumetric!r})"
         )
+
+
+def __getattr__(name: str) -> Any:
+    from harpx._moved import moved_attribute
+
+    return moved_attribute(__name__, name)

@@ -22,6 +22,8 @@ import skfem
 from numpy.typing import ArrayLike, NDArray
 from skfem.io.meshio import HEX_MAPPING
 
+from harpx.mechanics.cells import _orient_tets
+
 __all__ = [
     "MeshSpec",
     "box",
@@ -330,7 +332,7 @@ def curved_hex_mesh(
         (n, k): ``k = 2`` the ends of each edge of ``mesh.edges``, ``k = 4`` the corners
         of each face of ``mesh.facets``, ``k = 8`` the corners of each cell. Builders that
         know the analytic map of their parameter space put the nodes there (see
-        :func:`tube` and :func:`~harpx.mechanics.ventricle.ventricle` with
+        :func:`tube` and :func:`~harpx.anatomy.ventricle.ventricle` with
         ``curved=True``). Default: the vertex mean (straight edges, flat faces).
 
     Returns
@@ -724,7 +726,7 @@ def tetrahedralize(spec: MeshSpec) -> MeshSpec:
     -------
     MeshSpec
         A :class:`skfem.MeshTet1` with positively oriented cells. Use
-        :func:`harpx.mechanics.body.curved_tet_mesh` (or ``Body(..., element="tet10")``)
+        :func:`harpx.mechanics.cells.curved_tet_mesh` (or ``Body(..., element="tet10")``)
         for quadratic tetrahedra.
 
     Examples
@@ -761,7 +763,6 @@ def tetrahedralize(spec: MeshSpec) -> MeshSpec:
         points = np.concatenate([points, points[cells].mean(axis=1)], axis=0)
         parent = np.repeat(np.arange(n_hex), 12)
     tmesh = skfem.MeshTet1(np.ascontiguousarray(points.T), np.ascontiguousarray(tets.T))
-    from harpx.mechanics.body import _orient_tets  # local: body imports this module
 
     tmesh = _orient_tets(tmesh)
     npt = points.shape[0]

@@ -152,7 +152,7 @@ def simulate_systole(
     ConvergenceError
         If the continuation stalls.
     """
-    from harpx.mechanics.ventricle import cavity_volume
+    from harpx.anatomy.ventricle import cavity_volume
 
     if int(frames) < 2:
         raise ValueError(f"frames={frames!r} must be >= 2")

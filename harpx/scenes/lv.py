@@ -3,7 +3,7 @@ r"""Left-ventricle scene: residually stressed myocardium tracked through CSPAMM 
 Ground truth
 ------------
 A systolic sequence is *simulated* on a finer hexahedral mesh of the same truncated
-ellipsoid (:func:`harpx.mechanics.ventricle.ventricle`) than the tracking model, so the
+ellipsoid (:func:`harpx.anatomy.ventricle.ventricle`) than the tracking model, so the
 tracker never shares the truth's discretisation (no inverse crime):
 
 * passive myocardium: uncoupled transversely isotropic Guccione law with the canine values
@@ -52,7 +52,7 @@ drive it). Two references:
 
 * ``"stress-free"`` (SFR): the image geometry at frame 0 is stress free.
 * ``"prestretched"`` (PSR): the same geometry carries residual stress from a growth field
-  (:func:`~harpx.mechanics.growth.prestretch_growth`): fibres are *compressed in situ* by a
+  (:func:`~harpx.physiology.growth.prestretch_growth`): fibres are *compressed in situ* by a
   mean of 5 %
   (``mean=-0.05``: in-situ fibre length / stress-free fibre length − 1, averaged over the
   wall), more at the endocardium than at the epicardium (``gradient``), as residual-strain
@@ -87,15 +87,15 @@ import numpy as np
 import xarray as xr
 
 from harpx._typing import FloatArray
+from harpx.anatomy.ventricle import VentricleGeometry, ventricle
 from harpx.imaging.stacks import resample_stacks, tagged_dataset
 from harpx.imaging.synth import AcquisitionOptions, synthesize_tagged
 from harpx.mechanics.body import Body
-from harpx.mechanics.cut import NodeFixed
-from harpx.mechanics.growth import GrowthField, fiber_prestretch, prestretch_growth
 from harpx.mechanics.loads import Fixed
 from harpx.mechanics.materials import ActiveContraction, Guccione
 from harpx.mechanics.mesh import MeshSpec
-from harpx.mechanics.ventricle import VentricleGeometry, ventricle
+from harpx.physiology.cut import NodeFixed
+from harpx.physiology.growth import GrowthField, fiber_prestretch, prestretch_growth
 from harpx.scenes._lv_truth import FEMotion, Systole, simulate_systole
 
 __all__ = [
@@ -353,7 +353,7 @@ class LVScene:
 
     def growth(self) -> GrowthField:
         """The prestretch growth field of the PSR (computed once by
-        :func:`~harpx.mechanics.growth.prestretch_growth`)."""
+        :func:`~harpx.physiology.growth.prestretch_growth`)."""
         if self._growth is None:
             self._growth, info = prestretch_growth(
                 self.mesh,

@@ -1,11 +1,11 @@
 """Tongue scene: five activated muscles imaged with CSPAMM (paper §4.3).
 
-A tongue-like body (:func:`harpx.mechanics.tongue_mesh.tongue`: genioglossus, inferior and
+A tongue-like body (:func:`harpx.anatomy.tongue_mesh.tongue`: genioglossus, inferior and
 superior longitudinal, transverse and verticalis, each with its fibre directions; mandible
 and hyoid/base attachments fixed) made of the paper's neo-Hookean solid (C1 = 1.0 kPa,
 κ = 120 kPa) plus a Guccione--McCulloch active fibre stress whose level ``t_max`` is known
 per muscle. The ground truth is a *forward* simulation
-(:func:`harpx.mechanics.active.simulate_activation`, Newton with cut-back) of the
+(:func:`harpx.physiology.active.simulate_activation`, Newton with cut-back) of the
 activation rising linearly over the frames, run on a **finer** mesh than the 280-cell
 tracking model (no inverse crime: other discretisation, other boundary polygon).
 
@@ -35,16 +35,16 @@ import numpy as np
 import xarray as xr
 
 from harpx._typing import FloatArray
+from harpx.anatomy.tongue_mesh import MUSCLES, tongue_inside
+from harpx.anatomy.tongue_mesh import tongue as tongue_mesh
 from harpx.imaging.harp import extract_phase
 from harpx.imaging.stacks import resample_stacks, tagged_dataset
 from harpx.imaging.synth import AcquisitionOptions, synthesize_tagged, voxel_density
-from harpx.mechanics.active import simulate_activation
 from harpx.mechanics.body import Body, ElementName
 from harpx.mechanics.loads import Fixed
 from harpx.mechanics.materials import ActiveContraction, NeoHookean
 from harpx.mechanics.mesh import MeshSpec
-from harpx.mechanics.tongue_mesh import MUSCLES, tongue_inside
-from harpx.mechanics.tongue_mesh import tongue as tongue_mesh
+from harpx.physiology.active import simulate_activation
 from harpx.schema import standard_attrs
 from harpx.tracking.resample import interpolate_displacement
 from harpx.tracking.track import track

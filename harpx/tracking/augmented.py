@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from harpx._typing import FloatArray
 from harpx.tracking.frame import FrameOutcome, FrameProblem
-from harpx.tracking.penalty import STALL
 
 
 def track_frame_augmented(
@@ -63,7 +62,8 @@ def track_frame_augmented(
             change = constraint.update_multipliers(outcome.state)
             if change < settings.multiplier_tolerance:
                 break
-        if 2.0 * lam > settings.penalty_limit or outcome.epsilon > (1.0 - STALL) * best:
-            return outcome.finish_raise(best, STALL, target if plateau is None else plateau)
+        stall = settings.tuning.stall
+        if 2.0 * lam > settings.penalty_limit or outcome.epsilon > (1.0 - stall) * best:
+            return outcome.finish_raise(best, stall, target if plateau is None else plateau)
         best = min(best, outcome.epsilon)
         lam *= 2.0

@@ -29,6 +29,7 @@ from harpx.errors import ElementInversionError
 from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.tracking.constraint import ConstraintState, PhaseConstraint
+from harpx.tracking.settings import SolverTuning
 
 
 @dataclass
@@ -96,33 +97,18 @@ def split_dirichlet(body: Any, dirichlet: Sequence[Any]) -> tuple[np.ndarray, Fl
     return dofs, values
 
 
-#: Iterations after which a cycling Gauss-Newton iteration is damped, whatever its steps.
-DAMP_AFTER = 10
-#: Iterations after which cycling with small steps (below ``SMALL_STEP`` of the trust
-#: radius) is damped: such steps no longer search for a tag basin (paper phantom, last
-#: frame: steps of 0.05 mm for seven iterations with a 2 mm trust radius).
-DAMP_SMALL_AFTER = 3
-#: Fraction of the trust radius below which a step counts as small.
-SMALL_STEP = 0.1
-#: Increments that do not shrink below this fraction of the last one count as cycling.
-CONTRACTION = 0.8
-#: Contraction per iteration below which the increments still to come are bounded by a
-#: geometric series, so that a solve can stop one iteration before its increment itself
-#: falls below the tolerance (paper phantom: 141 → 109 iterations, mean error within 2e-5 mm).
-FAST = 0.5
-
-
-def _remaining(steps: list[float]) -> float:
+def _remaining(steps: list[float], fast: float = SolverTuning().fast) -> float:
     """Bound on the distance, mm, from the latest iterate to the converged one.
 
-    With the last two increments contracting by ρ = s_k / s_(k-1) < ``FAST``, the
+    With the last two increments contracting by ρ = s_k / s_(k-1) < ``fast``
+    (:attr:`SolverTuning.fast <harpx.tracking.settings.SolverTuning>`), the
     increments still to come sum to at most ρ s_k / (1 − ρ) (a geometric series; Gauss–Newton
     near its solution contracts at least this fast). inf when the bound does not apply.
     """
     if len(steps) < 2 or steps[-2] <= 0.0:
         return float("inf")
     rate = steps[-1] / steps[-2]
-    return rate * steps[-1] / (1.0 - rate) if rate < FAST else float("inf")
+    return rate * steps[-1] / (1.0 - rate) if rate < fast else float("inf")
 
 
 def _admissible_step(
@@ -170,6 +156,7 @@ def equilibrate(
     offset: FloatArray | None = None,
     timings: Timings | None = None,
     start: EquilibriumResult | None = None,
+    tuning: SolverTuning | None = None,
 ) -> EquilibriumResult:
     """Solve for equilibrium at the constraint's current penalty and multipliers.
 
@@ -209,6 +196,9 @@ def equilibrate(
         An earlier solve of the same frame that ended at ``u`` (e.g. the previous penalty
         stage): its constraint state and internal forces at ``u`` are reused instead of
         evaluated again (neither depends on the penalty or the multipliers).
+    tuning : SolverTuning, optional
+        Damping of cycling iterations and the geometric stopping bound; the defaults of
+        :class:`~harpx.tracking.settings.SolverTuning` if omitted.
 
     Returns
     -------
@@ -225,6 +215,7 @@ def equilibrate(
     ElementInversionError
         If even the smallest step inverts elements.
     """
+    tune = SolverTuning() if tuning is None else tuning
     clock = timings if timings is not None else Timings()
     u = np.array(u, dtype=float, copy=True)
     fixed, fixed_values = split_dirichlet(body, dirichlet)
@@ -281,9 +272,9 @@ def equilibrate(
         largest = float(np.abs(du).max())
         alpha = min(1.0, max_step / largest) if largest > 0 else 1.0
         history = result.step_norms
-        small = bool(history) and history[-1] < SMALL_STEP * max_step
-        late = iteration > DAMP_AFTER or (iteration > DAMP_SMALL_AFTER and small)
-        if late and history[-1] > CONTRACTION * history[-2]:
+        small = bool(history) and history[-1] < tune.small_step * max_step
+        late = iteration > tune.damp_after or (iteration > tune.damp_small_after and small)
+        if late and history[-1] > tune.contraction * history[-2]:
             # still not converged and the increments stopped shrinking: the iteration cycles
             # (e.g. between the facets of a linear phase interpolant); damp it so that it
             # contracts (early only once the steps are small: early large undamped steps
@@ -304,7 +295,7 @@ def equilibrate(
         result.step_norms.append(step)
         result.iterations = iteration
         result.state = state_trial
-        if step < tolerance or (full and _remaining(result.step_norms) < tolerance):
+        if step < tolerance or (full and _remaining(result.step_norms, tune.fast) < tolerance):
             result.converged = True
             break
     result.u = u

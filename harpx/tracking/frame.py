@@ -74,6 +74,7 @@ class FrameProblem:
             offset=self.offset,
             timings=self.timings,
             start=start,
+            tuning=self.settings.tuning,
         )
 
 

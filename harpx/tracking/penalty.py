@@ -18,12 +18,6 @@ import numpy as np
 from harpx._typing import FloatArray
 from harpx.tracking.frame import FrameOutcome, FrameProblem
 
-#: Relative decrease of ε below which raising the penalty is judged to have stalled (the
-#: residual has reached the noise floor of the data).
-STALL = 0.03
-#: Gauss–Newton iterations of the intermediate (continuation) stages of the ramp.
-RAMP_ITERATIONS = 3
-
 
 def track_frame_penalty(
     problem: FrameProblem,
@@ -72,7 +66,7 @@ def track_frame_penalty(
             outcome.add(
                 problem.solve(
                     outcome.u,
-                    iterations if last else min(iterations, RAMP_ITERATIONS),
+                    iterations if last else min(iterations, settings.tuning.ramp_iterations),
                     outcome.last,
                 ),
                 lam,
@@ -80,9 +74,10 @@ def track_frame_penalty(
             )
             if outcome.epsilon <= target:
                 return outcome.finish(reached=True)
-        if 2.0 * lam_max > settings.penalty_limit or outcome.epsilon > (1.0 - STALL) * best:
+        stall = settings.tuning.stall
+        if 2.0 * lam_max > settings.penalty_limit or outcome.epsilon > (1.0 - stall) * best:
             # the limit, or the data's noise floor: doubling λ no longer lowers ε
-            return outcome.finish_raise(best, STALL, target if plateau is None else plateau)
+            return outcome.finish_raise(best, stall, target if plateau is None else plateau)
         best = min(best, outcome.epsilon)
         lam_max *= 2.0
         levels = [lam_max]

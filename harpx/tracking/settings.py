@@ -8,7 +8,7 @@ solves, so every value is checked in one place and recorded in the result's attr
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields, replace
 from typing import Any, Literal
 
 Method = Literal["penalty", "augmented-lagrangian"]
@@ -36,6 +36,83 @@ def _count(name: str, value: Any, *, minimum: int) -> int:
     if not math.isfinite(value) or value != int(value) or value < minimum:
         raise ValueError(f"{name}={value!r} must be a whole number ≥ {minimum}")
     return int(value)
+
+
+@dataclass(frozen=True)
+class SolverTuning:
+    """Inner constants of the tracking solver: the one place they are set.
+
+    Users rarely change these; they are here (rather than scattered through the solver's
+    modules) so that a study can record and vary them like any other setting.
+
+    Parameters
+    ----------
+    stall : float, default 0.03
+        Relative decrease of ε below which raising the penalty is judged to have stalled
+        (the residual has reached what the data allow), dimensionless in (0, 1).
+    ramp_iterations : int, default 3
+        Gauss–Newton iterations of the intermediate (continuation) stages of the penalty
+        ramp (≥ 1).
+    damp_after : int, default 10
+        Iterations after which a cycling Gauss–Newton iteration is damped, whatever its
+        steps (≥ 1).
+    damp_small_after : int, default 3
+        Iterations after which cycling with small steps (below ``small_step`` of the trust
+        radius) is damped: such steps no longer search for a tag basin (≥ 1).
+    small_step : float, default 0.1
+        Fraction of the trust radius below which a step counts as small, in (0, 1).
+    contraction : float, default 0.8
+        Increments that do not shrink below this fraction of the last one count as
+        cycling, in (0, 1).
+    fast : float, default 0.5
+        Contraction per iteration below which the increments still to come are bounded by
+        the geometric series ρ s / (1 − ρ), so that a solve may stop once that bound is
+        below the tolerance, in (0, 1).
+    predictor_factors : tuple of float, default (0.0, 0.5, 1.0)
+        Extrapolation factors α of the linear predictor u(n−1) + α (u(n−1) − u(n−2)); the
+        one with the smallest phase residual starts the frame (each ≥ 0, at least one).
+
+    Raises
+    ------
+    ValueError, TypeError
+        Naming the constant that is out of range.
+
+    Examples
+    --------
+    >>> SolverTuning(stall=0.05).stall
+    0.05
+    >>> SolverTuning(fast=1.5)
+    Traceback (most recent call last):
+    ...
+    ValueError: fast=1.5 must lie in (0, 1)
+    """
+
+    stall: float = 0.03
+    ramp_iterations: int = 3
+    damp_after: int = 10
+    damp_small_after: int = 3
+    small_step: float = 0.1
+    contraction: float = 0.8
+    fast: float = 0.5
+    predictor_factors: tuple[float, ...] = (0.0, 0.5, 1.0)
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        for name in ("stall", "small_step", "contraction", "fast"):
+            value = _positive(name, getattr(self, name))
+            assert value is not None
+            if value >= 1.0:
+                raise ValueError(f"{name}={value!r} must lie in (0, 1)")
+            set_(self, name, value)
+        for name in ("ramp_iterations", "damp_after", "damp_small_after"):
+            set_(self, name, _count(name, getattr(self, name), minimum=1))
+        factors = tuple(float(a) for a in self.predictor_factors)
+        if not factors or not all(math.isfinite(a) and a >= 0 for a in factors):
+            raise ValueError(
+                f"predictor_factors={self.predictor_factors!r} must be one or more finite "
+                "numbers ≥ 0"
+            )
+        set_(self, "predictor_factors", factors)
 
 
 @dataclass(frozen=True)
@@ -146,6 +223,9 @@ class TrackingSettings:
         See :class:`harpx.mechanics.linsolve.LinearSolver`.
     progress : bool, default False
         Show a progress bar over frames.
+    tuning : SolverTuning, optional
+        The solver's inner constants (stall threshold, ramp iterations, damping, predictor
+        factors); the defaults suit every scene measured.
 
     Raises
     ------
@@ -183,6 +263,7 @@ class TrackingSettings:
     intorder: int | None = None
     linear_solver: str = "auto"
     progress: bool = False
+    tuning: SolverTuning = SolverTuning()
 
     def __post_init__(self) -> None:
         for name, allowed in (
@@ -219,6 +300,43 @@ class TrackingSettings:
         if not isinstance(self.linear_solver, str):
             raise TypeError(f"linear_solver={self.linear_solver!r} must be a string")
         set_(self, "progress", bool(self.progress))
+        if not isinstance(self.tuning, SolverTuning):
+            raise TypeError(f"tuning={self.tuning!r} must be a SolverTuning")
+
+    @classmethod
+    def build(cls, settings: TrackingSettings | None = None, **overrides: Any) -> TrackingSettings:
+        """``settings`` (default: the defaults) with the keyword ``overrides`` applied.
+
+        The one way the accessor, :func:`~harpx.tracking.track.track`, the batch runner
+        and the CLI turn user input into settings.
+
+        Raises
+        ------
+        TypeError
+            If ``settings`` is not a :class:`TrackingSettings`, or a keyword is not a
+            setting (naming it and listing the settings).
+
+        Examples
+        --------
+        >>> TrackingSettings.build(epsilon=0.1).epsilon
+        0.1
+        >>> TrackingSettings.build(TrackingSettings(ramp=3), epsilon=0.1).ramp
+        3
+        >>> TrackingSettings.build(epsilom=0.1)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        TypeError: 'epsilom' is not a tracking setting; the settings are: method, ...
+        """
+        base = cls() if settings is None else settings
+        if not isinstance(base, TrackingSettings):
+            raise TypeError(f"settings={settings!r} must be a TrackingSettings")
+        names = [f.name for f in fields(cls)]
+        unknown = [k for k in overrides if k not in names]
+        if unknown:
+            raise TypeError(
+                f"{unknown[0]!r} is not a tracking setting; the settings are: {', '.join(names)}"
+            )
+        return replace(base, **overrides) if overrides else base
 
     @property
     def effective_robust_scale(self) -> float | None:
@@ -260,7 +378,12 @@ class TrackingSettings:
     def as_attrs(self) -> dict[str, Any]:
         """The settings as NetCDF-safe attributes (None written as -1 or "auto")."""
         out: dict[str, Any] = {}
-        for key, value in asdict(self).items():
+        items = asdict(self)
+        tuning = items.pop("tuning")
+        items.update({f"tuning_{k}": v for k, v in tuning.items()})
+        for key, value in items.items():
+            if isinstance(value, tuple):
+                value = list(value)
             if value is None:
                 value = {"epsilon": "auto", "robust_scale": "none", "blur_passes": "auto"}.get(
                     key, -1

@@ -25,7 +25,6 @@ from harpx._typing import BoolArray
 from harpx.errors import HarpxWarning, SchemaError
 from harpx.imaging.coverage import explain_missing_data, phase_direction_mismatch
 from harpx.mechanics.assembly import internal_forces
-from harpx.mechanics.body import check_fits_image
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.schema import validate
 from harpx.tracking.augmented import track_frame_augmented
@@ -33,10 +32,11 @@ from harpx.tracking.blur import blur_correction, deblurred
 from harpx.tracking.constraint import PhaseConstraint
 from harpx.tracking.equilibrium import Timings, split_dirichlet
 from harpx.tracking.frame import FrameOutcome, FrameProblem
+from harpx.tracking.image_fit import check_fits_image
 from harpx.tracking.observability import describe_direction
 from harpx.tracking.penalty import track_frame_penalty
 from harpx.tracking.results import tracked_dataset
-from harpx.tracking.settings import Method, Predictor, Regularization, TrackingSettings
+from harpx.tracking.settings import TrackingSettings
 
 STRATEGIES = {"penalty": track_frame_penalty, "augmented-lagrangian": track_frame_augmented}
 
@@ -51,15 +51,16 @@ def _as_phase(ds: xr.Dataset) -> xr.Dataset:
     return ds
 
 
-PREDICTOR_FACTORS = (0.0, 0.5, 1.0)
-
-
 def _predict(
-    body: Any, constraint: PhaseConstraint, last: np.ndarray, before: np.ndarray
+    body: Any,
+    constraint: PhaseConstraint,
+    last: np.ndarray,
+    before: np.ndarray,
+    factors: Sequence[float],
 ) -> np.ndarray:
     """Extrapolated start of a frame with the smallest phase residual (see ``predictor``)."""
     best, best_eps = last, np.inf
-    for alpha in PREDICTOR_FACTORS:  # three candidates, each one image sampling
+    for alpha in factors:  # each candidate costs one image sampling
         guess = last + alpha * (last - before)
         if alpha and internal_forces(body, guess, tangent=False).r is None:
             continue  # folds the mesh (or overstretches it): not a candidate
@@ -156,28 +157,10 @@ def track(
     ds: xr.Dataset,
     body: Any,
     *,
-    method: Method = "penalty",
-    epsilon: float | None = None,
-    epsilon_factor: float = 1.5,
-    plateau_factor: float = 2.0,
-    epsilon_min: float = 0.02,
-    penalty: float = 1.0,
-    penalty_limit: float = 1e4,
-    ramp: int = 2,
-    multiplier_tolerance: float = 0.1,
-    max_updates: int = 10,
-    predictor: Predictor = "linear",
-    robust_scale: float | None = 0.5,
-    regularization: Regularization = "total",
-    blur_passes: int | None = None,
-    tolerance: float = 0.01,
-    max_iterations: int = 20,
+    settings: TrackingSettings | None = None,
     dirichlet: Sequence[Any] = (),
     terms: Sequence[Any] = (),
-    intorder: int | None = None,
-    linear_solver: str = "auto",
-    progress: bool = False,
-    settings: TrackingSettings | None = None,
+    **overrides: Any,
 ) -> xr.Dataset:
     """Track a body through a phase (or tagged) image series with the phase constraint.
 
@@ -187,22 +170,23 @@ def track(
         ``phase/1`` dataset, or ``tagged/1`` (its phase is extracted with defaults first).
     body : Body
         Finite-element model in the reference configuration of frame 0 (mm).
-    method, epsilon, epsilon_factor, plateau_factor, epsilon_min, penalty, penalty_limit, ramp, \
-multiplier_tolerance, max_updates, predictor, robust_scale, regularization, blur_passes, \
-tolerance, max_iterations, intorder, linear_solver, progress
-        The tracking settings, documented (with units and defaults) on
-        :class:`harpx.tracking.settings.TrackingSettings`. By default the target ε is the
-        noise floor the images allow in each frame (never below 0.02 rad), each point's
-        pull is weighted robustly (``robust_scale``), and after a first pass over all
-        frames the band-pass blur predicted from it is removed from the images and every
-        frame tracked again (``blur_passes``, :mod:`harpx.tracking.blur`).
+    settings : TrackingSettings, optional
+        All tracking settings as one validated object (default: ``TrackingSettings()``),
+        documented with units and defaults on
+        :class:`~harpx.tracking.settings.TrackingSettings`. By default the target ε is
+        ``epsilon_factor`` times the noise floor the images allow in each frame (never below
+        ``epsilon_min``), each point's pull is weighted robustly (``robust_scale``), and
+        after a first pass over all frames the band-pass blur predicted from it is removed
+        from the images and every frame tracked again (``blur_passes``,
+        :mod:`harpx.tracking.blur`).
     dirichlet : sequence, optional
         Prescribed displacements (:class:`harpx.mechanics.loads.Fixed`, ``Prescribed``).
     terms : sequence, optional
         Further residual terms (pressure, body force).
-    settings : TrackingSettings, optional
-        All settings as one object instead of the keywords (then leave those at their
-        defaults).
+    **overrides
+        Any field of :class:`~harpx.tracking.settings.TrackingSettings` (``epsilon=0.1``,
+        ``method="augmented-lagrangian"``, ``progress=True`` …), applied on top of
+        ``settings`` (:meth:`TrackingSettings.build`).
 
     Returns
     -------
@@ -220,6 +204,11 @@ tolerance, max_iterations, intorder, linear_solver, progress
 
     Raises
     ------
+    TypeError
+        If a keyword is not a tracking setting (names it), or ``settings`` is not a
+        :class:`~harpx.tracking.settings.TrackingSettings`.
+    ValueError
+        If a setting is out of range (names it).
     SchemaError
         If no constraint point lies in the image data at frame 0, a tag has data at none
         of them, or a later frame has no valid phase at any of them (an all-zero or fully
@@ -239,122 +228,7 @@ tolerance, max_iterations, intorder, linear_solver, progress
     The constraint force is paper eq. 5, its tangent eq. 6; see
     :mod:`harpx.tracking.constraint` for the wrap-safe form used here.
     """
-    chosen = TrackingSettings(
-        method=method, epsilon=epsilon, epsilon_factor=epsilon_factor,
-        plateau_factor=plateau_factor, epsilon_min=epsilon_min,
-        penalty=penalty, penalty_limit=penalty_limit, ramp=ramp,
-        multiplier_tolerance=multiplier_tolerance, max_updates=max_updates, predictor=predictor,
-        robust_scale=robust_scale, regularization=regularization, blur_passes=blur_passes,
-        tolerance=tolerance, max_iterations=max_iterations, intorder=intorder,
-        linear_solver=linear_solver, progress=progress,
-    )  # fmt: skip
-    if settings is not None:
-        if not isinstance(settings, TrackingSettings):
-            raise TypeError(f"settings={settings!r} must be a TrackingSettings")
-        if chosen != TrackingSettings():
-            raise ValueError(
-                "pass the tracking settings either as settings= or as keywords, not both "
-                "(e.g. dataclasses.replace(settings, epsilon=0.1))"
-            )
-        chosen = settings
-    return track_with(ds, body, chosen, dirichlet=dirichlet, terms=terms)
-
-
-@dataclass
-class _Pass:
-    """Arrays of one pass over every frame (:func:`_track_frames`)."""
-
-    U: np.ndarray
-    eps: np.ndarray
-    floor: np.ndarray
-    target: np.ndarray
-    eps_cell: np.ndarray
-    penalty: np.ndarray
-    iterations: np.ndarray
-    stages: np.ndarray
-    reached: np.ndarray
-    converged: np.ndarray
-    plateau: np.ndarray
-    wall: np.ndarray
-
-
-def _track_frames(
-    problem: FrameProblem, phase: xr.Dataset, start: float, earlier: _Pass | None = None
-) -> _Pass:
-    """Track every frame of ``phase`` in order, each started from the last (one pass).
-
-    A later pass (``earlier`` given) starts each frame from the earlier pass's result and
-    penalty for it, which the blur correction moves only a little.
-    """
-    body, constraint, settings = problem.body, problem.constraint, problem.settings
-    timings, terms = problem.timings, problem.terms
-    strategy = STRATEGIES[settings.method]
-    ntime = phase.sizes["time"]
-    out = _Pass(
-        U=np.zeros((ntime, body.ndof)), eps=np.zeros(ntime), floor=np.zeros(ntime),
-        target=np.zeros(ntime), eps_cell=np.full((ntime, body.ncell), np.nan),
-        penalty=np.zeros(ntime), iterations=np.zeros(ntime, dtype=np.int64),
-        stages=np.zeros(ntime, dtype=np.int64), reached=np.ones(ntime, dtype=bool),
-        converged=np.ones(ntime, dtype=bool), plateau=np.zeros(ntime, dtype=bool),
-        wall=np.zeros(ntime),
-    )  # fmt: skip
-    U = out.U
-    constraint.set_frame(0)
-    st0 = constraint.state(U[0])
-    out.eps[0] = st0.epsilon()
-    out.floor[0] = constraint.epsilon_floor(U[0])
-    out.target[0] = settings.target(out.floor[0])
-    out.eps_cell[0] = constraint.epsilon_cell(st0)
-    out.wall[0] = _time.perf_counter() - start
-    timings.setup += out.wall[0]
-    lam = settings.penalty
-    for n in tqdm(range(1, ntime), disable=not settings.progress, desc="tracking", unit="frame"):
-        begin = _time.perf_counter()
-        constraint.set_frame(n)
-        clock = _time.perf_counter()
-        timings.prefilter += clock - begin
-        u0 = U[n - 1]
-        if earlier is not None:
-            u0, lam = earlier.U[n], max(settings.penalty, float(earlier.penalty[n]))
-        elif settings.predictor == "linear" and n >= 2:
-            u0 = _predict(body, constraint, U[n - 1], U[n - 2])
-        if settings.regularization == "increment":
-            problem.offset = -_mechanical_force(body, U[n - 1], terms)
-        out.floor[n] = constraint.epsilon_floor(u0)
-        out.target[n] = settings.target(out.floor[n])
-        timings.prediction += _time.perf_counter() - clock
-        outcome: FrameOutcome = strategy(
-            problem, u0, target=out.target[n], penalty=lam,
-            plateau=settings.accepted_plateau(out.floor[n]), warm=earlier is not None,
-        )  # fmt: skip
-        if not np.isfinite(outcome.epsilon) or outcome.state is None:
-            raise SchemaError(
-                f"frame {n} (time={float(phase['time'][n])!r} ms) has no valid phase at any "
-                f"constraint point of the body: {explain_missing_data(phase, constraint.points, n)}"
-            )
-        U[n] = outcome.u
-        out.eps[n] = outcome.epsilon
-        out.eps_cell[n] = constraint.epsilon_cell(outcome.state)
-        out.penalty[n] = outcome.penalty
-        lam = max(settings.penalty, outcome.penalty)
-        out.iterations[n] = outcome.iterations
-        out.stages[n] = outcome.stages
-        out.reached[n] = outcome.reached
-        out.converged[n] = outcome.converged
-        out.plateau[n] = outcome.plateau
-        out.wall[n] = _time.perf_counter() - begin
-    return out
-
-
-def track_with(
-    ds: xr.Dataset,
-    body: Any,
-    settings: TrackingSettings,
-    *,
-    dirichlet: Sequence[Any] = (),
-    terms: Sequence[Any] = (),
-) -> xr.Dataset:
-    """:func:`track` with the settings as one validated object (same result)."""
+    settings = TrackingSettings.build(settings, **overrides)
     timings = Timings()
     clock = _time.perf_counter()
     phase = _as_phase(ds)
@@ -427,6 +301,92 @@ def track_with(
     out = tracked_dataset(body, result.U, phase, diagnostics, attrs)
     timings.output = _time.perf_counter() - clock
     out.attrs.update(timings.as_attrs())
+    return out
+
+
+@dataclass
+class _Pass:
+    """Arrays of one pass over every frame (:func:`_track_frames`)."""
+
+    U: np.ndarray
+    eps: np.ndarray
+    floor: np.ndarray
+    target: np.ndarray
+    eps_cell: np.ndarray
+    penalty: np.ndarray
+    iterations: np.ndarray
+    stages: np.ndarray
+    reached: np.ndarray
+    converged: np.ndarray
+    plateau: np.ndarray
+    wall: np.ndarray
+
+
+def _track_frames(
+    problem: FrameProblem, phase: xr.Dataset, start: float, earlier: _Pass | None = None
+) -> _Pass:
+    """Track every frame of ``phase`` in order, each started from the last (one pass).
+
+    A later pass (``earlier`` given) starts each frame from the earlier pass's result and
+    penalty for it, which the blur correction moves only a little.
+    """
+    body, constraint, settings = problem.body, problem.constraint, problem.settings
+    timings, terms = problem.timings, problem.terms
+    strategy = STRATEGIES[settings.method]
+    ntime = phase.sizes["time"]
+    out = _Pass(
+        U=np.zeros((ntime, body.ndof)), eps=np.zeros(ntime), floor=np.zeros(ntime),
+        target=np.zeros(ntime), eps_cell=np.full((ntime, body.ncell), np.nan),
+        penalty=np.zeros(ntime), iterations=np.zeros(ntime, dtype=np.int64),
+        stages=np.zeros(ntime, dtype=np.int64), reached=np.ones(ntime, dtype=bool),
+        converged=np.ones(ntime, dtype=bool), plateau=np.zeros(ntime, dtype=bool),
+        wall=np.zeros(ntime),
+    )  # fmt: skip
+    U = out.U
+    constraint.set_frame(0)
+    st0 = constraint.state(U[0])
+    out.eps[0] = st0.epsilon()
+    out.floor[0] = constraint.epsilon_floor(U[0])
+    out.target[0] = settings.target(out.floor[0])
+    out.eps_cell[0] = constraint.epsilon_cell(st0)
+    out.wall[0] = _time.perf_counter() - start
+    timings.setup += out.wall[0]
+    lam = settings.penalty
+    for n in tqdm(range(1, ntime), disable=not settings.progress, desc="tracking", unit="frame"):
+        begin = _time.perf_counter()
+        constraint.set_frame(n)
+        clock = _time.perf_counter()
+        timings.prefilter += clock - begin
+        u0 = U[n - 1]
+        if earlier is not None:
+            u0, lam = earlier.U[n], max(settings.penalty, float(earlier.penalty[n]))
+        elif settings.predictor == "linear" and n >= 2:
+            u0 = _predict(body, constraint, U[n - 1], U[n - 2], settings.tuning.predictor_factors)
+        if settings.regularization == "increment":
+            problem.offset = -_mechanical_force(body, U[n - 1], terms)
+        out.floor[n] = constraint.epsilon_floor(u0)
+        out.target[n] = settings.target(out.floor[n])
+        timings.prediction += _time.perf_counter() - clock
+        outcome: FrameOutcome = strategy(
+            problem, u0, target=out.target[n], penalty=lam,
+            plateau=settings.accepted_plateau(out.floor[n]), warm=earlier is not None,
+        )  # fmt: skip
+        if not np.isfinite(outcome.epsilon) or outcome.state is None:
+            raise SchemaError(
+                f"frame {n} (time={float(phase['time'][n])!r} ms) has no valid phase at any "
+                f"constraint point of the body: {explain_missing_data(phase, constraint.points, n)}"
+            )
+        U[n] = outcome.u
+        out.eps[n] = outcome.epsilon
+        out.eps_cell[n] = constraint.epsilon_cell(outcome.state)
+        out.penalty[n] = outcome.penalty
+        lam = max(settings.penalty, outcome.penalty)
+        out.iterations[n] = outcome.iterations
+        out.stages[n] = outcome.stages
+        out.reached[n] = outcome.reached
+        out.converged[n] = outcome.converged
+        out.plateau[n] = outcome.plateau
+        out.wall[n] = _time.perf_counter() - begin
     return out
 
 

@@ -7,9 +7,10 @@ import pytest
 import skfem
 import xarray as xr
 
-from harpx.mechanics.body import Body, check_fits_image
+from harpx.mechanics.body import Body
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import box
+from harpx.tracking.image_fit import check_fits_image
 
 MAT = NeoHookean(c1=1.0, kappa=120.0)
 # a 48 x 48 x 16 mm field of view of 2 mm voxels centred on 0, like an 8 x 24 x 24 grid

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from harpx.anatomy.ventricle import VentricleGeometry
+from harpx.anatomy.ventricle_fit import VentricleTemplate
 from harpx.cardiac.strain import aha_segments, cardiac_strain
 from harpx.mechanics.body import Body
 from harpx.mechanics.materials import NeoHookean
-from harpx.mechanics.ventricle import VentricleGeometry
-from harpx.mechanics.ventricle_fit import VentricleTemplate
 from harpx.plotting import bullseye
 
 GEOMETRY = VentricleGeometry(inner=(25.0, 70.0), outer=(35.0, 78.0), truncation=10.0)

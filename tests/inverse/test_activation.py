@@ -13,11 +13,11 @@ from harpx.inverse import (
     resimulate,
     uniaxial_active_tension,
 )
-from harpx.mechanics.active import simulate_activation, simulate_history
 from harpx.mechanics.body import Body
 from harpx.mechanics.loads import Fixed
 from harpx.mechanics.materials import ActiveContraction, NeoHookean
 from harpx.mechanics.mesh import box
+from harpx.physiology.active import simulate_activation, simulate_history
 from harpx.plotting import plot_stretch_agreement
 
 MATERIAL = NeoHookean(c1=1.0, kappa=120.0)

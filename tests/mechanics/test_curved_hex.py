@@ -12,18 +12,9 @@ import numpy as np
 import pytest
 import skfem
 
-from harpx.mechanics import (
-    Body,
-    Fixed,
-    NeoHookean,
-    Pressure,
-    cavity_volume,
-    solve,
-    tube,
-    ventricle,
-)
+from harpx.anatomy.ventricle import VentricleGeometry, cavity_volume, ventricle
+from harpx.mechanics import Body, Fixed, NeoHookean, Pressure, solve, tube
 from harpx.mechanics.mesh import box, curved_hex_mesh
-from harpx.mechanics.ventricle import VentricleGeometry
 
 C1 = 1.0
 MAT = NeoHookean(c1=C1, kappa=1e4 * C1)

@@ -26,7 +26,7 @@ from harpx.mechanics import (
     tube,
 )
 from harpx.mechanics.assembly import first_piola, internal_forces, sparsity
-from harpx.mechanics.body import curved_tet_mesh
+from harpx.mechanics.cells import curved_tet_mesh
 from harpx.mechanics.mesh import tetrahedralize
 
 NEO = NeoHookean(c1=1.0, kappa=120.0)
@@ -328,7 +328,7 @@ def test_displacement_at_points(element, rng):
 
 @pytest.mark.parametrize(("n_circumferential", "on_vertex"), [(8, True), (12, False)])
 def test_ventricle_apex_vertex(n_circumferential, on_vertex):
-    from harpx.mechanics import ventricle
+    from harpx.anatomy.ventricle import ventricle
 
     spec = ventricle(n_circumferential=n_circumferential, n_longitudinal=3, n_transmural=1)
     p = spec.mesh.p.T

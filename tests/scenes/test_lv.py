@@ -7,8 +7,8 @@ import pytest
 
 from harpx.imaging.harp import extract_phase
 from harpx.mechanics.assembly import cauchy_stress
-from harpx.mechanics.cut import opening_angle
-from harpx.mechanics.growth import fiber_prestretch, release
+from harpx.physiology.cut import opening_angle
+from harpx.physiology.growth import fiber_prestretch, release
 from harpx.scenes.lv import (
     Systole,
     fiber_shortening,

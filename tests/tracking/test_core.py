@@ -12,8 +12,7 @@ from harpx.mechanics.mesh import box
 from harpx.tracking.constraint import PhaseConstraint
 from harpx.tracking.equilibrium import EquilibriumResult
 from harpx.tracking.frame import FrameProblem
-from harpx.tracking.penalty import STALL
-from harpx.tracking.settings import TrackingSettings
+from harpx.tracking.settings import SolverTuning, TrackingSettings
 from tests._helpers import still
 from tests._ideal import ideal_phase
 
@@ -200,7 +199,7 @@ def test_a_warm_frame_starts_at_the_top_of_the_ramp():
 def test_penalty_stops_raising_at_the_noise_floor():
     from harpx.tracking.penalty import track_frame_penalty
 
-    stalled = 0.2 * (1.0 - STALL / 2)  # lowers ε by less than the stall margin
+    stalled = 0.2 * (1.0 - SolverTuning().stall / 2)  # lowers ε by less than the stall margin
     problem = _Scripted([0.3, 0.2, stalled], TrackingSettings(ramp=1, penalty_limit=100.0))
     out = track_frame_penalty(problem, np.zeros(3), target=0.1, penalty=1.0)
     assert problem.penalties == [1.0, 2.0, 4.0]
@@ -279,7 +278,9 @@ def test_settings_name_what_is_wrong(kwargs, match):
 def test_settings_attributes_are_netcdf_safe():
     attrs = TrackingSettings().as_attrs()
     assert attrs["setting_epsilon"] == "auto" and attrs["setting_intorder"] == -1
-    assert all(isinstance(v, str | int | float) for v in attrs.values())
+    scalars = {k: v for k, v in attrs.items() if k != "setting_tuning_predictor_factors"}
+    assert all(isinstance(v, str | int | float) for v in scalars.values())
+    assert attrs["setting_tuning_predictor_factors"] == [0.0, 0.5, 1.0]  # a NetCDF number list
 
 
 def test_robust_weight_is_for_the_penalty_method_only():
@@ -290,7 +291,9 @@ def test_robust_weight_is_for_the_penalty_method_only():
 
 
 def test_remaining_increments_are_bounded_by_a_geometric_tail():
-    from harpx.tracking.equilibrium import FAST, _remaining
+    from harpx.tracking.equilibrium import _remaining
+
+    FAST = SolverTuning().fast
 
     # increments s0 ρ^k: the tail after s_k sums to exactly ρ s_k / (1 - ρ)
     rho = 0.2

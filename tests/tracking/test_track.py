@@ -12,6 +12,7 @@ from harpx.mechanics.mesh import cylinder
 from harpx.scenes._motion import RotationalImpact
 from harpx.schema import standard_attrs, validate
 from harpx.tracking.results import tracking_error
+from harpx.tracking.settings import TrackingSettings
 from harpx.tracking.track import track
 from tests._ideal import ideal_phase
 
@@ -147,3 +148,20 @@ def test_phase_only_epsilon_matches_the_full_state(scene, rng):
     # the predictor ranks its candidates with the cheaper phase-only ε: it must be the same
     # number as the full state's (same samples, same weights; rounding only)
     assert constraint.epsilon_at(u) == pytest.approx(constraint.state(u).epsilon(), rel=1e-12)
+
+
+def test_a_misspelt_setting_is_named_with_the_settings_listed(scene):
+    ds, mesh = scene
+    with pytest.raises(TypeError, match="'epsilom' is not a tracking setting.*epsilon_factor"):
+        track(ds, Body(mesh, NeoHookean(c1=1.0, kappa=120.0)), epsilom=0.1)
+
+
+def test_keywords_apply_on_top_of_a_settings_object(scene):
+    # the one carrier: settings= and keyword overrides meet in TrackingSettings.build, and
+    # the result records what was used
+    ds, mesh = scene
+    base = TrackingSettings(epsilon=0.2, max_iterations=7)
+    out = ds.harp.track(Body(mesh, NeoHookean(c1=1.0, kappa=120.0)), settings=base, ramp=1)
+    assert out.attrs["setting_epsilon"] == 0.2
+    assert out.attrs["setting_max_iterations"] == 7
+    assert out.attrs["setting_ramp"] == 1

@@ -6,14 +6,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from harpx.anatomy.segmentation import body_from_segmentation, mesh_from_labels
+from harpx.io.labels import read_labels
 from harpx.mechanics.body import Body
 from harpx.mechanics.materials import NeoHookean
-from harpx.mechanics.segmentation import (
-    body_from_segmentation,
-    mesh_from_labels,
-    read_labels,
-    scaled_jacobian,
-)
+from harpx.mechanics.quality import scaled_jacobian
 
 R = 12.0  # ball radius, mm
 COORD = np.arange(-20.0, 20.5, 1.0)  # 1 mm voxels, coarse grid so the tests are fast

@@ -1,7 +1,7 @@
 r"""The radial-cut experiment that reveals residual stress, and node-wise supports.
 
 :func:`opening_angle` reproduces the classic experiment (Omens & Fung 1990): a ring-like
-short-axis slab of a residually stressed body (growth, :mod:`harpx.mechanics.growth`) is
+short-axis slab of a residually stressed body (growth, :mod:`harpx.physiology.growth`) is
 cut along a radial plane and released; a residually stressed ring springs open, a
 stress-free one does not move. :class:`NodeFixed` holds components at the dof nodes nearest
 to given points (pins).
@@ -37,8 +37,8 @@ from numpy.typing import ArrayLike
 from harpx._typing import FloatArray, IntArray
 from harpx.errors import CoincidentNodesWarning
 from harpx.mechanics.body import Body
-from harpx.mechanics.growth import release, set_growth
 from harpx.mechanics.mesh import hex_mesh
+from harpx.physiology.growth import release, set_growth
 
 __all__ = ["NodeFixed", "OpeningAngle", "opening_angle"]
 
@@ -134,7 +134,7 @@ def opening_angle(
     Parameters
     ----------
     body : Body
-        hex8 body about the z axis (e.g. on :func:`harpx.mechanics.ventricle.ventricle`),
+        hex8 body about the z axis (e.g. on :func:`harpx.anatomy.ventricle.ventricle`),
         with its growth field (residual stress) if any, fibres and material.
     u_reference : array_like, shape (body.ndof,), optional
         Displacement of the intact state that is cut (mm), e.g. a loaded configuration;

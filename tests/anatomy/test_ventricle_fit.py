@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from harpx.errors import HarpxWarning
-from harpx.mechanics.ventricle import VentricleGeometry
-from harpx.mechanics.ventricle_fit import (
+from harpx.anatomy.ventricle import VentricleGeometry
+from harpx.anatomy.ventricle_fit import (
     VentricleTemplate,
     fit_ventricle,
     fit_ventricle_to_mask,
 )
+from harpx.errors import HarpxWarning
 
 GEOMETRY = VentricleGeometry(inner=(22.0, 60.0), outer=(31.0, 68.0), truncation=8.0)
 

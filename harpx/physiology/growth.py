@@ -55,7 +55,7 @@ class GrowthField:
     Examples
     --------
     >>> from harpx.mechanics import Body, NeoHookean, box
-    >>> from harpx.mechanics.growth import GrowthField
+    >>> from harpx.physiology.growth import GrowthField
     >>> Fg = np.broadcast_to(np.diag([1.1, 1.0, 1.0]), (1, 8, 3, 3))
     >>> body = Body(box(divisions=(1, 1, 1)), NeoHookean(1.0, 100.0),
     ...             fibers=[[1.0, 0.0, 0.0]], growth=GrowthField(Fg))

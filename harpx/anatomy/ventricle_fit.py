@@ -3,14 +3,14 @@ r"""The analytic left ventricle fitted to endo- and epicardial contours or a myo
 Template
 --------
 A :class:`VentricleTemplate` places the truncated ellipsoidal ventricle of
-:mod:`harpx.mechanics.ventricle` (built about the z axis with the apex towards −z) in the
+:mod:`harpx.anatomy.ventricle` (built about the z axis with the apex towards −z) in the
 image: a centre :math:`c` (the centre of both ellipsoids) and a rotation :math:`R` whose
 columns are the template's x, y and z axes in image coordinates (z the long axis, pointing
 from the apex to the base), so that an image point :math:`p` has template coordinates
 :math:`q = R^T (p - c)`. The template's angular origin (its +x axis) is the image x axis
 projected onto the short-axis plane. Its meshes (:meth:`VentricleTemplate.mesh`) and
 helical fibres (:meth:`VentricleTemplate.fibers`) are those of
-:func:`~harpx.mechanics.ventricle.ventricle`, moved rigidly into the image.
+:func:`~harpx.anatomy.ventricle.ventricle`, moved rigidly into the image.
 
 Fit
 ---
@@ -52,10 +52,10 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from harpx._typing import FloatArray
+from harpx.anatomy.ventricle import VentricleGeometry, ventricle
 from harpx.errors import HarpxWarning
+from harpx.io.labels import read_labels
 from harpx.mechanics.mesh import MeshSpec, hex_mesh, labelled_spec
-from harpx.mechanics.segmentation import read_labels
-from harpx.mechanics.ventricle import VentricleGeometry, ventricle
 
 __all__ = [
     "VentricleFit",
@@ -94,8 +94,8 @@ class VentricleTemplate:
 
     Examples
     --------
-    >>> from harpx.mechanics.ventricle import VentricleGeometry
-    >>> from harpx.mechanics.ventricle_fit import VentricleTemplate
+    >>> from harpx.anatomy.ventricle import VentricleGeometry
+    >>> from harpx.anatomy.ventricle_fit import VentricleTemplate
     >>> g = VentricleGeometry(inner=(25.0, 70.0), outer=(35.0, 78.0), truncation=10.0)
     >>> VentricleTemplate(g, centre=(1.0, 2.0, 3.0)).apex.tolist()  # epicardial apex, mm
     [1.0, 2.0, -75.0]
@@ -168,7 +168,7 @@ class VentricleTemplate:
         """Predicates naming ``"base"``, ``"endo"`` and ``"epi"`` facets of any wall mesh.
 
         For the ``boundaries`` argument of
-        :func:`~harpx.mechanics.segmentation.mesh_from_labels`: a facet is basal when its
+        :func:`~harpx.anatomy.segmentation.mesh_from_labels`: a facet is basal when its
         centre lies within ``base_tolerance`` (mm) of the base plane and its outward normal
         is within 45° of the long axis; the other facets are endocardial where the
         transmural fraction of their centre is below 1/2, epicardial otherwise.
@@ -209,8 +209,8 @@ class VentricleTemplate:
             this matches the scene's conditions when the long axis is the image z axis; a
             :class:`~harpx.errors.HarpxWarning` flags a long axis more than 5° off z.
         """
-        from harpx.mechanics.cut import NodeFixed
         from harpx.mechanics.loads import Fixed
+        from harpx.physiology.cut import NodeFixed
 
         tilt = float(np.degrees(np.arccos(np.clip(abs(self.axis[2]), 0.0, 1.0))))
         if tilt > 5.0:
@@ -235,7 +235,7 @@ class VentricleTemplate:
         Parameters
         ----------
         **options
-            Keywords of :func:`~harpx.mechanics.ventricle.ventricle` other than the
+            Keywords of :func:`~harpx.anatomy.ventricle.ventricle` other than the
             geometry (``n_circumferential``, ``n_longitudinal``, ``n_transmural``,
             ``fiber_endo``, ``fiber_epi``, ``segments``).
 
@@ -421,7 +421,7 @@ def ventricle_contours(
     ----------
     mask : xarray.Dataset, xarray.DataArray, str or os.PathLike
         Myocardium fraction or binary mask on a ``(z, y, x)`` grid (see
-        :func:`~harpx.mechanics.segmentation.read_labels`; a ``tagged/1`` dataset gives
+        :func:`~harpx.io.labels.read_labels`; a ``tagged/1`` dataset gives
         its ``body``).
     slice_axis : {"x", "y", "z"}, default "z"
         Grid axis normal to the short-axis slices (the closest one for oblique hearts).

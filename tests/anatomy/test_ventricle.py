@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from harpx.anatomy.ventricle import VentricleGeometry, cavity_volume, ventricle
 from harpx.mechanics.body import Body
 from harpx.mechanics.materials import NeoHookean
-from harpx.mechanics.ventricle import VentricleGeometry, cavity_volume, ventricle
 
 INNER, OUTER, BASE = (25.0, 70.0), (35.0, 78.0), 10.0
 GEOM = VentricleGeometry(inner=INNER, outer=OUTER, truncation=BASE)
@@ -155,10 +155,10 @@ def test_bad_arguments_are_clear_errors(kwargs, match):
 
 
 # ------------------------------------------------------------------ growth release and cut
-from harpx.mechanics.cut import NodeFixed, opening_angle  # noqa: E402
-from harpx.mechanics.growth import GrowthField, set_growth  # noqa: E402
 from harpx.mechanics.kinematics import growth_tensor  # noqa: E402
 from harpx.mechanics.mesh import tube  # noqa: E402
+from harpx.physiology.cut import NodeFixed, opening_angle  # noqa: E402
+from harpx.physiology.growth import GrowthField, set_growth  # noqa: E402
 
 
 def _ring(growth_of_radius=None):

@@ -125,7 +125,7 @@ def tongue_map(ref: NDArray[np.float64], length: float, width: float, height: fl
 
     Examples
     --------
-    >>> from harpx.mechanics.tongue_mesh import tongue_map
+    >>> from harpx.anatomy.tongue_mesh import tongue_map
     >>> tongue_map(np.array([[0.0, 1.0, 1.0]]), 70.0, 50.0, 40.0).round(3).tolist()
     [[0.0, 21.25, 34.0]]
     """
@@ -197,7 +197,7 @@ def tongue_reference(
 
     Examples
     --------
-    >>> from harpx.mechanics.tongue_mesh import tongue_map, tongue_reference
+    >>> from harpx.anatomy.tongue_mesh import tongue_map, tongue_reference
     >>> ref = np.array([[0.3, -0.5, 0.7], [0.95, 0.9, 0.1]])
     >>> bool(np.allclose(tongue_reference(tongue_map(ref, 70, 50, 40), 70, 50, 40), ref))
     True
@@ -258,7 +258,7 @@ def tongue_inside(
 
     Examples
     --------
-    >>> from harpx.mechanics.tongue_mesh import tongue_inside
+    >>> from harpx.anatomy.tongue_mesh import tongue_inside
     >>> tongue_inside(np.array([[30.0, 0.0, 10.0], [30.0, 0.0, -1.0]]), 70, 50, 40).tolist()
     [True, False]
     """
@@ -302,7 +302,7 @@ def muscle_atlas(ref: NDArray[np.float64]) -> NDArray[np.str_]:
 
     Examples
     --------
-    >>> from harpx.mechanics.tongue_mesh import muscle_atlas
+    >>> from harpx.anatomy.tongue_mesh import muscle_atlas
     >>> muscle_atlas(np.array([[0.3, 0.0, 0.2], [0.3, 0.0, 0.95], [0.95, 0.0, 0.2]])).tolist()
     ['GG', 'SL', 'T']
     """
@@ -377,7 +377,7 @@ def tongue(
 
     Examples
     --------
-    >>> from harpx.mechanics.tongue_mesh import tongue
+    >>> from harpx.anatomy.tongue_mesh import tongue
     >>> spec = tongue()
     >>> spec.mesh.nelements, {k: len(v) for k, v in spec.regions.items()}
     (280, {'GG': 63, 'IL': 28, 'SL': 70, 'T': 63, 'V': 56})

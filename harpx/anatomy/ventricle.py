@@ -113,7 +113,7 @@ class VentricleGeometry:
 
     Examples
     --------
-    >>> from harpx.mechanics.ventricle import VentricleGeometry
+    >>> from harpx.anatomy.ventricle import VentricleGeometry
     >>> g = VentricleGeometry(inner=(20.0, 50.0), outer=(30.0, 60.0), truncation=0.0)
     >>> round(g.wall_volume() / 1000.0, 3)  # 2/3 π (a_epi² c_epi - a_endo² c_endo), mL
     71.209
@@ -489,7 +489,7 @@ def ventricle(
 
     Examples
     --------
-    >>> from harpx.mechanics.ventricle import ventricle
+    >>> from harpx.anatomy.ventricle import ventricle
     >>> spec = ventricle(n_circumferential=8, n_longitudinal=3, n_transmural=1)
     >>> spec.mesh.nelements, sorted(spec.boundaries)
     (36, ['base', 'endo', 'epi'])

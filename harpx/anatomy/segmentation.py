@@ -28,8 +28,9 @@ named after the label on its outer side (``"exterior"`` for background), so a ma
 myocardium label beside a blood-pool label gives the facets facing the cavity their own
 name. Further named facet sets come from predicates on facet centres and outward normals.
 
-:func:`read_labels` reads a label volume from a ``tagged/1`` dataset, a NetCDF file, an
-:class:`xarray.DataArray` or a NIfTI file (with nibabel, an optional dependency);
+:func:`harpx.io.labels.read_labels` reads a label volume from a ``tagged/1`` dataset, a
+NetCDF file, an :class:`xarray.DataArray` or a NIfTI file (with nibabel, an optional
+dependency);
 :func:`body_from_segmentation` goes straight to a :class:`~harpx.mechanics.body.Body`.
 
 Units: mm throughout.
@@ -37,7 +38,6 @@ Units: mm throughout.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -45,19 +45,17 @@ from typing import Any
 import numpy as np
 import scipy.ndimage as ndi
 import scipy.sparse as sp
-import xarray as xr
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
-from harpx.mechanics.mesh import _CORNER_EDGES, MeshSpec, hex_mesh, labelled_spec
+from harpx.io.labels import read_labels
+from harpx.mechanics.mesh import MeshSpec, hex_mesh, labelled_spec
+from harpx.mechanics.quality import MeshQuality, scaled_jacobian
 
 __all__ = [
-    "MeshQuality",
     "SegmentationMesh",
     "body_from_segmentation",
     "mesh_from_labels",
-    "read_labels",
-    "scaled_jacobian",
 ]
 
 #: VTK corner offsets (x, y, z) of a hexahedron in a structured grid
@@ -68,36 +66,6 @@ _VTK_OFFSETS = np.array(
 _SUBSAMPLES = 3
 
 FacetPredicate = Callable[[FloatArray, FloatArray], ArrayLike]
-
-
-@dataclass(frozen=True)
-class MeshQuality:
-    """Quality report of a hexahedral mesh.
-
-    Attributes
-    ----------
-    cells : int
-        Number of hexahedra.
-    min_scaled_jacobian, mean_scaled_jacobian : float
-        Smallest and mean per-cell scaled Jacobian (1 for a cube, dimensionless).
-    inverted : int
-        Cells with a non-positive corner Jacobian (0 for every mesh this module returns).
-    dropped_cells : int
-        Cubes of the voxel mesh that were not face-connected to its largest part.
-    max_boundary_offset : float
-        Largest distance of a boundary vertex from the smoothed iso-surface after
-        projection, first-order estimate :math:`|\\phi - 1/2| / |\\nabla\\phi|`, mm.
-    restored_vertices : int
-        Vertices moved back towards their voxel position to keep every cell valid.
-    """
-
-    cells: int
-    min_scaled_jacobian: float
-    mean_scaled_jacobian: float
-    inverted: int
-    dropped_cells: int
-    max_boundary_offset: float
-    restored_vertices: int
 
 
 @dataclass(frozen=True)
@@ -116,38 +84,6 @@ class SegmentationMesh:
     quality: MeshQuality
 
 
-def scaled_jacobian(points: ArrayLike, cells_vtk: ArrayLike) -> FloatArray:
-    """Per-cell scaled Jacobian of VTK-ordered hexahedra (dimensionless).
-
-    Parameters
-    ----------
-    points : array_like, shape (npoint, 3)
-        Vertex coordinates, mm.
-    cells_vtk : array_like, shape (ncell, 8)
-        Vertex ids per cell in VTK order.
-
-    Returns
-    -------
-    ndarray, shape (ncell,)
-        Minimum over the eight corners of ``det[e1, e2, e3] / (|e1| |e2| |e3|)``; 1 for a
-        cube, ≤ 0 for an inverted or degenerate cell.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from harpx.mechanics.segmentation import scaled_jacobian
-    >>> cube = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
-    ...                  [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], dtype=float)
-    >>> scaled_jacobian(cube, np.arange(8)[None]).round(12).tolist()
-    [1.0]
-    """
-    xyz = np.asarray(points, dtype=np.float64)[np.asarray(cells_vtk)]
-    edges = xyz[:, _CORNER_EDGES] - xyz[:, :, None, :]  # (ncell, 8, 3, 3)
-    lengths = np.linalg.norm(edges, axis=-1).prod(axis=-1)
-    det = np.linalg.det(edges) / np.maximum(lengths, np.finfo(float).tiny)
-    return det.min(axis=1)
-
-
 def _axis(values: ArrayLike, name: str) -> tuple[float, float]:
     v = np.asarray(values, dtype=np.float64)
     if v.ndim != 1 or v.size < 2:
@@ -159,95 +95,6 @@ def _axis(values: ArrayLike, name: str) -> tuple[float, float]:
             f"{d.max():.6g} mm); resample the labels onto a uniform grid"
         )
     return float(v[0]), float(d[0])
-
-
-def read_labels(source: Any, *, variable: str | None = None) -> xr.DataArray:
-    """A label volume ``(z, y, x)`` with coordinates in mm from a dataset, array or file.
-
-    Parameters
-    ----------
-    source : xarray.Dataset, xarray.DataArray, str or os.PathLike
-        A dataset (``variable``, else its ``body`` fraction, else its only ``(z, y, x)``
-        variable), a DataArray with dims ``(z, y, x)``, a NetCDF file (read like a dataset)
-        or a NIfTI file (``.nii``/``.nii.gz``, needs nibabel). NIfTI voxel axes must be
-        aligned with the scanner axes (a diagonal affine); its RAS coordinates become the
-        DICOM patient (LPS) coordinates that :func:`harpx.io.dicom.read_tagged` uses
-        (``x = -R``, ``y = -A``, ``z = S``), so a mask drawn on the same scan lines up.
-    variable : str, optional
-        Name of the label variable in a dataset or NetCDF file.
-
-    Returns
-    -------
-    xarray.DataArray
-        Labels or fractions with increasing coordinates ``z``, ``y``, ``x`` (mm).
-
-    Raises
-    ------
-    ValueError
-        If no label variable can be chosen, its dims are not ``(z, y, x)`` or a NIfTI
-        affine is oblique.
-    ImportError
-        For a NIfTI file without nibabel (``pip install nibabel``).
-    """
-    if isinstance(source, str | os.PathLike):
-        name = os.fspath(source)
-        if name.endswith((".nii", ".nii.gz")):
-            return _read_nifti(name)
-        with xr.open_dataset(name) as opened:
-            return read_labels(opened.load(), variable=variable)
-    if isinstance(source, xr.Dataset):
-        grid = [k for k, v in source.data_vars.items() if set(v.dims) == {"z", "y", "x"}]
-        if variable is None:
-            if "body" in source.data_vars:
-                variable = "body"
-            elif len(grid) == 1:
-                variable = str(grid[0])
-            else:
-                raise ValueError(
-                    f"cannot tell which variable holds the labels (candidates {grid!r}); "
-                    "pass variable='...'"
-                )
-        if variable not in source.data_vars:
-            raise ValueError(f"variable={variable!r} is not in the dataset ({list(source)!r})")
-        source = source[variable]
-    if not isinstance(source, xr.DataArray):
-        raise TypeError(
-            f"labels must be an xarray Dataset/DataArray or a file path, got "
-            f"{type(source).__name__!r}"
-        )
-    if set(source.dims) != {"z", "y", "x"}:
-        raise ValueError(
-            f"labels have dims {source.dims!r}; expected ('z', 'y', 'x') (select one frame "
-            "or tag first)"
-        )
-    out = source.transpose("z", "y", "x")
-    return out.sortby(["z", "y", "x"])
-
-
-def _read_nifti(path: str) -> xr.DataArray:
-    try:
-        import nibabel
-    except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError(
-            f"reading the NIfTI file {path!r} needs nibabel: pip install nibabel"
-        ) from exc
-    image = nibabel.load(path)
-    data = np.asarray(image.dataobj)
-    if data.ndim != 3:
-        raise ValueError(f"NIfTI file {path!r} holds a {data.ndim}-D image; expected 3-D labels")
-    affine = np.asarray(image.affine, dtype=np.float64)
-    linear = affine[:3, :3]
-    if np.abs(linear - np.diag(np.diag(linear))).max() > 1e-6 * np.abs(linear).max():
-        raise ValueError(
-            f"NIfTI file {path!r} has an oblique affine; resample it onto scanner axes first"
-        )
-    sign = np.array([-1.0, -1.0, 1.0])  # RAS -> LPS
-    coords = [sign[a] * (affine[a, 3] + linear[a, a] * np.arange(data.shape[a])) for a in range(3)]
-    da = xr.DataArray(
-        data.transpose(2, 1, 0), dims=("z", "y", "x"),
-        coords={"z": coords[2], "y": coords[1], "x": coords[0]},
-    )  # fmt: skip
-    return da.sortby(["z", "y", "x"])
 
 
 def _label_indicators(
@@ -310,8 +157,8 @@ def mesh_from_labels(
     Parameters
     ----------
     labels : xarray.Dataset, xarray.DataArray, str or os.PathLike
-        The label volume (see :func:`read_labels`): integer labels (0 background) or a
-        tissue fraction in [0, 1] on a uniform grid of voxel centres, mm.
+        The label volume (see :func:`harpx.io.labels.read_labels`): integer labels (0
+        background) or a tissue fraction in [0, 1] on a uniform grid of voxel centres, mm.
     element_size : float
         Edge of the voxel-mesh cubes, mm (at least half a voxel).
     variable : str, optional
@@ -339,7 +186,7 @@ def mesh_from_labels(
     SegmentationMesh
         ``spec``: regions named after the meshed labels, boundary facets named after the
         label on their outer side (``"exterior"`` for background) plus ``boundaries``;
-        ``quality``: the :class:`MeshQuality` report.
+        ``quality``: the :class:`~harpx.mechanics.quality.MeshQuality` report.
 
     Raises
     ------
@@ -351,7 +198,7 @@ def mesh_from_labels(
     Examples
     --------
     >>> import numpy as np, xarray as xr
-    >>> from harpx.mechanics.segmentation import mesh_from_labels
+    >>> from harpx.anatomy.segmentation import mesh_from_labels
     >>> c = np.arange(-10.0, 10.5, 1.0)
     >>> Z, Y, X = np.meshgrid(c, c, c, indexing="ij")
     >>> ball = xr.DataArray((X**2 + Y**2 + Z**2 < 64).astype(int), dims=("z", "y", "x"),
@@ -570,3 +417,9 @@ def body_from_segmentation(
     body = Body(result.spec, material, **body_options)
     body.mesh_quality = result.quality
     return body
+
+
+def __getattr__(name: str) -> Any:
+    from harpx._moved import moved_attribute
+
+    return moved_attribute(__name__, name)

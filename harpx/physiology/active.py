@@ -52,7 +52,7 @@ def fibred_body(body: object) -> Body:
     if body.fibers_qp is None:
         raise ValueError(
             "the body has no fibers; activation needs fibre directions: build it from a "
-            "mesh with fibers (e.g. harpx.mechanics.tongue_mesh.tongue) or pass fibers="
+            "mesh with fibers (e.g. harpx.anatomy.tongue_mesh.tongue) or pass fibers="
         )
     return body
 

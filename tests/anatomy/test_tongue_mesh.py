@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 import skfem
 
-from harpx.mechanics.locate import locate
-from harpx.mechanics.tongue_mesh import (
+from harpx.anatomy.tongue_mesh import (
     MUSCLES,
     muscle_atlas,
     tongue,
@@ -15,6 +14,7 @@ from harpx.mechanics.tongue_mesh import (
     tongue_map,
     tongue_reference,
 )
+from harpx.mechanics.locate import locate
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,11 @@
+"""Anatomy from images and templates, built on the finite-element engine.
+
+* :mod:`~harpx.anatomy.segmentation`: hexahedral meshes and bodies from label volumes
+  (:func:`~harpx.anatomy.segmentation.mesh_from_labels`).
+* :mod:`~harpx.anatomy.ventricle`: the prolate-spheroidal left-ventricle template with
+  fibres, AHA regions and named boundaries (:func:`~harpx.anatomy.ventricle.ventricle`).
+* :mod:`~harpx.anatomy.ventricle_fit`: that template fitted to a segmentation.
+* :mod:`~harpx.anatomy.tongue_mesh`: the tongue with its muscles and fibre fields.
+
+Units: mm.
+"""

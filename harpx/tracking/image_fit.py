@@ -1,0 +1,154 @@
+"""Can a body be tracked on an image grid at all? Cheap checks before tracking allocates.
+
+:func:`check_fits_image` compares a body's nodes (mm) with the image's field of view and
+voxel size and estimates the constraint quadrature the tracker would place, so a mesh in the
+wrong units, with stray nodes, or too coarse for the voxels is refused with numbers before
+anything large is allocated.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import skfem
+
+from harpx.errors import SchemaError
+from harpx.mechanics.body import Body
+from harpx.mechanics.cells import _VTK_TET_EDGES
+
+__all__ = ["check_fits_image"]
+
+_EDGES_BY_DIRECTION = np.array(
+    [[[0, 1], [3, 2], [4, 5], [7, 6]], [[0, 3], [1, 2], [4, 7], [5, 6]],
+     [[0, 4], [1, 5], [2, 6], [3, 7]]]
+)  # fmt: skip
+# bytes held per constraint quadrature point and basis function (values, gradients, work
+# arrays), plus per point (positions, weights, phase samples): a generous estimate
+_BYTES_PER_POINT_BASIS = 64
+_BYTES_PER_POINT = 400
+
+
+def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> None:
+    """Raise before tracking if a body's size or position cannot match an image grid.
+
+    Cheap checks (a pass over nodes and cells) that catch a mesh in the wrong units or
+    with stray nodes before the tracker allocates its constraint quadrature, whose point
+    count grows with (cell size / voxel size)³:
+
+    * every node lies within one field of view (the largest extent of the grid) of the
+      image's field of view;
+    * the mesh is larger than one voxel;
+    * the constraint quadrature, points at most one acquired voxel apart as the tracker
+      places them, has at most ``max_points`` points.
+
+    Parameters
+    ----------
+    body : Body
+        The tracking body (mm).
+    grid : xarray.Dataset
+        A ``tagged/1`` or ``phase/1`` dataset: coordinates ``z``, ``y``, ``x`` (mm) and,
+        for phase images, the ``upsample`` attribute (the acquired voxel is ``upsample``
+        grid steps).
+    max_points : int, default 10_000_000
+        Largest constraint quadrature allowed (about 1 kB of memory per point).
+
+    Raises
+    ------
+    NotImplementedError
+        For a body on curved hexahedra (``skfem.MeshHex2``): tracking samples the body
+        through the straight-cell point locator.
+    ValueError
+        Naming the nodes far outside the field of view, the mesh and field-of-view sizes,
+        the estimated point count and memory, and a likely unit mix-up (µm or m instead
+        of mm) when the size ratio suggests one.
+
+    Examples
+    --------
+    >>> import numpy as np, xarray as xr
+    >>> from harpx.mechanics.mesh import box
+    >>> from harpx.mechanics.materials import NeoHookean
+    >>> grid = xr.Dataset(coords={d: np.arange(16.0) for d in "zyx"})
+    >>> body = Body(box((8.0, 8.0, 8.0), (2, 2, 2), origin=(4.0, 4.0, 4.0)), NeoHookean(1, 120))
+    >>> check_fits_image(body, grid)  # inside, in mm: nothing to say
+    >>> far = Body(box((8e3, 8e3, 8e3), (2, 2, 2)), NeoHookean(1, 120))  # micrometres
+    >>> try:
+    ...     check_fits_image(far, grid)
+    ... except ValueError as err:
+    ...     print(str(err).split(": ")[-1])
+    are its coordinates in micrometres (divide by 1000)?
+    """
+    if isinstance(body.mesh, skfem.MeshHex2):
+        raise NotImplementedError(
+            "tracking a body on curved hexahedra (skfem.MeshHex2) is not implemented: the "
+            "tracker locates points with the straight (trilinear) cell map; track with the "
+            "straight mesh (curved=False)"
+        )
+    low, high, step = [], [], []
+    for axis in ("x", "y", "z"):
+        if axis not in grid.coords:
+            raise SchemaError(f"grid has no coordinate {axis!r} (voxel centres in mm)")
+        values = np.asarray(grid[axis].values, dtype=np.float64)
+        if values.size == 0 or not np.all(np.isfinite(values)):
+            raise SchemaError(f"grid coordinate {axis!r} is empty or not finite")
+        d = float((values[-1] - values[0]) / (values.size - 1)) if values.size > 1 else 0.0
+        low.append(values[0] - d / 2)
+        high.append(values[-1] + d / 2)
+        if values.size > 1:
+            step.append(abs(d))
+    lo, hi = np.array(low), np.array(high)
+    fov = float((hi - lo).max())
+    voxel = float(grid.attrs.get("upsample", 1)) * min(step) if step else fov
+    nodes = np.asarray(body.nodes)
+    size = float(np.ptp(nodes, axis=0).max())
+    ratio = size / fov if fov > 0 else np.inf
+    hint = ""
+    if ratio > 20:
+        hint = (
+            f"; the mesh is {ratio:.3g} times larger than the image: are its coordinates in "
+            "micrometres (divide by 1000)?"
+        )
+    elif size < voxel:
+        hint = (
+            "; the mesh is smaller than one voxel: are its coordinates in metres (multiply "
+            "by 1000)?"
+        )
+    outside = np.maximum(lo - nodes, nodes - hi).max(axis=1)  # mm beyond the field of view
+    far = np.flatnonzero(outside > fov)
+    if far.size:
+        shown = ", ".join(str(int(i)) for i in far[:10]) + (", ..." if far.size > 10 else "")
+        raise SchemaError(
+            f"mesh nodes [{shown}] lie up to {outside.max():.4g} mm outside the image field "
+            f"of view ({lo.round(3).tolist()} to {hi.round(3).tolist()} mm, x/y/z); the mesh "
+            f"spans {size:.4g} mm, the field of view {fov:.4g} mm"
+            f"{hint if 2 * far.size > len(nodes) else '; move or fix those nodes'}"
+        )
+    if size < voxel:
+        raise SchemaError(
+            f"the mesh spans {size:.4g} mm but one acquired voxel is {voxel:.4g} mm{hint}"
+        )
+    count = 1
+    if body.element.startswith("tet"):  # the tracker's rule: m³ points, m from the longest edge
+        corners = nodes[body.cells[:, :4]]  # (ncell, 4, 3)
+        pairs = _VTK_TET_EDGES
+        length = np.linalg.norm(corners[:, pairs[:, 0]] - corners[:, pairs[:, 1]], axis=-1)
+        m = max(1, int(np.ceil(float(length.max()) / (1.5 * voxel))))
+        count = m**3
+        longest = (
+            f"its longest tetrahedron edge is {float(length.max()):.4g} mm, {m} points per "
+            f"edge at most 1.5 voxels ({1.5 * voxel:.4g} mm) apart, {count} points per cell"
+        )
+    else:
+        corners = nodes[body.cells[:, :8]]  # (ncell, 8, 3)
+        for edges in _EDGES_BY_DIRECTION:  # n points along the longest edge per direction
+            length = np.linalg.norm(corners[:, edges[:, 0]] - corners[:, edges[:, 1]], axis=-1)
+            count *= max(1, int(np.ceil(float(length.max()) / voxel)))
+        longest = f"its longest cells are {count ** (1 / 3):.3g} voxels ({voxel:.4g} mm) across"
+    points = count * body.ncell
+    if points > max_points:
+        gib = points * (_BYTES_PER_POINT + _BYTES_PER_POINT_BASIS * body.nbasis) / 2**30
+        raise SchemaError(
+            f"tracking this mesh would place {points:.3g} constraint points (~{gib:.3g} GiB; "
+            f"limit max_points={max_points:.3g}): {longest}{hint or ''}; refine the "
+            "mesh (smaller cells) or check its units (mm)"
+        )
