@@ -54,8 +54,8 @@ not modelled; the genioglossus fan radiates from a single insertion point on the
 Boundaries
 ----------
 ``"mandible"``: floor facets around the genioglossus insertion (0.6 ≤ ξ ≤ 0.9,
-|η| ≤ 3/7); ``"base"`` (alias ``"hyoid"``): the posterior floor strip under the
-genioglossus (ξ ≤ 0.6, |η| ≤ 3/7), attached to the hyoid; ``"floor"``: the rest of the floor
+abs(η) ≤ 3/7); ``"base"`` (alias ``"hyoid"``): the posterior floor strip under the
+genioglossus (ξ ≤ 0.6, abs(η) ≤ 3/7), attached to the hyoid; ``"floor"``: the rest of the floor
 (free, so the inferior longitudinal muscles can shorten); ``"dorsum"``:
 upper surface (ζ = 1, free); ``"tip"`` (ξ = 1), ``"posterior"`` (ξ = 0) and ``"lateral"``
 (η = ±1), all free. Units: mm.

@@ -26,7 +26,7 @@ The polar parametrisation is singular at the apex, where a structured (θ, σ) g
 collapse its first ring of cells into wedges. The apical cap :math:`\sigma \le \sigma_{cap}`
 is therefore meshed as an O-grid in the disc coordinates :math:`(\xi, \eta) =
 (\sigma/\sigma_{cap}) (\cos\theta, \sin\theta)`: a square core of
-``n_circumferential/4``² cells, rounded towards a circle, surrounded by rings that blend the
+(``n_circumferential/4``)² cells, rounded towards a circle, surrounded by rings that blend the
 square into the circle :math:`\sigma = \sigma_{cap}`, whose nodes are the first row of the
 structured (θ, σ) grid. The map from the disc to the surface is smooth through the pole,
 so every cell is a proper hexahedron (positive Jacobian at every Gauss point, no hole). The

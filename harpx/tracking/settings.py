@@ -117,7 +117,7 @@ class SolverTuning:
 
 @dataclass(frozen=True)
 class TrackingSettings:
-    """How a body is pulled through the phase images (paper §3.2).
+    r"""How a body is pulled through the phase images (paper §3.2).
 
     Parameters
     ----------
@@ -125,24 +125,18 @@ class TrackingSettings:
         Constraint enforcement: a penalty λ ramped within each frame and raised until ε meets
         its target, or per-point multipliers updated at a fixed penalty.
     epsilon : float, optional
-        Target tracking residual ε, the weighted mean of |W(φ(x, t) − φ0(X))| over the
-        constrained volume, rad. Default (None): ``epsilon_factor`` times the noise floor the
-        images allow in each frame (``epsilon_floor`` in the result,
-        :mod:`harpx.tracking.noise`), but never below ``epsilon_min``, so that the penalty is
-        not raised to fit noise. Passing a number keeps full control.
+        Target tracking residual ε, the weighted mean of
+        :math:`|W(\varphi(x, t) - \varphi_0(X))|` over the constrained volume, rad.
+        Default (None): ``epsilon_factor`` times the noise floor the images allow in each
+        frame (``epsilon_floor`` in the result, :mod:`harpx.tracking.noise`), but never
+        below ``epsilon_min``, so that the penalty is not raised to fit noise. A number
+        keeps full control.
     epsilon_factor : float, default 1.5
         Default target relative to the estimated phase-noise floor (dimensionless, ≥ 1).
-        The residual at the true motion exceeds the noise alone (the filter's blur that the
-        correction leaves, partial volume): measured with the blur correction, 1.5 against
-        1.0 gave the paper phantom 0.125 / 0.313 mm (mean / p95) against 0.142 / 0.343, the
-        small tongue 0.101 / 0.257 against 0.102 / 0.268, the small left ventricle 0.280
-        against 0.283 and the paper short-axis scene 0.128 / 0.379 against 0.129 / 0.383.
-        2.0 lowers the paper phantom's error further (0.113 / 0.302 / 0.97 mm with the
-        correction; 0.124 / 0.329 / 0.81 without it, against 0.137 / 0.338 / 0.84) and leaves
-        the paper left ventricle, the paper short-axis scene and the small tongue, LV and
-        phantom as they are, but raises the small short-axis scene's through-plane drift
-        (0.87 → 1.03 mm): a looser fit under-reports the wall's thickening, which is all the
-        model has to infer the motion no tag sees. 1.5 stays the default.
+        The residual at the true motion exceeds the noise alone (the band-pass blur the
+        correction leaves, partial volume), so a target a little above the floor avoids
+        fitting noise; a looser fit under-reports wall thickening, the only cue the model
+        has for motion no tag sees. Why 1.5: ``benchmarks/results/tracking_defaults.md``.
     plateau_factor : float, default 2.0
         With the default target only: a frame whose ε ends above the target — it levels off
         (doubling λ lowers it by less than 3 %: the images' own residual, e.g. the band-pass
@@ -153,9 +147,7 @@ class TrackingSettings:
         is never relaxed.
     epsilon_min : float, default 0.02
         Lowest default target, rad (0.3 % of a tag period): on clean data (an estimated
-        floor near 0) the target is this. It sits below the floors of the scenes' images
-        (0.025–0.08 rad), so there the floor decides; the earlier 0.05 held the paper
-        left ventricle's fit above its floor (0.026–0.039 rad) in every frame.
+        floor near 0) the target is this; on noisy images the floor decides.
     penalty : float, default 1.0
         Starting λ_max relative to material stiffness and tag wavenumber (dimensionless;
         1 makes the data stiffness λ|k|² equal to μ/h² at the element scale h). The tracker
@@ -173,47 +165,36 @@ class TrackingSettings:
         Start each frame from the previous displacement, or from the linear extrapolation
         u(n−1) + α (u(n−1) − u(n−2)) whose phase residual is smallest among α ∈ {0, ½, 1}.
     robust_scale : float or None, default 0.5
-        Residual scale r0 (rad) of the Cauchy loss on each constraint point's phase
-        mismatch (:class:`harpx.tracking.constraint.PhaseConstraint`): a point pulls with
-        the weight 1/(1 + (r/r0)²) of its quadratic force, so the few points whose phase lies
-        in a neighbouring tag's basin (|r| near π: 2.5 % weight) cannot drag the body across
-        a wrap while the penalty rises, and the bulk (|r| ≲ 0.1 rad: ≥ 96 %) is fitted as by
-        least squares. None: the paper's quadratic penalty. Penalty method only: the
-        augmented-Lagrangian multiplier update Λ ← Λ + λ r assumes the quadratic form
-        (with the weight it diverged on the small phantom, ε 1.3 rad), so that method
-        keeps it.
+        Residual scale :math:`r_0` (rad) of the Cauchy loss on each constraint point's
+        phase mismatch :math:`r` (:class:`harpx.tracking.constraint.PhaseConstraint`): a
+        point pulls with the weight :math:`1/(1 + (r/r_0)^2)` of its quadratic force, so
+        points whose phase lies in a neighbouring tag's basin (:math:`|r|` near π) cannot
+        drag the body across a wrap while the penalty rises, and the bulk
+        (:math:`|r| \ll r_0`) is fitted as by least squares. None: the paper's quadratic
+        penalty. Penalty method only: the augmented-Lagrangian multiplier update
+        :math:`\Lambda \leftarrow \Lambda + \lambda r` assumes the quadratic form, so that
+        method keeps it.
     regularization : {"total", "increment"}, default "total"
         What the tracking model resists. ``"total"`` (the paper's formulation): the stored
         energy of the whole deformation from frame 0. ``"increment"``: each frame starts
         stress-free from the previous frame's tracked state (the previous mechanical force
         is balanced), so the model regularises only the frame-to-frame increment while the
-        phase constraint still matches every frame to φ0(X). Measured with the default
-        target, the total form is as accurate or better on every scene: paper LV
-        stress-free 0.224 mm mean against 0.239 (increment), small phantom 0.214 against
-        0.229; small LV 0.300 against 0.295; and the tongue's activation estimate needs it
-        (its fibre stretch drifts under the increment form).
+        phase constraint still matches every frame to φ0(X). The activation estimate of
+        :mod:`harpx.inverse` needs ``"total"`` (fibre stretch drifts under the increment).
     blur_passes : int, optional
         Passes of the band-pass blur correction (:mod:`harpx.tracking.blur`, ≥ 0): after
         tracking every frame, the phase the band-pass filter adds under the tracked motion
-        is predicted, removed from the images, and every frame is tracked again. 0 is the
-        paper's formulation (the blurred phase as it is). Default (None): one pass with
-        the default target, none when ``epsilon`` is given — the prediction is only as good
-        as the fit it comes from (small left ventricle at ε = 0.2 rad: 0.575 → 0.622 mm
-        with a pass), and a user-set ε keeps the paper's single pass unless asked. Applied
-        only to phase images that say they come from the disk band-pass (``bandpass="disk"``, as
-        :func:`~harpx.imaging.harp.extract_phase` writes); the result records the passes
-        made (``blur_passes_applied``, ``iterations_per_pass``). A pass starts every frame from
-        the first pass's result and takes about half its iterations (the paper phantom: 73
-        + 36 Gauss–Newton iterations, 1.8× the run time without it: 51 against 29 s); at paper
-        size it lowered the mean error on the left ventricle (0.350 → 0.253 mm), the
-        short-axis scene (in-plane 0.168 → 0.128 mm) and the brain phantom (0.137 → 0.125 mm,
-        its largest error 0.84 → 1.09 mm at one edge voxel) and left the tongue as it was
-        (0.101 → 0.102 mm); a second pass raised the in-plane error again.
+        is predicted, removed from the images, and every frame is tracked again, each
+        started from the previous pass's result. 0 is the paper's formulation (the blurred
+        phase as it is). Default (None): one pass with the default target, none when
+        ``epsilon`` is given (the prediction is only as good as the fit it comes from).
+        Applied only to phase images that say they come from the disk band-pass
+        (``bandpass="disk"``, as :func:`~harpx.imaging.harp.extract_phase` writes); the
+        result records the passes made (``blur_passes_applied``, ``iterations_per_pass``).
     tolerance : float, default 0.01
         Gauss–Newton convergence, mm: the largest nodal increment is below it, or the
-        increments contract so fast (by more than half per iteration, full steps) that those
-        still to come sum to less than it (a geometric bound): the paper phantom then needs
-        109 iterations instead of 141 (mean and p95 error within 2e-5 mm).
+        increments contract so fast (``tuning.fast``, full steps) that those still to come
+        sum to less than it (a geometric bound).
     max_iterations : int, default 20
         Gauss–Newton iterations per full penalty stage (≥ 1); a solve that needs more is
         reported (``converged`` False and a warning).
