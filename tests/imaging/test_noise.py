@@ -82,10 +82,13 @@ def test_harmonic_noise_stays_lazy():
 
 def test_tracker_noise_floor_is_the_residual_of_noise_at_the_true_motion():
     # a still ring imaged twice with independent noise: at the true motion (none) the
-    # tracking residual is noise alone, and the floor estimated from harmonic_noise must
-    # match it: from 0.9 to 1.5 times (measured 1.3 at SNR 10: σ is estimated from one
-    # frame, and near the ring's edges |H| is low, where the first-order phase noise σ/|H|
-    # overstates the saturating true one, so the floor errs on the high side)
+    # tracking residual is noise alone, the independent truth both floor estimates are held
+    # to. From harmonic_noise: measured floor / residual = 1.32 (CSPAMM) and 1.06 (SPAMM) at
+    # SNR 10 (σ is estimated from one frame; near the ring's edges |H| is low, where the
+    # first-order phase noise σ/|H| overstates the saturating true one, more so for CSPAMM's
+    # weaker harmonic at the edges). Within ±12 %: the one-frame σ estimate from ~2k
+    # signal-free samples has a few % sd, so a change of the formula (e.g. dropping the
+    # factor ½ of the across-H noise: ×√2) fails it.
     from harpx.mechanics.body import Body
     from harpx.mechanics.materials import NeoHookean
     from harpx.mechanics.mesh import tube
@@ -94,6 +97,7 @@ def test_tracker_noise_floor_is_the_residual_of_noise_at_the_true_motion():
     mesh = tube(9.0, 15.0, 12.0, n_radial=2, n_circumferential=16, n_axial=2,
                 center=(0.0, 0.0, -6.0))  # fmt: skip
     body = Body(mesh, NeoHookean(c1=1.0, kappa=50.0))
+    measured = {"CSPAMM": (1.32, 1.20), "SPAMM": (1.06, 1.38)}  # (noise, affine) / residual
     for sequence in ("CSPAMM", "SPAMM"):
         noisy, clean = _pair(sequence, snr=10.0)
         phase = extract_phase(noisy)
@@ -101,15 +105,15 @@ def test_tracker_noise_floor_is_the_residual_of_noise_at_the_true_motion():
         constraint.set_frame(1)
         still_u = np.zeros(body.ndof)
         floor, actual = constraint.epsilon_floor(still_u), constraint.epsilon_at(still_u)
-        assert 0.9 * actual < floor < 1.5 * actual, (sequence, floor, actual)
-        # without the noise estimate (an older archive) the affine-fit estimate is used: in
-        # frame 0 the reference frame's residual per tag, weighted by each tag's data volume
+        from_noise, from_affine = measured[sequence]
+        assert floor / actual == pytest.approx(from_noise, rel=0.12), sequence
+        # without the noise estimate (an older archive) the floor comes from the affine fit
+        # of the reference frame's phase: it counts the filter's edge error as noise too, so
+        # it lies higher, 1.20 / 1.38 times the residual measured (±12 % as above)
         older = PhaseConstraint(body, phase.drop_vars("harmonic_noise"))
         assert older.harmonic_noise is None
-        older.set_frame(0)
-        share = (older.volume[:, None] * older.reference_valid).sum(axis=0)
-        expected = float((share * older.reference_noise).sum() / share.sum())
-        assert older.epsilon_floor(still_u) == pytest.approx(expected, rel=1e-12)
+        older.set_frame(1)
+        assert older.epsilon_floor(still_u) / actual == pytest.approx(from_affine, rel=0.12)
         # noise-free images: no noise floor
         quiet = PhaseConstraint(body, extract_phase(clean))
         quiet.set_frame(1)

@@ -141,8 +141,12 @@ def test_in_plane_tags_only_track_no_worse_than_harp_and_say_what_they_cannot_se
     phase = extract_phase(scene.tagged)
     with pytest.warns(HarpxWarning, match="no tag sees motion along z"):
         fe = track(phase, scene.body(), dirichlet=list(scene.dirichlet))
+    with pytest.warns(HarpxWarning, match="no tag sees motion along z"):
+        plain = track(phase, scene.body(), dirichlet=list(scene.dirichlet), blur_passes=0)
     assert (fe.observed_directions.values == 2).all()
-    assert fe.target_reached.all(), fe.epsilon.values
+    # every frame reaches the default target itself, not only the plateau allowance
+    assert (fe.epsilon.values[1:] <= fe.epsilon_target.values[1:]).all(), fe.epsilon.values
+    assert not fe.plateau.values.any() and fe.target_reached.all()
     # the blur-correction pass starts every frame from the first pass's result at the top of
     # the penalty ramp: measured 52 then 21 Gauss–Newton iterations
     first, second = fe.attrs["iterations_per_pass"]
@@ -150,13 +154,20 @@ def test_in_plane_tags_only_track_no_worse_than_harp_and_say_what_they_cannot_se
     assert second == int(fe.iterations.sum())
     harp = track_harp(phase, points=scene.tagged)
     ours, theirs = scene.error_split(fe), scene.error_split(harp)
-    # in-plane, on the same images with the tracker's defaults: measured FE 0.159 / 0.435 mm
-    # against HARP 0.198 / 0.542 (mean / p95); without the blur correction 0.193 / 0.530,
-    # and with the earlier affine noise floor (0.067 rad) 0.237 / 0.655
-    assert float(ours.in_plane_mean_all) <= float(theirs.in_plane_mean_all)
-    assert float(ours.in_plane_p95_all) <= float(theirs.in_plane_p95_all)
+    without = scene.error_split(plain)
+    # in-plane, on the same images with the tracker's defaults: measured FE 0.155 / 0.405 mm
+    # (mean / p95) against 0.196 / 0.529 without the blur correction and HARP 0.198 / 0.542.
+    # FE without the correction is level with HARP, so the correction is what wins: it must
+    # keep ≥ 15 % of its 21 % gain, and the error stay within 15 % of the measured value
+    assert float(ours.in_plane_mean_all) < 0.85 * float(without.in_plane_mean_all)
+    assert float(ours.in_plane_p95_all) < 0.85 * float(without.in_plane_p95_all)
+    assert float(ours.in_plane_mean_all) < 1.15 * 0.155
+    assert float(ours.in_plane_p95_all) < 1.15 * 0.405
+    assert float(ours.in_plane_mean_all) < float(theirs.in_plane_mean_all)
     # through-plane the motion is the model's, inferred from the wall's thickening: HARP
     # reports none, so its drift is the truth's mean shortening (up to 1.47 mm); measured FE
-    # at most 0.87 mm (1.71 without the blur correction, which under-reports thickening)
+    # at most 0.90 mm, and 1.72 without the blur correction (which under-reports thickening)
     drift, none = np.abs(ours.drift.values).max(), np.abs(theirs.drift.values).max()
-    assert drift < 0.7 * none, (ours.drift.values, theirs.drift.values)
+    assert drift < 1.15 * 0.90, (ours.drift.values, theirs.drift.values)
+    assert drift < 0.65 * np.abs(without.drift.values).max()
+    assert drift < 0.7 * none

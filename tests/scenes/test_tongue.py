@@ -71,23 +71,24 @@ def test_images_follow_the_schema_and_the_tongue_moves_a_few_mm(scene):
 
 def test_tracking_reaches_epsilon_with_sub_voxel_error(scene, tracked):
     # the activation chain's target: twice the images' phase-noise floor (never below
-    # 0.02 rad); measured floors 0.019-0.022 rad (SNR 20 CSPAMM), ε 0.036-0.039 rad. A
-    # frame may end at a plateau of ε within plateau_factor (2) × the target.
+    # 0.02 rad); measured floors 0.019-0.022 rad (SNR 20 CSPAMM), ε 0.036-0.039 rad, every
+    # frame below its target itself (no plateau allowance used)
     assert tracked.target_reached.all(), tracked.epsilon.values
     eps, target = tracked.epsilon.values[1:], tracked.epsilon_target.values[1:]
     floor = tracked.epsilon_floor.values[1:]
     np.testing.assert_allclose(target, np.maximum(2.0 * floor, 0.02))
     assert np.all(floor > 0.01) and np.all(floor < 0.03), floor
-    assert np.all(np.where(tracked.plateau.values[1:], eps <= 2.0 * target, eps <= target)), eps
+    assert np.all(eps <= target) and not tracked.plateau.values.any(), eps
     # the tracked grid is the acquired grid, up to round-off in its coordinates: use the
     # tagged coordinates so that xarray aligns every voxel
     grid = {d: scene.tagged[d] for d in ("z", "y", "x")}
     assert all(np.allclose(tracked[d], grid[d], atol=1e-9) for d in grid)
     err = tracking_error(tracked.assign_coords(grid), scene.tagged)
-    # SNR 20, 1.9 mm pixels, 7 mm between slices: measured 0.07-0.15 mm mean per frame
-    assert float(err.mean_all) < 0.3, err["mean"].values
-    assert float(err.p95_all) < 0.8, err.p95.values
-    assert float(err.coverage) > 0.9
+    # SNR 20, 1.9 mm pixels, 7 mm between slices: measured 0.109 / 0.274 mm (mean / p95 over
+    # frames; 0.085-0.129 mm mean per frame); bounds at measured × 1.2
+    assert float(err.mean_all) < 1.2 * 0.109, err["mean"].values
+    assert float(err.p95_all) < 1.2 * 0.274, err.p95.values
+    assert float(err.coverage) > 0.99
 
 
 def test_activation_estimate_per_muscle_is_within_15_percent(scene, estimates):

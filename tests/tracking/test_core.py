@@ -347,23 +347,31 @@ class _ScriptedSolver:
         return self.sizes.pop(0) * self.unit.ravel()
 
 
-@pytest.mark.parametrize(
-    ("sizes", "expected"),
-    [
-        # small steps (< 0.1 of the 2 mm trust radius) that stop shrinking are damped from the
-        # fourth iteration on, and again whenever they stop shrinking at the damped size
-        ([0.15] + [0.1] * 6, [0.15, 0.1, 0.1, 0.05, 0.05, 0.025, 0.025]),
-        # large steps are what carry points into the right tag basin: undamped until the
-        # eleventh iteration
-        ([1.0] * 12, [1.0] * 10 + [0.5, 0.5]),
-    ],
-)
-def test_cycling_steps_are_damped_early_only_when_small(ideal, sizes, expected):
+@pytest.mark.parametrize("tuning", [SolverTuning(), SolverTuning(damp_after=5, damp_small_after=2)])
+def test_cycling_steps_are_damped_small_ones_first(ideal, tuning):
+    # behaviour, for any tuning: steps that stop shrinking (cycling between tag basins) are
+    # damped so that the accumulated motion stays bounded; small ones (below small_step of
+    # the trust radius: no longer searching for a basin) soon, large ones (which carry
+    # points into the right basin) only after damp_after iterations
     import harpx.tracking.equilibrium as eq
 
     body, constraint = ideal
-    assert 0.5 * np.pi / constraint.max_wavenumber == pytest.approx(2.0)  # the trust radius
-    res = eq.equilibrate(body, constraint, np.zeros(body.ndof), max_iterations=len(sizes),
-                         tolerance=1e-9, solver=_ScriptedSolver(body, sizes))  # fmt: skip
-    np.testing.assert_allclose(res.step_norms, expected, rtol=1e-12)
-    assert not res.converged
+    radius = 0.5 * np.pi / constraint.max_wavenumber  # the trust radius, 2 mm here
+    assert radius == pytest.approx(2.0)
+
+    def steps(size: float, count: int) -> np.ndarray:
+        res = eq.equilibrate(body, constraint, np.zeros(body.ndof), max_iterations=count,
+                             tolerance=1e-9, solver=_ScriptedSolver(body, [size] * count),
+                             tuning=tuning)  # fmt: skip
+        assert not res.converged
+        return np.asarray(res.step_norms)
+
+    small = steps(0.5 * tuning.small_step * radius, 16)
+    early = tuning.damp_small_after
+    np.testing.assert_allclose(small[:early], small[0], rtol=1e-12)  # undamped at first
+    assert small[early] < small[0]  # then damped
+    # damped again whenever the damped steps cycle: the total stays within a few steps
+    assert small[-1] <= small[0] / 8 and small.sum() < (early + 3) * small[0]
+    large = steps(0.5 * radius, tuning.damp_after + 3)
+    np.testing.assert_allclose(large[: tuning.damp_after], large[0], rtol=1e-12)
+    assert large[-1] < large[0]
