@@ -41,6 +41,8 @@ MOVED_NAMES: dict[tuple[str, str], str] = {
     ("harpx.mechanics.body", "check_fits_image"): "harpx.tracking.image_fit",
     ("harpx.mechanics.body", "ElementKind"): "harpx.mechanics.cells",
     ("harpx.mechanics.body", "curved_tet_mesh"): "harpx.mechanics.cells",
+    ("harpx.mechanics.materials", "ActiveContraction"): "harpx.mechanics.fiber_laws",
+    ("harpx.mechanics.materials", "FiberGrowth"): "harpx.mechanics.fiber_laws",
     ("harpx.inverse", "simulate_activation"): "harpx.physiology.active",
     ("harpx.inverse", "simulate_history"): "harpx.physiology.active",
 }

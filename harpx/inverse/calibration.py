@@ -21,7 +21,7 @@ from harpx.inverse._common import (
 from harpx.inverse.correction import correct_activation
 from harpx.inverse.estimate import estimate_activation
 from harpx.mechanics.body import Body
-from harpx.mechanics.materials import ActiveContraction
+from harpx.mechanics.fiber_laws import ActiveContraction
 from harpx.physiology.active import default_law, fibred_body, simulate_history
 
 __all__ = ["calibrate_activation"]

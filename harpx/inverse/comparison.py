@@ -23,7 +23,7 @@ from harpx.inverse._common import (
     weighted_stats,
 )
 from harpx.mechanics.body import Body
-from harpx.mechanics.materials import ActiveContraction
+from harpx.mechanics.fiber_laws import ActiveContraction
 from harpx.physiology.active import (
     default_law,
     fibred_body,

@@ -42,7 +42,7 @@ from harpx.inverse._common import (
 )
 from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.body import Body
-from harpx.mechanics.materials import ActiveContraction
+from harpx.mechanics.fiber_laws import ActiveContraction
 from harpx.physiology.active import default_law, fibred_body, with_active_law
 
 __all__ = ["correct_activation"]

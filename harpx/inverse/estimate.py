@@ -10,7 +10,7 @@ per muscle, the median (or volume-weighted mean) of the element values with thei
 Per-element equation (uniaxial fibre equilibrium)
 -------------------------------------------------
 The tissue is hyperelastic with an active fibre stress of Guccione--McCulloch type in
-second Piola--Kirchhoff form (:class:`harpx.mechanics.materials.ActiveContraction`),
+second Piola--Kirchhoff form (:class:`harpx.mechanics.fiber_laws.ActiveContraction`),
 
 .. math::
 
@@ -74,8 +74,8 @@ from harpx.inverse._common import (
     weighted_stats,
 )
 from harpx.mechanics.body import Body
+from harpx.mechanics.fiber_laws import ActiveContraction
 from harpx.mechanics.kinematics import split_growth
-from harpx.mechanics.materials import ActiveContraction
 from harpx.physiology.active import default_law, fibred_body
 
 __all__ = ["estimate_activation", "uniaxial_active_tension"]

@@ -17,9 +17,10 @@ from __future__ import annotations
 from typing import Any
 
 from harpx.mechanics.body import Body
+from harpx.mechanics.fiber_laws import ActiveContraction, FiberGrowth
 from harpx.mechanics.loads import BodyForce, Fixed, Prescribed, Pressure
 from harpx.mechanics.locate import displacement_at
-from harpx.mechanics.materials import ActiveContraction, FiberGrowth, Guccione, NeoHookean
+from harpx.mechanics.materials import Guccione, NeoHookean
 from harpx.mechanics.mesh import MeshSpec, box, cylinder, tetrahedralize, tube
 from harpx.mechanics.newton import SolveResult, equilibrate, solve
 

@@ -397,7 +397,7 @@ class Body:
         ----------
         growth : FiberGrowth, GrowthField, array_like of shape (ncell,), or None
             A law or field with ``tensor(fibers_qp) -> Fg`` (e.g.
-            :class:`~harpx.mechanics.materials.FiberGrowth`,
+            :class:`~harpx.mechanics.fiber_laws.FiberGrowth`,
             :class:`~harpx.physiology.growth.GrowthField`), or one fibre stretch θ per cell
             (``Fg = I + (θ - 1) f0 ⊗ f0``, dimensionless, > 0).
 

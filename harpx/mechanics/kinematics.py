@@ -139,6 +139,29 @@ def _det_cof(F: FloatArray) -> tuple[FloatArray, FloatArray]:
     return np.einsum("...j,...j->...", F[..., 0, :], cof[..., 0, :]), cof
 
 
+def positive_det_cof(F: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``(det F, cof F)`` of deformation gradients that must not invert.
+
+    Raises
+    ------
+    ValueError
+        If ``det F <= 0`` or NaN anywhere (names how many points and the smallest value).
+    """
+    J, cof = _det_cof(F)
+    if not np.all(J > 0.0):
+        bad = int(np.count_nonzero(~(J > 0.0)))
+        raise ValueError(
+            f"'F' has det F <= 0 (or NaN) at {bad} point(s) (min {np.nanmin(J)!r}); "
+            "the material response is only defined for J > 0 -- cut the load step"
+        )
+    return J, cof
+
+
+def _outer(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``a[..., i, J] b[..., k, L]`` as ``(..., 3, 3, 3, 3)``."""
+    return a[..., :, :, None, None] * b[..., None, None, :, :]
+
+
 def right_cauchy_green(F: ArrayLike) -> FloatArray:
     """Right Cauchy--Green tensor ``C = F^T F``.
 

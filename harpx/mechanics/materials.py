@@ -1,4 +1,4 @@
-r"""Hyperelastic, active and growth laws for myocardium-like soft tissue.
+r"""Passive hyperelastic laws for myocardium-like soft tissue: neo-Hookean and Guccione.
 
 All laws are evaluated on batches of deformation gradients ``F`` with shape ``(..., 3, 3)``
 (typically ``(n_cells, n_qp, 3, 3)``) and return the first Piola--Kirchhoff stress
@@ -105,23 +105,7 @@ Here :math:`Y_{ab} : \bar F = g_a \cdot g_b = \tilde C_{ab}` (times :math:`\sqrt
 evaluated as one batched product :math:`K^T (M K)` of ``(9, 9)`` matrices per point, which
 keeps the tangent at ~0.3 s for 115k points.
 
-*Active fiber stress.* :math:`S_a = T_a(\lambda) f_0 \otimes f_0` with
-:math:`\lambda = |F f_0|` and :math:`a = F f_0`: :math:`P = T_a\, a \otimes f_0` and, using
-:math:`\partial\lambda/\partial F = a \otimes f_0 / \lambda`,
-
-.. math::
-
-    \mathbb A_{iJkL} = T_a\, \delta_{ik} f_J f_L + \frac{T_a'(\lambda)}{\lambda}
-      (a_i f_J)(a_k f_L) .
-
-For the calcium law :math:`T_a = T_{max}\, e/(e + r^2)` with
-:math:`e = \exp(B(l - l_0)) - 1`, :math:`l = l_r \lambda`, :math:`r = Ca_{0,max}/Ca_0`,
-so :math:`dT_a/d\lambda = T_{max}\, r^2/(e + r^2)^2 \cdot B (e + 1)\, l_r` for
-:math:`l > l_0` and 0 otherwise. The active stress derives from the potential
-:math:`W_a = \int_1^\lambda T_a(\mu)\,\mu\, d\mu`, so :math:`\mathbb A` is symmetric.
-
-*Growth* is composed by the assembly with
-:func:`harpx.mechanics.kinematics.push_growth_response`.
+The active fibre stress and fibre growth laws live in :mod:`harpx.mechanics.fiber_laws`.
 
 References
 ----------
@@ -142,21 +126,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import ClassVar, Literal
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray
 from harpx.mechanics.kernel import TangentFactors
-from harpx.mechanics.kinematics import (
-    cofactor,
-    fiber_basis,
-    growth_tensor,
-    unit_fibers,
-)
+from harpx.mechanics.kinematics import _as_tensor, fiber_basis, positive_det_cof
 
-__all__ = ["ActiveContraction", "FiberGrowth", "Guccione", "NeoHookean"]
+__all__ = ["Guccione", "NeoHookean"]
 
 
 # --------------------------------------------------------------------------------------
@@ -174,35 +153,8 @@ def _check(name: str, value: float, *, allow_zero: bool = False) -> None:
         raise ValueError(f"parameter {name!r} must be {need}, got {value!r}")
 
 
-def _as_F(F: ArrayLike) -> FloatArray:
-    F = np.asarray(F, dtype=np.float64)
-    if F.ndim < 2 or F.shape[-2:] != (3, 3):
-        raise ValueError(
-            f"'F' must have shape (..., 3, 3), got {F.shape!r}; "
-            "pass one deformation gradient per point in the trailing dimensions"
-        )
-    return F
-
-
-def _det_cof(F: FloatArray) -> tuple[FloatArray, FloatArray]:
-    cof = cofactor(F)
-    J = np.einsum("...j,...j->...", F[..., 0, :], cof[..., 0, :])
-    if not np.all(J > 0.0):
-        bad = int(np.count_nonzero(~(J > 0.0)))
-        raise ValueError(
-            f"'F' has det F <= 0 (or NaN) at {bad} point(s) (min {np.nanmin(J)!r}); "
-            "the material response is only defined for J > 0 -- cut the load step"
-        )
-    return J, cof
-
-
 _SQRT2 = math.sqrt(2.0)
 _SQRT_HALF = math.sqrt(0.5)
-
-
-def _outer(a: FloatArray, b: FloatArray) -> FloatArray:
-    """``a[..., i, J] b[..., k, L]`` as ``(..., 3, 3, 3, 3)``."""
-    return a[..., :, :, None, None] * b[..., None, None, :, :]
 
 
 def _cross_outer(H: FloatArray) -> FloatArray:
@@ -261,8 +213,8 @@ class _Uncoupled:
         ndarray, shape (...)
             Energy per unit reference volume (kPa, i.e. kJ/m^3).
         """
-        F = _as_F(F)
-        J, _ = _det_cof(F)
+        F = _as_tensor(F)
+        J, _ = positive_det_cof(F)
         return self.isochoric_energy(F, fiber) + self.volumetric(J)[0]
 
     def cauchy_stress(self, F: ArrayLike, fiber: ArrayLike | None = None) -> FloatArray:
@@ -280,8 +232,8 @@ class _Uncoupled:
         ndarray, shape (..., 3, 3)
             Cauchy stress (kPa), symmetric.
         """
-        F = _as_F(F)
-        J, _ = _det_cof(F)
+        F = _as_tensor(F)
+        J, _ = positive_det_cof(F)
         P, _ = self.isochoric_response(F, fiber)
         sigma = np.matmul(P, np.swapaxes(F, -1, -2)) / J[..., None, None]
         return sigma + self.volumetric(J)[1][..., None, None] * np.eye(3)
@@ -344,8 +296,8 @@ class NeoHookean(_Uncoupled):
 
     def isochoric_energy(self, F: ArrayLike, fiber: ArrayLike | None = None) -> FloatArray:
         """Isochoric energy ``C1 (J^{-2/3} I1 - 3)`` in kPa, shape ``(...)``; no fibers used."""
-        F = _as_F(F)
-        J, _ = _det_cof(F)
+        F = _as_tensor(F)
+        J, _ = positive_det_cof(F)
         I1 = np.einsum("...iJ,...iJ->...", F, F)
         return self.c1 * (J ** (-2.0 / 3.0) * I1 - 3.0)
 
@@ -400,8 +352,8 @@ class NeoHookean(_Uncoupled):
             :math:`c = a I_1/3` (``h_index = 1``); ``factors.dense()`` is the tangent of
             :meth:`isochoric_response`.
         """
-        F = _as_F(F)
-        J, cof = _det_cof(F) if det_cof is None else det_cof
+        F = _as_tensor(F)
+        J, cof = positive_det_cof(F) if det_cof is None else det_cof
         H = cof / J[..., None, None]
         I1 = np.einsum("...iJ,...iJ->...", F, F)
         a = 2.0 * self.c1 * J ** (-2.0 / 3.0)
@@ -501,7 +453,7 @@ class Guccione(_Uncoupled):
         batch = np.broadcast_shapes(F.shape[:-2], R.shape[:-2])
         F = np.broadcast_to(F, batch + (3, 3))
         R = np.broadcast_to(R, batch + (3, 3))
-        J, cof = _det_cof(F)
+        J, cof = positive_det_cof(F)
         j = J ** (-1.0 / 3.0)
         G = np.matmul(j[..., None, None] * F, R)  # columns g_a = Fbar r_a
         Ct = np.matmul(np.swapaxes(G, -1, -2), G)  # local components of Cbar
@@ -511,7 +463,7 @@ class Guccione(_Uncoupled):
 
     def isochoric_energy(self, F: ArrayLike, fiber: ArrayLike | None = None) -> FloatArray:
         """Isochoric energy ``C/2 (exp Q - 1)`` in kPa, shape ``(...)``."""
-        F = _as_F(F)
+        F = _as_tensor(F)
         *_, Q = self._local(F, fiber)
         return 0.5 * self.c * np.expm1(Q)
 
@@ -539,7 +491,7 @@ class Guccione(_Uncoupled):
         ValueError
             If ``fiber`` is None.
         """
-        F = _as_F(F)
+        F = _as_tensor(F)
         P, K, MK, pbar, Hbar, Sbar, j, _ = self._tangent_parts(F, fiber)
         batch = j.shape
         A = np.matmul(
@@ -581,7 +533,7 @@ class Guccione(_Uncoupled):
             :math:`S = J^{-2/3} \bar S` and :math:`s = 0`; ``factors.dense()`` is the
             tangent of :meth:`isochoric_response`.
         """
-        F = _as_F(F)
+        F = _as_tensor(F)
         P, K, MK, pbar, Hbar, Sbar, j, H = self._tangent_parts(F, fiber)
         jj = (j * j)[..., None, None, None]
         Y = K
@@ -630,249 +582,7 @@ class Guccione(_Uncoupled):
         return P, K, MK, pbar, Hbar, Sbar, j, cof / J[..., None, None]
 
 
-# --------------------------------------------------------------------------------------
-# active stress
-# --------------------------------------------------------------------------------------
+def __getattr__(name: str) -> Any:
+    from harpx._moved import moved_attribute
 
-
-@dataclass(frozen=True)
-class ActiveContraction:
-    r"""Active fiber stress of Guccione--McCulloch type (second Piola--Kirchhoff form).
-
-    Parameters
-    ----------
-    t_max : float, default 135.7
-        Maximum isometric tension :math:`T_{max}` in kPa (>= 0).
-    law : {"prescribed", "calcium"}, default "calcium"
-        ``"prescribed"``: :math:`T_a = T_{max}` (FEBio ``prescribed fiber active
-        contraction``); ``"calcium"``: the length-dependent calcium law below.
-    ca0 : float, default 4.35
-        Peak intracellular calcium :math:`Ca_0` in uM.
-    ca0_max : float, default 4.35
-        Maximum peak calcium :math:`(Ca_0)_{max}` in uM.
-    beta : float, default 4.75
-        Shape coefficient :math:`B` in 1/um.
-    l0 : float, default 1.58
-        Sarcomere length without active tension :math:`l_0` in um.
-    lr : float, default 2.04
-        Stress-free sarcomere length :math:`l_r` in um.
-
-    Raises
-    ------
-    ValueError
-        If a parameter is out of range (the message names it).
-
-    Notes
-    -----
-    .. math::
-
-        S_a = T_a\, f_0 \otimes f_0, \qquad
-        T_a = T_{max} \frac{Ca_0^2}{Ca_0^2 + ECa_{50}^2}, \qquad
-        ECa_{50} = \frac{(Ca_0)_{max}}{\sqrt{\exp(B (l - l_0)) - 1}},
-
-    with :math:`l = l_r \lambda`, :math:`\lambda = \sqrt{2 E_{ff} + 1} = |F f_0|`, and
-    :math:`T_a = 0` for :math:`l \le l_0`. Defaults are FEBio's "typical" values
-    (Guccione & McCulloch 1993). Unlike FEBio's uncoupled variant, which uses the
-    deviatoric stretch :math:`J^{-1/3}|F f_0|`, the total stretch is used; they agree at
-    :math:`J = 1`. With the defaults, :math:`T_a(\lambda = 1) = 120.4368` kPa. The
-    consistent tangent is derived in the module docstring.
-
-    References
-    ----------
-    .. [1] Guccione JM, McCulloch AD. J Biomech Eng 115:72--81, 1993.
-    .. [2] Maas SA et al. FEBio theory manual, section 5.12 (active contraction).
-
-    Examples
-    --------
-    >>> from harpx.mechanics.materials import ActiveContraction
-    >>> act = ActiveContraction()
-    >>> round(float(act.tension(1.0)), 4)
-    120.4368
-    """
-
-    t_max: float = 135.7
-    law: Literal["prescribed", "calcium"] = "calcium"
-    ca0: float = 4.35
-    ca0_max: float = 4.35
-    beta: float = 4.75
-    l0: float = 1.58
-    lr: float = 2.04
-    needs_fibers: ClassVar[bool] = True
-
-    def __post_init__(self) -> None:
-        _check("t_max", self.t_max, allow_zero=True)
-        if self.law not in ("prescribed", "calcium"):
-            raise ValueError(f"parameter 'law' must be 'prescribed' or 'calcium', got {self.law!r}")
-        for name in ("ca0", "ca0_max", "beta", "l0", "lr"):
-            _check(name, getattr(self, name))
-
-    def _g_dg(self, stretch: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        lam = np.asarray(stretch, dtype=np.float64)
-        if self.law == "prescribed":
-            nan = np.isnan(lam)
-            return np.where(nan, np.nan, 1.0), np.where(nan, np.nan, 0.0)
-        r2 = (self.ca0_max / self.ca0) ** 2
-        dl = self.lr * lam - self.l0
-        on = dl > 0.0
-        x = np.where(on, self.beta * dl, 0.0)
-        # huge stretches overflow e to inf; the law saturates there (g = 1, dg = 0)
-        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-            e = np.expm1(x)
-            big = np.isinf(e)
-            e = np.where(big, 1.0, e)
-            g = np.where(on, e / (e + r2), 0.0)
-            dg = np.where(on, r2 / (e + r2) ** 2 * self.beta * (e + 1.0) * self.lr, 0.0)
-        g = np.where(big, 1.0, g)
-        dg = np.where(big, 0.0, dg)
-        nan = np.isnan(lam)
-        return np.where(nan, np.nan, g), np.where(nan, np.nan, dg)
-
-    def activation_factor(self, stretch: ArrayLike) -> FloatArray:
-        """Length dependence ``g(lambda)`` with ``T_a = t_max g``.
-
-        Parameters
-        ----------
-        stretch : array_like
-            Fiber stretch :math:`\\lambda` (dimensionless).
-
-        Returns
-        -------
-        ndarray
-            ``g`` in [0, 1] (dimensionless); 1 for the prescribed law, 0 where
-            :math:`l_r \\lambda \\le l_0` for the calcium law.
-        """
-        return self._g_dg(stretch)[0]
-
-    def tension(self, stretch: ArrayLike, t_max: ArrayLike | None = None) -> FloatArray:
-        """Active fiber tension ``T_a = t_max g(lambda)``.
-
-        Parameters
-        ----------
-        stretch : array_like
-            Fiber stretch (dimensionless).
-        t_max : array_like, optional
-            Maximum tension in kPa, broadcasting against ``stretch``; default ``self.t_max``.
-
-        Returns
-        -------
-        ndarray
-            ``T_a`` in kPa (second Piola--Kirchhoff fiber component).
-        """
-        t = self.t_max if t_max is None else np.asarray(t_max, dtype=np.float64)
-        return t * self.activation_factor(stretch)
-
-    def t_max_for_tension(self, stretch: ArrayLike, tension: ArrayLike) -> FloatArray:
-        """Invert the law for ``t_max``: ``t_max = tension / g(lambda)``.
-
-        Parameters
-        ----------
-        stretch : array_like
-            Fiber stretch (dimensionless).
-        tension : array_like
-            Active tension ``T_a`` in kPa, broadcasting against ``stretch``.
-
-        Returns
-        -------
-        ndarray
-            ``t_max`` in kPa. NaN where ``g(lambda) = 0`` (the calcium law is inactive for
-            :math:`l_r \\lambda \\le l_0`, so any ``t_max`` fits) and where an input is NaN.
-            No warnings are emitted.
-        """
-        g = self.activation_factor(stretch)
-        T = np.asarray(tension, dtype=np.float64)
-        g, T = np.broadcast_arrays(g, T)
-        out = np.full(g.shape, np.nan)
-        np.divide(T, g, out=out, where=g > 0.0)
-        return out
-
-    def response(
-        self, F: ArrayLike, fiber: ArrayLike, t_max: ArrayLike | None = None
-    ) -> tuple[FloatArray, FloatArray]:
-        """First Piola--Kirchhoff active stress and its consistent tangent.
-
-        Parameters
-        ----------
-        F : array_like, shape (..., 3, 3)
-            Deformation gradients (dimensionless).
-        fiber : array_like, shape (..., 3)
-            Unit reference fiber directions, broadcast against the batch of ``F``.
-        t_max : array_like, optional
-            Maximum tension in kPa broadcasting over the batch (e.g. ``(n_cells, 1)`` per
-            cell); default ``self.t_max``.
-
-        Returns
-        -------
-        P : ndarray, shape (..., 3, 3)
-            ``P = F S_a = T_a (F f0) (x) f0`` (kPa).
-        A : ndarray, shape (..., 3, 3, 3, 3)
-            ``A[..., i, J, k, L] = dP_iJ/dF_kL`` (kPa), including ``dT_a/dlambda``.
-        """
-        F = _as_F(F)
-        f = unit_fibers(fiber)
-        a = np.einsum("...iJ,...J->...i", F, f)
-        lam = np.sqrt(np.einsum("...i,...i->...", a, a))
-        g, dg = self._g_dg(lam)
-        t = self.t_max if t_max is None else np.asarray(t_max, dtype=np.float64)
-        T = t * g
-        dT = t * dg
-        batch = np.broadcast_shapes(F.shape[:-2], f.shape[:-1], np.shape(T))
-        af = np.broadcast_to(a[..., :, None] * f[..., None, :], batch + (3, 3))
-        T = np.broadcast_to(T, batch)
-        P = T[..., None, None] * af
-        ff = f[..., :, None] * f[..., None, :]
-        A = (np.broadcast_to(dT / lam, batch)[..., None, None, None, None]) * _outer(af, af)
-        for i in range(3):
-            A[..., i, :, i, :] += T[..., None, None] * ff
-        return P, A
-
-
-# --------------------------------------------------------------------------------------
-# growth
-# --------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class FiberGrowth:
-    r"""Multiplicative growth (prestretch) along the fibers.
-
-    Parameters
-    ----------
-    stretch : float
-        Growth stretch :math:`\vartheta > 0` along the fibers (dimensionless); > 1 lengthens
-        the stress-free fibers, so a body held at ``F = I`` is compressed along them.
-
-    Raises
-    ------
-    ValueError
-        If ``stretch`` is not a finite positive number.
-
-    Notes
-    -----
-    .. math::
-
-        F = F_e F_g, \qquad F_g = I + (\vartheta - 1) f_0 \otimes f_0, \qquad
-        W(F) = \det(F_g)\, W_e(F F_g^{-1}).
-
-    The assembly composes a passive response at :math:`F_e` with
-    :func:`harpx.mechanics.kinematics.push_growth_response`.
-
-    References
-    ----------
-    .. [1] Rodriguez EK, Hoger A, McCulloch AD. J Biomech 27:455--467, 1994.
-
-    Examples
-    --------
-    >>> from harpx.mechanics.materials import FiberGrowth
-    >>> np.diag(FiberGrowth(1.1).tensor([1.0, 0.0, 0.0])).tolist()
-    [1.1, 1.0, 1.0]
-    """
-
-    stretch: float
-    needs_fibers: ClassVar[bool] = True
-
-    def __post_init__(self) -> None:
-        _check("stretch", self.stretch)
-
-    def tensor(self, fiber: ArrayLike) -> FloatArray:
-        """Growth tensor ``Fg`` (dimensionless), shape ``(..., 3, 3)`` for ``fiber (..., 3)``."""
-        return growth_tensor(fiber, self.stretch)
+    return moved_attribute(__name__, name)

@@ -1,7 +1,7 @@
 """Forward simulation of active bodies: activation ramps and activation histories.
 
 :func:`simulate_activation` solves the static equilibrium of a body with an active fibre
-law (:class:`~harpx.mechanics.materials.ActiveContraction`) at a target activation,
+law (:class:`~harpx.mechanics.fiber_laws.ActiveContraction`) at a target activation,
 ramping it over load steps with cut-back; :func:`simulate_history` runs an activation that
 rises over frames, each frame continuing the last. The helpers turn per-region activations
 into the body's per-cell levels (:func:`region_values`) and make an active copy of a
@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike
 from harpx._typing import FloatArray
 from harpx.errors import ConvergenceError
 from harpx.mechanics.body import Body
-from harpx.mechanics.materials import ActiveContraction
+from harpx.mechanics.fiber_laws import ActiveContraction
 from harpx.mechanics.newton import SolveResult, equilibrate
 
 __all__ = [

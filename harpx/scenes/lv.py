@@ -10,7 +10,7 @@ tracker never shares the truth's discretisation (no inverse crime):
   of Guccione et al. (1991, 1995): ``C = 0.88 kPa, bf = 18.5, bt = 3.58, bfs = 1.63`` and a
   bulk modulus ``κ = 350 kPa`` (``κ/C ≈ 400``: nearly incompressible, mean dilatation);
 * active fibre stress: the length-dependent calcium law of Guccione & McCulloch (1993)
-  (:class:`~harpx.mechanics.materials.ActiveContraction`) with a level that rises from 0
+  (:class:`~harpx.mechanics.fiber_laws.ActiveContraction`) with a level that rises from 0
   to ``t_max`` over the frames;
 * cavity pressure on ``"endo"`` (follower load) rising in proportion to the activation
   (isovolumic contraction and ejection lumped into one quasi-static path);
@@ -91,8 +91,9 @@ from harpx.anatomy.ventricle import VentricleGeometry, ventricle
 from harpx.imaging.stacks import resample_stacks, tagged_dataset
 from harpx.imaging.synth import AcquisitionOptions, synthesize_tagged
 from harpx.mechanics.body import Body
+from harpx.mechanics.fiber_laws import ActiveContraction
 from harpx.mechanics.loads import Fixed
-from harpx.mechanics.materials import ActiveContraction, Guccione
+from harpx.mechanics.materials import Guccione
 from harpx.mechanics.mesh import MeshSpec
 from harpx.physiology.cut import NodeFixed
 from harpx.physiology.growth import GrowthField, fiber_prestretch, prestretch_growth

@@ -41,8 +41,9 @@ from harpx.imaging.harp import extract_phase
 from harpx.imaging.stacks import resample_stacks, tagged_dataset
 from harpx.imaging.synth import AcquisitionOptions, synthesize_tagged, voxel_density
 from harpx.mechanics.body import Body, ElementName
+from harpx.mechanics.fiber_laws import ActiveContraction
 from harpx.mechanics.loads import Fixed
-from harpx.mechanics.materials import ActiveContraction, NeoHookean
+from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import MeshSpec
 from harpx.physiology.active import simulate_activation
 from harpx.schema import standard_attrs

@@ -14,8 +14,9 @@ from harpx.inverse import (
     uniaxial_active_tension,
 )
 from harpx.mechanics.body import Body
+from harpx.mechanics.fiber_laws import ActiveContraction
 from harpx.mechanics.loads import Fixed
-from harpx.mechanics.materials import ActiveContraction, NeoHookean
+from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import box
 from harpx.physiology.active import simulate_activation, simulate_history
 from harpx.plotting import plot_stretch_agreement

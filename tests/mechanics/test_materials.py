@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
+from harpx.mechanics.fiber_laws import ActiveContraction, FiberGrowth
 from harpx.mechanics.kinematics import growth_tensor, push_growth_response, split_growth
-from harpx.mechanics.materials import ActiveContraction, FiberGrowth, Guccione, NeoHookean
+from harpx.mechanics.materials import Guccione, NeoHookean
 
 # Floating-point identities: O(1) quantities built from a few products, round-off ~1e-15.
 EXACT = 1e-12
