@@ -18,7 +18,8 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from harpx.errors import SchemaError
-from harpx.imaging._kernels import harmonic_phase, refine_linear, refine_positions
+from harpx.imaging._kernels import refine_linear, refine_positions
+from harpx.imaging.bandpass import harmonic_phase
 from harpx.imaging.fft import default_threads
 from harpx.imaging.noise import harmonic_noise
 from harpx.schema import AXES, GRID_DIMS, standard_attrs, validate

@@ -31,7 +31,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from harpx.imaging._kernels import bandpass_mask
+from harpx.imaging.bandpass import bandpass_mask
 from harpx.schema import GRID_DIMS, standard_attrs
 
 __all__ = ["harmonic_noise", "harmonic_noise_block", "slice_noise"]

@@ -1,4 +1,4 @@
-"""Tests of the numpy kernels of the harmonic-phase pipeline (harpx.imaging._kernels)."""
+"""Tests of the numpy kernels of the harmonic-phase pipeline (_kernels and bandpass)."""
 
 from __future__ import annotations
 
@@ -9,15 +9,13 @@ from hypothesis import strategies as st
 from scipy import ndimage
 
 from harpx.imaging._kernels import (
-    bandpass_mask,
-    harmonic_images,
-    harmonic_phase,
     linear_weights,
     refine_linear,
     refine_positions,
     upsample_slices,
     wrap,
 )
+from harpx.imaging.bandpass import bandpass_mask, harmonic_images, harmonic_phase
 
 finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False, allow_infinity=False)
 
