@@ -3,8 +3,7 @@
 numpy hands a product of more than 65536 × 4 multiply-adds to OpenBLAS's worker threads.
 Those threads then busy-wait for a while after the product, and on a machine with as many
 cores as threads they take a core from whatever runs next — on the tracker's hot path that is
-the sparse factorisation, whose own (MKL) threads it slows by a third (paper phantom, 2
-cores: 0.073 s per factorisation alone, 0.112 s after a threaded product). The same holds for
+the sparse factorisation, whose own (MKL) threads it slows markedly. The same holds for
 a dot product (or a norm) of more than 10 000 terms, which OpenBLAS also threads. The
 products here are cut into blocks below that threshold instead, and dot products and norms
 are summed without BLAS: everything runs on the calling thread, and nothing about OpenBLAS's

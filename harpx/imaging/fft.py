@@ -11,8 +11,8 @@ callers copy data into ``plan.input_array``, call ``plan.execute()`` and read
 buffers stay valid for kernels that keep sparse data in them between calls (see
 :mod:`harpx.imaging._kernels`).
 
-Why this design (measured on a 13 × 320 × 320 complex batch, see ``benchmarks/bench_phase.py``):
-direct execution on owned aligned buffers is as fast as ``pyfftw.builders`` and faster than the
+Why this design (``benchmarks/bench_phase.py``, ``benchmarks/results/phase.md``): direct
+execution on owned aligned buffers is as fast as ``pyfftw.builders`` and faster than the
 ``pyfftw.interfaces`` cache, which re-checks and may copy its arrays on every call; numpy.fft
 is 2-3 times slower.
 

@@ -117,11 +117,8 @@ class PhaseSampler:
     at half the memory traffic. Phase and gradient are returned in float64 either way.
 
     Cost: one spline prefilter per tag at construction; per point ``(order+1)**d`` taps
-    shared by all tags (``d`` grid axes with more than one sample). Measured on a 2-core
-    machine (float64 data) for 10**6 random points: about 2.3 s for 3 tags on a
-    13 × 320 × 320 grid (construction 1.4 s) and about 0.7 s for 2 tags on one 320 × 320
-    slice; one evaluation of the paper phantom's 103 680 constraint points (float32, 3
-    tags, with gradients) takes ~60 ms.
+    shared by all tags (``d`` grid axes with more than one sample); timings in
+    ``benchmarks/results/phase.md``.
 
     Examples
     --------

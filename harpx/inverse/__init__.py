@@ -25,11 +25,9 @@ None of them iterates: there is no objective function and no search.
 The chain reads per-element fibre stretch, which is noisier than the displacement it comes
 from: track the data (and, in the calibration's ``measure``, the re-simulated images) with
 :data:`ACTIVATION_TRACKING`, the tracker's defaults with the target at twice the
-phase-noise floor and without the blur correction's second pass. Fitted to the floor
-itself the displacement is slightly better (small tongue scene: 0.101 against 0.109 mm
-mean) but the element stretches carry the noise, and
-the estimates of the small tongue scene fell 20–73 % short (one muscle diverged); at twice
-the floor every muscle is within 11 %.
+phase-noise floor and without the blur correction's second pass: fitted to the floor
+itself the element stretches carry the noise and the estimates fall short
+(``benchmarks/results/README.md``, tongue).
 
 The forward simulations they use live in :mod:`harpx.physiology.active`
 (``simulate_activation``, ``simulate_history``), the figure in :mod:`harpx.plotting`.
@@ -46,8 +44,7 @@ from harpx.inverse.estimate import estimate_activation, uniaxial_active_tension
 from harpx.tracking.settings import TrackingSettings
 
 #: Tracking settings for the activation chain (module notes): target ε twice the floor,
-#: one pass (the band-pass blur correction left the small tongue's error as it was,
-#: 0.101 → 0.102 mm, at twice the time).
+#: no blur-correction pass (it leaves the tongue's error as it is at twice the time).
 ACTIVATION_TRACKING = TrackingSettings(epsilon_factor=2.0, blur_passes=0)
 
 __all__ = [

@@ -18,8 +18,8 @@ prescribed increment :math:`\Delta g = g(s) - u_D`,
 so the first iteration of a step is the consistent linearised predictor and the boundary
 moves with it. Steps are full Newton steps (keeping quadratic convergence, which energy or
 ``‖R‖`` line searches destroy for nearly incompressible solids, where a full step overshoots
-the volumetric energy yet lands in the basin of convergence: measured 4--5 instead of 7--12
-iterations per step at κ/C1 = 10⁴). The line search is a safeguard: a trial with an inverted
+the volumetric energy yet lands in the basin of convergence; ``benchmarks/results/newton.md``).
+The line search is a safeguard: a trial with an inverted
 element or NaN is halved (:math:`\alpha = 1, 1/2, \dots`; if the trial still moves the
 prescribed boundary the step fails at once, so that the load increment is halved), and
 once :math:`\|R_F\|` has grown in two consecutive iterations the energy-slope line search

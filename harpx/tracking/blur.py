@@ -26,13 +26,8 @@ positions gives the unblurred signal :math:`S`, and :math:`K * S` its band-passe
 is the phase the filter adds at :math:`x` (rad, zero outside the tissue). The tracker
 subtracts it from the measured phase and tracks again (``blur_passes``): the data term
 then compares the model with images that are consistent with it, not with a blurred
-version of them. Measured at paper size with the tracker's defaults, mean / p95 error in
-mm without → with one pass: left ventricle 0.350 / 1.091 → 0.253 / 0.714 (conventional
-HARP 0.329 / 0.989); short-axis scene in-plane 0.168 / 0.479 → 0.128 / 0.379 (HARP
-0.172 / 0.474) and its through-plane drift 1.06 → 0.64; brain phantom 0.137 / 0.338 →
-0.125 / 0.313 (its largest error 0.84 → 1.09, at one edge voxel); tongue 0.101 / 0.255 →
-0.102 / 0.256. A second pass lowered the drift further but raised the in-plane error
-(0.156 mm on the paper short-axis scene): one pass is the default.
+version of them. One pass is the default (what it buys on each scene:
+``benchmarks/results/tracking_defaults.md``).
 
 Assumptions: the tagged signal near the body comes from the body alone (``body`` density
 of the images where given, else uniform inside the mesh), the tag fading is uniform, and

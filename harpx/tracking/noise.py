@@ -22,8 +22,7 @@ iterations. The floor is estimated from the data, before any tracking:
    with :math:`w_t` the share of constraint volume that tag t has data in. A single frame's
    error is used, not the root sum of two frames' (which would be
    :math:`\sqrt 2` larger for independent errors), because the filter's edge error moves
-   with the tissue and largely cancels between frames: measured on the small phantom, LV and
-   tongue scenes, the tracker reaches ε between 0.8 and 1.3 times this estimate.
+   with the tissue and largely cancels between frames.
 
 The estimate is recorded per frame as ``epsilon_floor`` in the tracked result; the default
 target is a fixed factor above it (:class:`harpx.tracking.settings.TrackingSettings`).
@@ -38,9 +37,8 @@ component across :math:`H`, half its complex variance, turns the phase), and its
 modulus is
 :math:`\sqrt{2/\pi}\,\sigma_r` (at most π/2, the mean of a uniform phase). This leaves out
 the filter's edge error, which the affine estimate above counts as noise although it is a
-bias the tracker should follow: on the short-axis scene the affine estimate is five times
-the phase noise measured against noise-free images (0.067 against 0.010–0.014 rad), and
-stopping there leaves the model short of the data. Phase datasets without
+bias the tracker should follow (stopping at it leaves the model short of the data). Phase
+datasets without
 ``harmonic_noise`` (written by older versions or built by hand) keep the affine estimate.
 """
 
