@@ -53,7 +53,7 @@ from harpx.mechanics.cells import (
     _skfem_mesh,
     default_element,
 )
-from harpx.mechanics.mesh import MeshSpec, check_nodes, check_unused_nodes, coincident_nodes
+from harpx.mechanics.meshspec import MeshSpec, check_nodes, check_unused_nodes, coincident_nodes
 
 __all__ = ["Body"]
 
@@ -678,12 +678,13 @@ class Body:
         Parameters
         ----------
         mesh : meshio.Mesh
-            Reference configuration (mm) with one block of ``hexahedron``,
-            ``hexahedron20`` (reduced to its corners: straight edges), ``tetra`` or
-            ``tetra10`` (curved edges kept) cells; the first such block is used, other
-            blocks and points no cell uses are dropped. Cell data ``fiber`` (one vector per
-            cell) becomes the fibres unless ``fibers=`` is given; named boundaries and
-            regions written by :meth:`to_meshio` are kept.
+            Reference configuration (mm) with ``hexahedron``, ``hexahedron20`` (reduced to
+            its corners: straight edges), ``tetra`` or ``tetra10`` (curved edges kept)
+            cells, all of one of these kinds; several blocks of that kind are merged in
+            block order, while surface and line blocks (boundaries) and points no cell uses
+            are dropped. Cell data ``fiber`` (one vector per cell) becomes the fibres
+            unless ``fibers=`` is given; named boundaries and regions written by
+            :meth:`to_meshio` are kept.
         material : object
             The material (see :class:`Body`).
         source : str, default "the meshio mesh"
@@ -698,7 +699,8 @@ class Body:
         Raises
         ------
         ValueError
-            If the mesh has no hexahedra or tetrahedra.
+            If the mesh has no hexahedra or tetrahedra, or volume cells of several kinds
+            (e.g. hexahedra and a tetrahedron; the message counts each kind).
 
         See Also
         --------

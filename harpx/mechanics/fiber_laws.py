@@ -100,7 +100,7 @@ class ActiveContraction:
 
     Examples
     --------
-    >>> from harpx.mechanics.materials import ActiveContraction
+    >>> from harpx.mechanics.fiber_laws import ActiveContraction
     >>> act = ActiveContraction()
     >>> round(float(act.tension(1.0)), 4)
     120.4368
@@ -278,7 +278,7 @@ class FiberGrowth:
 
     Examples
     --------
-    >>> from harpx.mechanics.materials import FiberGrowth
+    >>> from harpx.mechanics.fiber_laws import FiberGrowth
     >>> np.diag(FiberGrowth(1.1).tensor([1.0, 0.0, 0.0])).tolist()
     [1.1, 1.0, 1.0]
     """

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray
-from harpx.mechanics.mesh import _CORNER_EDGES
+from harpx.mechanics.meshspec import _CORNER_EDGES
 
 __all__ = ["MeshQuality", "scaled_jacobian"]
 
