@@ -4,26 +4,35 @@ Subcommands: ``demo`` (the phantom scene end to end), ``scene`` (a synthetic sce
 archive and tracking mesh, to try the other subcommands on), ``phase`` (tagged archive →
 phase archive), ``track`` (phase archive + mesh → tracked archive), ``dicom`` (tagged cine
 DICOM series → tagged archive), ``report`` (summary of a tracked archive, optionally
-against ground truth). Errors print as one line (``--debug`` for the traceback); exit
-codes: 0 success, 1 harpx or input error, 2 usage error. Progress bars follow
-:mod:`harpx._progress`: shown in a terminal for calls longer than a few seconds, never in
-logs or pipes, unless ``--progress`` or ``--no-progress`` says otherwise. Exit code 130
-means interrupted (Ctrl-C) and 143 terminated (SIGTERM): an interrupted write removes its
-temporary file and leaves an existing output untouched.
+against ground truth). ``track`` and ``demo`` end with a summary: ε against its target
+per frame, the frames that missed it, levelled off (plateau) or did not converge, the
+warnings raised (count and first line of each), the total time and the files written; the
+other subcommands print the warnings on standard error as ``harpx CMD: warning: ...``.
+
+Errors print as one line (``--debug`` for the traceback), followed by the choices where
+harpx cannot choose for the user (the series ``harpx dicom`` found); exit codes: 0 success,
+1 harpx or input error, 2 usage error. Progress bars follow :mod:`harpx._progress`: shown
+in a terminal for calls longer than a few seconds, never in logs or pipes, unless
+``--progress`` or ``--no-progress`` says otherwise. Exit code 130 means interrupted
+(Ctrl-C) and 143 terminated (SIGTERM): an interrupted write removes its temporary file and
+leaves an existing output untouched.
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 import signal
 import sys
+import textwrap
 import threading
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from harpx.errors import HarpxError, SchemaError
+from harpx.errors import HarpxError, HarpxWarning, SchemaError
 
 _DESCRIPTION = "Motion estimation from tagged cine MRI with hyperelastic finite-element models."
 _EPILOG = (
@@ -33,6 +42,11 @@ _EPILOG = (
     "2 usage error."
 )
 _AXES = {"x": 0, "y": 1, "z": 2}
+#: Subcommands that list the warnings in their closing summary (the others print them on
+#: standard error).
+_SUMMARISED = ("track", "demo")
+#: Width of wrapped summary lines.
+_WIDTH = 100
 
 
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -46,6 +60,7 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
 
 def _demo(args: argparse.Namespace) -> int:
+    from harpx._progress import elapsed
     from harpx.imaging.harp import extract_phase
     from harpx.imaging.harptrack import track_harp
     from harpx.io.netcdf import to_netcdf
@@ -54,20 +69,25 @@ def _demo(args: argparse.Namespace) -> int:
     from harpx.tracking.results import tracking_error
     from harpx.tracking.track import track
 
+    start = time.perf_counter()
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()
-    scene = phantom(args.size)
+    with elapsed(f"building the phantom scene ({args.size})", progress=args.progress):
+        scene = phantom(args.size)
     seconds = time.perf_counter() - t
     print(f"phantom ({args.size}): images {dict(scene.tagged.sizes)} built in {seconds:.1f} s")
     t = time.perf_counter()
-    phase = extract_phase(scene.tagged, upsample=args.upsample)
+    with elapsed("harmonic phase", progress=args.progress):
+        phase = extract_phase(scene.tagged, upsample=args.upsample)
     phase_time = time.perf_counter() - t
     print(f"harmonic phase (upsample {args.upsample}) in {phase_time:.1f} s")
     rows: list[dict[str, Any]] = []
     results = {}
+    written: list[Path] = []
     t = time.perf_counter()
-    harp = track_harp(phase, points=scene.tagged)
+    with elapsed("conventional HARP", progress=args.progress):
+        harp = track_harp(phase, points=scene.tagged)
     results["HARP"] = harp
     rows.append(
         {
@@ -88,8 +108,8 @@ def _demo(args: argparse.Namespace) -> int:
                 "result": fe,
             }
         )
-        to_netcdf(fe, out / f"phantom_{element}.nc")
-    to_netcdf(harp, out / "phantom_harp.nc")
+        written.append(to_netcdf(fe, out / f"phantom_{element}.nc"))
+    written.append(to_netcdf(harp, out / "phantom_harp.nc"))
     print()
     print("| method | mean ± sd (mm) | p95 (mm) | max (mm) | wall time (s) |")
     print("|---|---|---|---|---|")
@@ -108,13 +128,17 @@ def _demo(args: argparse.Namespace) -> int:
     frame_time = 54.0 if args.size == "paper" else float(scene.tagged.time[-2])
     import matplotlib.pyplot as plt
 
-    plt.close(
-        displacement_maps(
-            results, scene.tagged, time=frame_time, path=out / "phantom_displacement_maps.png"
-        )
-    )
-    plt.close(error_vs_runtime(rows, path=out / "phantom_error_vs_runtime.png"))
-    print(f"\narchives and figures written to {out}/")
+    maps, runtime = out / "phantom_displacement_maps.png", out / "phantom_error_vs_runtime.png"
+    plt.close(displacement_maps(results, scene.tagged, time=frame_time, path=maps))
+    plt.close(error_vs_runtime(rows, path=runtime))
+    written += [maps, runtime]
+    for row in rows[1:]:  # the FE models: what happened in each frame
+        print()
+        _print_frames(row["result"], row["method"])
+    print()
+    _print_warnings(getattr(args, "warnings", []))
+    print(f"total {time.perf_counter() - start:.1f} s")
+    print(f"wrote {', '.join(p.name for p in written)} to {out}/")
     return 0
 
 
@@ -135,14 +159,108 @@ def _track(args: argparse.Namespace) -> int:
     from harpx.mechanics.materials import NeoHookean
     from harpx.tracking.track import track
 
+    start = time.perf_counter()
     _refuse_overwriting_input(args.output, [args.input, args.mesh])
     ds = open_dataset(args.input)
     body = read_body(args.mesh, NeoHookean(c1=args.c1, kappa=args.kappa), element=args.element)
     fixed = [_fixed(item, body) for item in args.fix]
+    reading = time.perf_counter() - start
+    t = time.perf_counter()
     result = track(ds, body, dirichlet=fixed, **_tracking(args))
+    tracking = time.perf_counter() - t
+    t = time.perf_counter()
     to_netcdf(result, args.output)
+    writing = time.perf_counter() - t
+    _print_frames(result)
+    _print_warnings(getattr(args, "warnings", []))
+    print(
+        f"total {time.perf_counter() - start:.1f} s (reading {reading:.1f} s, tracking "
+        f"{tracking:.1f} s, writing {writing:.1f} s)"
+    )
     print(f"wrote {args.output}")
     return 0
+
+
+def _print_frames(ds: Any, title: str | None = None) -> None:
+    """What happened in each frame of a tracked dataset (:func:`_frames_table`), and a count."""
+    if title is None:
+        element = ds["cells"].attrs.get("element", "") if "cells" in ds else ""
+        title = f"{ds.attrs.get('method', '?')}, {ds.sizes.get('cell', 0)} {element} cells"
+    passes = ds.attrs.get("blur_passes_applied")
+    blur = f", blur correction {passes} pass{'es' if passes != 1 else ''}" if passes else ""
+    print(f"{title}{blur}; per frame:")
+    for line in _frames_table(ds):
+        print(line)
+    flags = ("target_reached", "plateau", "converged")
+    if all(k in ds for k in flags):
+        frames = range(1, ds.sizes["time"])
+        missed = [n for n in frames if not bool(ds["target_reached"].values[n])]
+        plateau = [n for n in frames if bool(ds["plateau"].values[n])]
+        stopped = [n for n in frames if not bool(ds["converged"].values[n])]
+        print(
+            f"{len(frames)} frames tracked: target missed {_which(missed)}; plateau "
+            f"{_which(plateau)}; not converged {_which(stopped)}"
+        )
+
+
+def _which(frames: Sequence[int]) -> str:
+    if not frames:
+        return "in none"
+    return ("in frame " if len(frames) == 1 else "in frames ") + ", ".join(map(str, frames))
+
+
+def _frames_table(ds: Any, *, wall_time: bool = False) -> list[str]:
+    """A tracked dataset's per-frame diagnostics as a Markdown table, with units.
+
+    ε and its target for every frame; the penalty, iterations (and ``wall_time``) of the
+    tracked frames; and a note: ``reference`` for frame 0, ``target missed``, ``plateau``
+    (ε levelled off within what the data allow), ``not converged``. Columns the dataset
+    lacks (a HARP result has no target) are left out.
+    """
+    columns: list[tuple[str, str, str]] = [
+        ("epsilon", "epsilon (rad)", "{:.3g}"),
+        ("epsilon_target", "target (rad)", "{:.3g}"),
+        ("penalty", "penalty (relative)", "{:.3g}"),
+        ("iterations", "iterations", "{:.0f}"),
+    ]
+    if wall_time:
+        columns.append(("wall_time", "wall time (s)", "{:.2f}"))
+    present = [c for c in columns if c[0] in ds]
+    flags = [k for k in ("target_reached", "plateau", "converged") if k in ds]
+    header = ["frame", "time (ms)", *(c[1] for c in present), *(["note"] if flags else [])]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for n, t in enumerate(ds["time"].values):
+        cells = [str(n), f"{float(t):g}"]
+        for name, _, fmt in present:
+            tracked_only = name in ("penalty", "iterations", "wall_time")
+            cells.append("" if n == 0 and tracked_only else fmt.format(float(ds[name].values[n])))
+        if flags:
+            notes = ["reference"] if n == 0 else []
+            if n and "target_reached" in ds and not bool(ds["target_reached"].values[n]):
+                notes.append("target missed")
+            if n and "plateau" in ds and bool(ds["plateau"].values[n]):
+                notes.append("plateau")
+            if n and "converged" in ds and not bool(ds["converged"].values[n]):
+                notes.append("not converged")
+            cells.append(", ".join(notes))
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def _print_warnings(caught: Sequence[warnings.WarningMessage]) -> None:
+    """The warnings of a run: their count and the first line of each (repeats counted)."""
+    counts: dict[str, int] = {}
+    for item in caught:
+        lines = str(item.message).strip().splitlines()
+        key = f"{item.category.__name__}: {lines[0] if lines else ''}"
+        counts[key] = counts.get(key, 0) + 1
+    if not counts:
+        print("warnings: none")
+        return
+    print(f"warnings ({len(caught)}):")
+    for text, count in counts.items():
+        repeat = f" (×{count})" if count > 1 else ""
+        print(textwrap.fill(text + repeat, _WIDTH, initial_indent="  - ", subsequent_indent="    "))
 
 
 #: TrackingSettings fields the ``demo`` and ``track`` commands expose, with their help
@@ -181,10 +299,10 @@ def _tracking_options(parser: argparse.ArgumentParser) -> None:
 
 def _tracking(args: argparse.Namespace) -> dict[str, Any]:
     """The tracking settings given on the command line (the rest stay the library's)."""
-    from harpx._progress import show_progress
-
     given = {k: getattr(args, k) for k in _TRACKING_OPTIONS if getattr(args, k) is not None}
-    return {**given, "progress": show_progress(args.progress)}
+    if args.progress is not None:  # else the library's auto rule, as in a notebook
+        given["progress"] = args.progress
+    return given
 
 
 def _fixed(item: str, body: Any) -> Any:
@@ -210,7 +328,7 @@ def _scene(args: argparse.Namespace) -> int:
     from harpx.datasets import DATASETS, export_scene
 
     out = Path(args.output)
-    files = export_scene(args.name, out)
+    files = export_scene(args.name, out, progress=args.progress)
     recipe = DATASETS[args.name]
     print(f"wrote {files['tagged']} and {files['mesh']} ({recipe.description})")
     phase_opts = " ".join(f"--{k} {v}" for k, v in recipe.phase.items())
@@ -250,11 +368,15 @@ def _report(args: argparse.Namespace) -> int:
             f"{args.archive!r} is a {kind!r} archive; report needs a 'tracked/1' archive: {hint}"
         )
     print(f"{args.archive}: {kind}, method {ds.attrs.get('method')}")
-    cols = [c for c in ("epsilon", "penalty", "iterations", "wall_time") if c in ds]
-    print("| time (ms) | " + " | ".join(cols) + " |")
-    print("|---" * (len(cols) + 1) + "|")
-    for i, t in enumerate(ds.time.values):
-        print(f"| {t:.0f} | " + " | ".join(f"{float(ds[c][i]):.4g}" for c in cols) + " |")
+    for line in _frames_table(ds, wall_time=True):
+        print(line)
+    if "wall_time" in ds and ds.sizes["time"] and float(ds["wall_time"].values[0]) > 0:
+        blur = " and the blur correction" if ds.attrs.get("blur_passes_applied") else ""
+        seconds = float(ds["wall_time"].values[0])
+        print(
+            f"frame 0 is the reference: its wall_time, {seconds:.2f} s, is the set-up{blur}, "
+            "not tracking (left out of the table)"
+        )
     if args.figure:
         import matplotlib.pyplot as plt
 
@@ -275,6 +397,18 @@ def _dicom(args: argparse.Namespace) -> int:
     from harpx.io.dicom import read_tagged
     from harpx.io.netcdf import to_netcdf
 
+    if not args.tag:
+        raise _series_choice(
+            "no --tag given: say which series carries which tag with --tag "
+            "SERIES:LABEL:DIRECTION (DIRECTION: row, column or x,y,z), e.g. --tag "
+            "'SA tagging:x:row', once per tag",
+            args.input,
+        )
+    if args.tag_period is None:
+        raise HarpxError(
+            "--tag-period is required: DICOM does not record the tag spacing; give it in mm, "
+            "e.g. --tag-period 8"
+        )
     _refuse_overwriting_input(args.output, args.input)
     directions: dict[str, list[tuple[str, Any]]] = {}
     for item in args.tag:
@@ -286,16 +420,53 @@ def _dicom(args: argparse.Namespace) -> int:
             ) from None
         vector = [float(v) for v in direction.split(",")] if "," in direction else direction
         directions.setdefault(series, []).append((label, vector))
-    ds = read_tagged(
-        args.input,
-        tag_period=args.tag_period,
-        tag_directions=directions,
-        sequence=args.sequence,
-        spacing=args.spacing,
-    )
+    try:
+        ds = read_tagged(
+            args.input,
+            tag_period=args.tag_period,
+            tag_directions=directions,
+            sequence=args.sequence,
+            spacing=args.spacing,
+        )
+    except HarpxError as err:
+        first = (str(err).strip().splitlines() or [""])[0]
+        if "tag_directions" not in first:  # not about which series carries which tag
+            raise
+        # the series selection failed: say it in the command's words, with the series found
+        head = _SERIES_FOUND.split(first)[0].replace("tag_directions", "--tag")
+        raise _series_choice(head, args.input, err) from err
     to_netcdf(ds, args.output)
     print(f"wrote {args.output}: {dict(ds.sizes)}")
     return 0
+
+
+#: Where a harpx.io.dicom message starts listing the series it found.
+_SERIES_FOUND = re.compile(r"[;.]?\s*[Ss]eries found:")
+
+
+class _Choices(HarpxError):
+    """An error that lists what the user can choose from: printed in full, not one line."""
+
+
+def _series_choice(
+    message: str, inputs: Sequence[str], err: HarpxError | None = None
+) -> HarpxError:
+    """``message`` followed by the DICOM series found in ``inputs`` (as harpx.io.dicom
+    lists them); without a listing (e.g. no DICOM images at all) that error itself."""
+    from harpx.io.dicom import read_tagged
+
+    listing = _SERIES_FOUND.split(str(err), maxsplit=1)[1:] if err is not None else []
+    if not listing:
+        try:
+            read_tagged(inputs, tag_directions=None)  # headers only: fails listing the series
+        except HarpxError as found:
+            listing = _SERIES_FOUND.split(str(found), maxsplit=1)[1:]
+            if not listing:
+                return found  # no images, unreadable files: that is the error to show
+    if not listing:  # pragma: no cover - read_tagged always needs tag_directions
+        return HarpxError(message)
+    series = listing[0].strip("\n").rstrip()  # keeps the items' indentation
+    return _Choices(f"{message}; series found:\n{series}")
 
 
 def _progress_option(parser: argparse.ArgumentParser) -> None:
@@ -303,8 +474,7 @@ def _progress_option(parser: argparse.ArgumentParser) -> None:
         "--progress",
         action=argparse.BooleanOptionalAction,
         default=None,
-        help="progress bar over frames (default: shown when stderr is a terminal, after a "
-        "few seconds)",
+        help="progress bars (default: shown when stderr is a terminal, after a few seconds)",
     )
 
 
@@ -337,7 +507,13 @@ def build_parser() -> argparse.ArgumentParser:
         "demo", help="track the synthetic brain phantom end to end", formatter_class=fmt
     )
     demo.add_argument("--output", default="harpx-demo", help="output folder")
-    demo.add_argument("--size", choices=["paper", "small"], default="paper", help="scene size")
+    demo.add_argument(
+        "--size",
+        choices=["paper", "small"],
+        default="paper",
+        help="scene size: paper (13 frames of 13 × 160² voxels, 4320 cells: a minute or two) "
+        "or small (5 frames of 7 × 48² voxels, 432 cells: seconds)",
+    )
     demo.add_argument("--upsample", type=int, default=2, help="in-plane phase upsampling")
     _tracking_options(demo)
     demo.add_argument(
@@ -360,6 +536,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     scn.add_argument("name", choices=sorted(DATASETS), help="scene and size")
     scn.add_argument("--output", default="harpx-scene", help="output folder")
+    _progress_option(scn)
     scn.set_defaults(func=_scene)
 
     phase = sub.add_parser("phase", help="harmonic phase of a tagged archive", formatter_class=fmt)
@@ -400,12 +577,13 @@ def build_parser() -> argparse.ArgumentParser:
     dcm.add_argument(
         "--tag",
         action="append",
-        required=True,
+        default=[],
         metavar="SERIES:LABEL:DIRECTION",
         help="tag of a series (SeriesDescription, number or UID): label and "
-        "direction 'row', 'column' or 'x,y,z'; repeat for each tag",
+        "direction 'row', 'column' or 'x,y,z'; repeat for each tag (without it: lists the "
+        "series found)",
     )
-    dcm.add_argument("--tag-period", type=float, required=True, help="tag spacing, mm")
+    dcm.add_argument("--tag-period", type=float, help="tag spacing, mm (required with --tag)")
     dcm.add_argument(
         "--sequence", choices=["SPAMM", "CSPAMM"], help="tagging sequence (default: from headers)"
     )
@@ -429,15 +607,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     previous = None
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _terminate)  # unwind, so cleanups run
+    recorded: list[warnings.WarningMessage] = []
     try:
-        return int(args.func(args))
+        # the command reports its warnings itself (its summary, or one line each on
+        # stderr); the filters are restored when it returns
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.filterwarnings("always", category=HarpxWarning)
+            recorded = args.warnings = caught
+            code = int(args.func(args))
+        if args.command not in _SUMMARISED:
+            _warnings_to_stderr(args.command, recorded)
+        return code
     except (KeyboardInterrupt, _Terminated) as exc:
+        _warnings_to_stderr(args.command, recorded)
         if args.debug:
             raise
         what = "terminated" if isinstance(exc, _Terminated) else "interrupted"
         print(f"harpx {args.command}: {what}; no partial output was written", file=sys.stderr)
         return 143 if isinstance(exc, _Terminated) else 130
     except Exception as exc:  # every failure is one line; --debug shows the traceback
+        _warnings_to_stderr(args.command, recorded)
         if args.debug:
             raise
         print(f"harpx {args.command}: error: {_one_line(exc)}", file=sys.stderr)
@@ -455,8 +644,17 @@ def _terminate(signum: int, frame: Any) -> None:
     raise _Terminated()
 
 
+def _warnings_to_stderr(command: str, caught: Sequence[warnings.WarningMessage]) -> None:
+    """Each warning of a run as ``harpx COMMAND: warning: MESSAGE`` on stderr."""
+    for item in caught:
+        print(f"harpx {command}: warning: {str(item.message).strip()}", file=sys.stderr)
+
+
 def _one_line(exc: BaseException) -> str:
-    """First line of an error, prefixed by its type unless it is a harpx or input error."""
+    """First line of an error, prefixed by its type unless it is a harpx or input error
+    (an error listing the user's choices keeps its list)."""
+    if isinstance(exc, _Choices):
+        return str(exc).strip()
     lines = str(exc).strip().splitlines()
     first = lines[0] if lines else ""
     if isinstance(exc, HarpxError | ValueError | OSError) and first:

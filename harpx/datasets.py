@@ -12,7 +12,12 @@ mesh::
 so a notebook can start from any stage without building a scene::
 
     import harpx.datasets
+    harpx.datasets.list_datasets()          # name -> what it shows
     tracked = harpx.datasets.open("phantom-small", kind="tracked")
+    mesh = harpx.datasets.path("phantom-small", "mesh")  # for harpx.io.mesh.read_body
+
+The archives carry the CF ``Conventions`` attribute of the files (``CF-1.10``, plus
+``UGRID-1.0`` for the tracked mesh), and :func:`open` keeps it.
 
 Each archive is made by :func:`build` from a fixed :class:`Recipe` (scene, phase and
 tracking settings) and written by :func:`regenerate`, which is also the command line
@@ -182,6 +187,10 @@ STORED: tuple[str, ...] = ("phantom-small", "lv-small", "tongue-small")
 def list_datasets() -> dict[str, str]:
     """The stored datasets and what each shows.
 
+    Each has the archives :data:`KINDS` (:func:`open`) and the tracking mesh
+    (:func:`path` with ``kind="mesh"``). The paper-size recipes of :data:`DATASETS` are not
+    stored: :func:`build` or :func:`regenerate` make them.
+
     Returns
     -------
     dict of str to str
@@ -247,9 +256,11 @@ def open(  # noqa: A001  (harpx.datasets.open reads as the verb it is)
     Parameters
     ----------
     name : str
-        ``"phantom-small"``, ``"lv-small"`` or ``"tongue-small"`` (:func:`list_datasets`).
+        ``"phantom-small"``, ``"lv-small"`` or ``"tongue-small"`` (:func:`list_datasets`),
+        or a paper-size recipe that :func:`regenerate` stored under ``root``.
     kind : {"tagged", "phase", "tracked"}, default "tagged"
-        Pipeline stage.
+        Pipeline stage. The tracking mesh is a file, not an archive: ``path(name, "mesh")``
+        gives it, :func:`harpx.io.mesh.read_body` reads it.
     chunks : mapping, "auto", {} or None, default None
         As in :func:`harpx.io.netcdf.open_dataset` (e.g. ``{"time": 1}``: one frame per
         dask chunk, the archives' own chunking).
@@ -259,12 +270,14 @@ def open(  # noqa: A001  (harpx.datasets.open reads as the verb it is)
     Returns
     -------
     xarray.Dataset
-        A ``tagged/1``, ``phase/1`` or ``tracked/1`` dataset.
+        A ``tagged/1``, ``phase/1`` or ``tracked/1`` dataset, with the file's CF
+        ``Conventions`` attribute.
 
     Raises
     ------
     ValueError
-        For an unknown name or kind.
+        For an unknown name or kind (the message lists the stored datasets, and for
+        ``kind="mesh"`` says how to read the mesh).
     FileNotFoundError
         If the archive is not there (e.g. harpx installed without the repository): the
         message gives the command that makes it.
@@ -285,15 +298,49 @@ def open(  # noqa: A001  (harpx.datasets.open reads as the verb it is)
             f"regenerate {name} --kinds {kind} --output {file.parent.parent}` (or set "
             f"{ENVIRONMENT} to a folder that has it)"
         )
-    return open_dataset(file, chunks=chunks)
+    ds = open_dataset(file, chunks=chunks)
+    if "Conventions" not in ds.attrs:  # harpx.io drops what its writer added: keep this one
+        conventions = _file_conventions(file)
+        if conventions is not None:
+            ds.attrs["Conventions"] = conventions
+    return ds
+
+
+def _file_conventions(file: Path) -> str | None:
+    """The global ``Conventions`` attribute of a NetCDF file (None if it has none)."""
+    import netCDF4
+
+    with netCDF4.Dataset(file) as nc:
+        value = getattr(nc, "Conventions", None)
+    return None if value is None else str(value)
+
+
+def _conventions(ds: xr.Dataset) -> xr.Dataset:
+    """``ds`` with the ``Conventions`` its archive carries (as :func:`to_netcdf` writes it:
+    UGRID for the hexahedral mesh of every tracked recipe)."""
+    from harpx.io.netcdf import CONVENTIONS, UGRID_CONVENTIONS
+
+    mesh = ds.attrs.get("harpx_schema") == "tracked/1" and "cells" in ds
+    ds.attrs["Conventions"] = CONVENTIONS + (f" {UGRID_CONVENTIONS}" if mesh else "")
+    return ds
 
 
 def _check(name: str, kind: str, *, allow_mesh: bool = False) -> None:
     if name not in DATASETS:
-        raise ValueError(f"unknown dataset {name!r}; known: {sorted(DATASETS)!r}")
+        others = sorted(set(DATASETS) - set(STORED))
+        raise ValueError(
+            f"unknown dataset {name!r}; stored: {sorted(STORED)!r} (list_datasets()); "
+            f"not stored, made by regenerate(): {others!r}"
+        )
     kinds = (*KINDS, "mesh") if allow_mesh else KINDS
     if kind not in kinds:
-        raise ValueError(f"kind={kind!r}; expected one of {list(kinds)!r}")
+        hint = (
+            f" (the tracking mesh is a file, not an archive: harpx.datasets.path({name!r}, "
+            "'mesh') gives it, harpx.io.mesh.read_body reads it)"
+            if kind == "mesh"
+            else ""
+        )
+        raise ValueError(f"kind={kind!r}; expected one of {list(kinds)!r}{hint}")
 
 
 # --- making the archives -------------------------------------------------------------------
@@ -360,15 +407,18 @@ class _Scene:
     dirichlet: list[Any]
 
 
-def _scene(recipe: Recipe) -> _Scene:
+def _scene(recipe: Recipe, progress: bool | None = None) -> _Scene:
     from harpx import scenes
+    from harpx._progress import elapsed
 
     make: Any = getattr(scenes, recipe.scene)
-    if recipe.scene == "lv":
-        v = make(size=recipe.size, **recipe.scene_kwargs)
-        return _Scene(v.tagged, v.body(), list(v.dirichlet()))
-    scene = make(recipe.size, **recipe.scene_kwargs)
-    return _Scene(scene.tagged, scene.body(recipe.element), list(getattr(scene, "dirichlet", ())))
+    with elapsed(f"building the {recipe.name} scene", progress=progress):
+        if recipe.scene == "lv":
+            v = make(size=recipe.size, **recipe.scene_kwargs)
+            return _Scene(v.tagged, v.body(), list(v.dirichlet()))
+        scene = make(recipe.size, **recipe.scene_kwargs)
+        body = scene.body(recipe.element)
+    return _Scene(scene.tagged, body, list(getattr(scene, "dirichlet", ())))
 
 
 def build(
@@ -391,14 +441,15 @@ def build(
         the stored ``tagged`` archive and ``tracked`` alone from the stored ``phase`` archive
         when they exist there (default: always rebuild from the scene).
     progress : bool or None, default None
-        Progress bar of the tracking (None: auto, see :mod:`harpx._progress`).
+        Progress of the scene build and the tracking (None: auto, see
+        :mod:`harpx._progress`).
 
     Returns
     -------
     dict
-        Kind → dataset, plus ``"body"`` (the tracking model) and ``"dirichlet"``.
+        Kind → dataset (with the ``Conventions`` attribute of its archive), plus ``"body"``
+        (the tracking model) and ``"dirichlet"``.
     """
-    from harpx._progress import show_progress
     from harpx.imaging.harp import extract_phase
     from harpx.tracking.track import track
 
@@ -412,19 +463,20 @@ def build(
         if kind not in kinds and root is not None and path(name, kind, root=root).is_file():
             data[kind] = open(name, kind, root=root)  # an earlier stage, as stored
         elif kind == "tagged":
-            scene = scene or _scene(recipe)
-            data[kind] = shorten(scene.tagged)
+            scene = scene or _scene(recipe, progress)
+            data[kind] = _conventions(shorten(scene.tagged))
         elif kind == "phase":
             phase = extract_phase(data["tagged"], **recipe.phase)
             # the truth is in the tagged archive: no second copy
-            data[kind] = shorten(phase.drop_vars(["displacement_true"], errors="ignore"))
+            phase = phase.drop_vars(["displacement_true"], errors="ignore")
+            data[kind] = _conventions(shorten(phase))
         else:
-            scene = scene or _scene(recipe)
+            scene = scene or _scene(recipe, progress)
             kwargs = dict(recipe.track)
             if scene.dirichlet:
                 kwargs["dirichlet"] = scene.dirichlet
-            tracked = track(data["phase"], scene.body, progress=show_progress(progress), **kwargs)
-            data[kind] = shorten(_without_timings(tracked))
+            tracked = track(data["phase"], scene.body, progress=progress, **kwargs)
+            data[kind] = _conventions(shorten(_without_timings(tracked)))
     out: dict[str, Any] = {k: data[k] for k in KINDS if k in kinds}
     if scene is not None:
         out["body"], out["dirichlet"] = scene.body, scene.dirichlet
@@ -438,7 +490,7 @@ def _without_timings(tracked: xr.Dataset) -> xr.Dataset:
     return out
 
 
-def export_scene(name: str, output: PathLike) -> dict[str, Path]:
+def export_scene(name: str, output: PathLike, *, progress: bool | None = None) -> dict[str, Path]:
     """Write a scene's input archive and tracking mesh, to try the ``harpx`` subcommands on.
 
     Parameters
@@ -447,6 +499,8 @@ def export_scene(name: str, output: PathLike) -> dict[str, Path]:
         Dataset name (any key of :data:`DATASETS`, e.g. ``"phantom-small"``).
     output : str or os.PathLike
         Folder (created if needed).
+    progress : bool or None, default None
+        Show the running time of the scene build (None: auto, see :mod:`harpx._progress`).
 
     Returns
     -------
@@ -458,7 +512,7 @@ def export_scene(name: str, output: PathLike) -> dict[str, Path]:
     _check(name, "tagged")
     folder = Path(output)
     folder.mkdir(parents=True, exist_ok=True)
-    scene = _scene(DATASETS[name])
+    scene = _scene(DATASETS[name], progress)
     return {
         "tagged": to_netcdf(scene.tagged, folder / "tagged.nc"),
         "mesh": _write_mesh(scene.body, folder / _MESH_FILE),
@@ -618,8 +672,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "list":
         for name, text in list_datasets().items():
-            files = [k for k in (*KINDS, "mesh") if path(name, k).is_file()]
-            builtins.print(f"{name:15s} {text}  [{', '.join(files) or 'not made'}]")
+            kinds = [k for k in KINDS if path(name, k).is_file()]
+            mesh = _MESH_FILE if path(name, "mesh").is_file() else "none"
+            builtins.print(
+                f"{name:15s} {text}  [archives: {', '.join(kinds) or 'none'}; mesh: {mesh}]"
+            )
+        builtins.print(
+            f"\nopen an archive: harpx.datasets.open(NAME, KIND), KIND one of {', '.join(KINDS)}"
+            "\nthe tracking mesh: harpx.datasets.path(NAME, 'mesh'), read by "
+            f"harpx.io.mesh.read_body\nfolder: {directory()}"
+        )
         return 0
     for file in regenerate(args.names or None, args.kinds, output=args.output):
         builtins.print(f"wrote {file} ({file.stat().st_size / 1e6:.2f} MB)")

@@ -202,8 +202,11 @@ class TrackingSettings:
         Gauss order of the constraint quadrature (≥ 1); default: points at most a voxel apart.
     linear_solver : str, default "auto"
         See :class:`harpx.mechanics.linsolve.LinearSolver`.
-    progress : bool, default False
-        Show a progress bar over frames.
+    progress : bool or None, default None
+        A progress bar over the frames of each pass (``"tracking"``, then
+        ``"tracking (blur correction)"``). None: shown when someone watches (a Jupyter
+        notebook or a terminal) once tracking has run a few seconds, never in logs or
+        pipes (:mod:`harpx._progress`); True or False force it.
     tuning : SolverTuning, optional
         The solver's inner constants (stall threshold, ramp iterations, damping, predictor
         factors); the defaults suit every scene measured.
@@ -243,7 +246,7 @@ class TrackingSettings:
     max_iterations: int = 20
     intorder: int | None = None
     linear_solver: str = "auto"
-    progress: bool = False
+    progress: bool | None = None
     tuning: SolverTuning = SolverTuning()
 
     def __post_init__(self) -> None:
@@ -280,7 +283,7 @@ class TrackingSettings:
             set_(self, "intorder", _count("intorder", self.intorder, minimum=1))
         if not isinstance(self.linear_solver, str):
             raise TypeError(f"linear_solver={self.linear_solver!r} must be a string")
-        set_(self, "progress", bool(self.progress))
+        set_(self, "progress", None if self.progress is None else bool(self.progress))
         if not isinstance(self.tuning, SolverTuning):
             raise TypeError(f"tuning={self.tuning!r} must be a SolverTuning")
 
@@ -366,9 +369,12 @@ class TrackingSettings:
             if isinstance(value, tuple):
                 value = list(value)
             if value is None:
-                value = {"epsilon": "auto", "robust_scale": "none", "blur_passes": "auto"}.get(
-                    key, -1
-                )
+                value = {
+                    "epsilon": "auto",
+                    "robust_scale": "none",
+                    "blur_passes": "auto",
+                    "progress": "auto",
+                }.get(key, -1)
             elif isinstance(value, bool):
                 value = int(value)
             out[f"setting_{key}"] = value

@@ -19,8 +19,8 @@ from typing import Any, cast
 
 import numpy as np
 import xarray as xr
-from tqdm.auto import tqdm
 
+from harpx._progress import progress_bar
 from harpx._typing import BoolArray
 from harpx.errors import HarpxWarning, SchemaError
 from harpx.imaging.coverage import explain_missing_data, phase_direction_mismatch
@@ -352,7 +352,8 @@ def _track_frames(
     out.wall[0] = _time.perf_counter() - start
     timings.setup += out.wall[0]
     lam = settings.penalty
-    for n in tqdm(range(1, ntime), disable=not settings.progress, desc="tracking", unit="frame"):
+    desc = "tracking" if earlier is None else "tracking (blur correction)"
+    for n in progress_bar(range(1, ntime), progress=settings.progress, desc=desc, unit="frame"):
         begin = _time.perf_counter()
         constraint.set_frame(n)
         clock = _time.perf_counter()

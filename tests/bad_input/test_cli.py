@@ -108,3 +108,40 @@ def test_sigterm_exits_143_with_one_line_and_no_output(tmp_path: Path) -> None:
     assert child.returncode == 143, err
     assert err.strip() == "harpx phase: terminated; no partial output was written"
     assert sorted(os.listdir(tmp_path)) == ["a.nc"]
+
+
+def test_dicom_without_tag_in_a_folder_without_dicom_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "notes.txt").write_text("not DICOM")
+    assert main(["dicom", str(tmp_path), str(tmp_path / "o.nc")]) == 1
+    _one_error_line(capsys, "dicom", "no DICOM images found")  # nothing to list
+
+
+def test_warnings_of_a_failing_run_come_before_its_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import warnings
+
+    from harpx.errors import HarpxWarning
+
+    def warn_then(fail: bool):
+        def phase(*args: object, **kwargs: object) -> object:
+            warnings.warn("tag 'x' looks odd\nsecond line", HarpxWarning, stacklevel=2)
+            if fail:
+                raise ValueError("bad phase")
+            return make_phase()
+
+        return phase
+
+    source = to_netcdf(make_tagged(), tmp_path / "a.nc")
+    monkeypatch.setattr("harpx.imaging.harp.extract_phase", warn_then(True))
+    assert main(["phase", str(source), str(tmp_path / "b.nc")]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err[:2] == ["harpx phase: warning: tag 'x' looks odd", "second line"]
+    assert err[2:] == ["harpx phase: error: bad phase"]
+    monkeypatch.setattr("harpx.imaging.harp.extract_phase", warn_then(False))
+    assert main(["phase", str(source), str(tmp_path / "b.nc")]) == 0
+    captured = capsys.readouterr()
+    assert captured.err.startswith("harpx phase: warning: tag 'x' looks odd")
+    assert captured.out.strip() == f"wrote {tmp_path / 'b.nc'}"
