@@ -17,6 +17,7 @@ a rule fails the test until its place is decided.
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
 
 import pytest
@@ -102,3 +103,74 @@ def test_the_scan_sees_a_forbidden_import(tmp_path):
     bad = tmp_path / "bad.py"
     bad.write_text("from harpx.tracking.track import track\nimport harpx.scenes.lv\n")
     assert _harpx_imports(bad) == {"tracking", "scenes"}
+
+
+def _module_name(path: Path) -> str:
+    rel = path.relative_to(PACKAGE.parent).with_suffix("")
+    parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
+    return ".".join(parts)
+
+
+def _module_graph() -> dict[str, set[str]]:
+    """harpx module -> harpx modules it imports (submodules named in ``from a import b``
+    count as imports of ``a.b``; package ``__init__`` files are left out as targets, since
+    importing a submodule runs its package first by Python's rules, not by choice)."""
+    names = {_module_name(p): p for p in MODULES}
+    graph: dict[str, set[str]] = {}
+    for name, path in names.items():
+        found: set[str] = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                found.update(a.name for a in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                found.add(node.module)
+                found.update(f"{node.module}.{a.name}" for a in node.names)
+        graph[name] = {m for m in found if m in names and m != name}
+        graph[name] -= {m for m in graph[name] if names[m].name == "__init__.py"}
+    return graph
+
+
+def test_no_import_circle_between_modules():
+    # Tarjan's strongly connected components: a component of more than one module is a circle
+    graph = _module_graph()
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    circles: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                circles.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    assert not circles, circles
+
+
+def test_the_circle_check_sees_a_circle(tmp_path, monkeypatch):
+    # the guard itself: two modules importing each other form one component
+    a, b = tmp_path / "a.py", tmp_path / "b.py"
+    a.write_text("from harpx.b import f\n")
+    b.write_text("import harpx.a\n")
+    monkeypatch.setattr(sys.modules[__name__], "PACKAGE", tmp_path / "harpx")
+    (tmp_path / "harpx").mkdir()
+    a.rename(tmp_path / "harpx" / "a.py")
+    b.rename(tmp_path / "harpx" / "b.py")
+    monkeypatch.setattr(sys.modules[__name__], "MODULES", sorted((tmp_path / "harpx").glob("*.py")))
+    assert _module_graph() == {"harpx.a": {"harpx.b"}, "harpx.b": {"harpx.a"}}
