@@ -62,6 +62,12 @@ class PlotMethods:
 
         return bullseye(self._ds, **kwargs)
 
+    def segment_curves(self, **kwargs: Any) -> Any:
+        """AHA segment strain over time by ring. See Also: harpx.plotting.segment_curves."""
+        from harpx.plotting import segment_curves
+
+        return segment_curves(self._ds, **kwargs)
+
 
 @xr.register_dataset_accessor("harp")
 class HarpAccessor:
@@ -167,7 +173,13 @@ class HarpAccessor:
         return tracking_error(self._ds, truth, where=where)
 
     def cardiac_strain(
-        self, template: Any, *, anterior: float = 0.0, body: xr.DataArray | None = None
+        self,
+        template: Any,
+        *,
+        anterior: float | None = None,
+        body: xr.DataArray | None = None,
+        min_coverage: float = 0.1,
+        heart_size: tuple[float, float] = (20.0, 150.0),
     ) -> xr.Dataset:
         """LV-frame strain, AHA segments, twist and torsion.
 
@@ -177,7 +189,14 @@ class HarpAccessor:
         """
         from harpx.cardiac.strain import cardiac_strain
 
-        return cardiac_strain(self._ds, template, anterior=anterior, body=body)
+        return cardiac_strain(
+            self._ds,
+            template,
+            anterior=anterior,
+            body=body,
+            min_coverage=min_coverage,
+            heart_size=heart_size,
+        )
 
     def to_meshio(self, path: PathLike, *, series: Literal["vtu", "xdmf"] = "xdmf") -> list[Path]:
         """Write a tracked result as a ParaView time series (XDMF, or VTU files and a PVD).
@@ -189,3 +208,29 @@ class HarpAccessor:
         from harpx.io.mesh import to_meshio
 
         return to_meshio(self._ds, path, series=series)
+
+    def uncertainty(
+        self,
+        body: Any,
+        images: xr.Dataset,
+        *,
+        tagged: xr.Dataset | None = None,
+        dirichlet: Sequence[Any] = (),
+        terms: Sequence[Any] = (),
+        samples: int = 64,
+        seed: int | None = None,
+        keep_samples: bool = False,
+    ) -> xr.Dataset:
+        """Standard deviation of a tracked displacement due to the image noise.
+
+        See Also
+        --------
+        harpx.tracking.uncertainty.tracking_uncertainty
+        harpx.cardiac.uncertainty.segment_uncertainty : the AHA segment measures from it.
+        """
+        from harpx.tracking.uncertainty import tracking_uncertainty
+
+        return tracking_uncertainty(
+            self._ds, body, images, tagged=tagged, dirichlet=dirichlet, terms=terms,
+            samples=samples, seed=seed, keep_samples=keep_samples,
+        )  # fmt: skip

@@ -18,6 +18,7 @@ from harpx.mechanics.mesh import cylinder
 from harpx.scenes._motion import RotationalImpact
 from harpx.tracking.track import track
 from tests._ideal import ideal_phase
+from tests.cardiac._lv import TEMPLATE, fe_dataset
 
 
 @pytest.fixture(scope="module")
@@ -28,6 +29,15 @@ def tracked():
     fibers = np.tile([1.0, 0.0, 0.0], (mesh.mesh.nelements, 1))
     body = Body(mesh, NeoHookean(1.0, 120.0), fibers=fibers)
     return ds, track(ds, body)
+
+
+@pytest.fixture(scope="module")
+def cardiac():
+    """A cardiac strain result (10 % in-plane contraction of the LV template)."""
+    from harpx.cardiac.strain import cardiac_strain
+
+    ds = fe_dataset(lambda p: -0.1 * (p - TEMPLATE.centre) * [1.0, 1.0, 0.0])
+    return cardiac_strain(ds, TEMPLATE, anterior=0.0)
 
 
 @pytest.fixture(autouse=True)
@@ -78,7 +88,7 @@ def test_fiber_stretch_without_fibers_is_a_clear_error(tracked):
         result.drop_vars("fiber_stretch").harp.plot.fiber_stretch()
 
 
-def test_plotting_leaves_the_matplotlib_backend_alone(tracked):
+def test_plotting_leaves_the_matplotlib_backend_alone(tracked, cardiac):
     """Importing harpx.plotting and drawing keep the backend the user chose."""
     ds, result = tracked
     before = matplotlib.get_backend()
@@ -88,6 +98,8 @@ def test_plotting_leaves_the_matplotlib_backend_alone(tracked):
         ds.harp.plot.phase()
         result.harp.plot.displacement()
         harpx.plotting.error_vs_runtime([{"method": "a", "seconds": 1, "mean": 1, "p95": 2}])
+        cardiac.harp.plot.bullseye()
+        cardiac.harp.plot.segment_curves()
         assert matplotlib.get_backend() == "svg"
     finally:
         plt.switch_backend(before)
@@ -105,7 +117,7 @@ def _outside(fig) -> list[str]:
     return [side for side, out in sides.items() if out]
 
 
-def test_every_plot_keeps_its_titles_and_labels_inside_the_figure(tracked):
+def test_every_plot_keeps_its_titles_and_labels_inside_the_figure(tracked, cardiac):
     ds, result = tracked
     tagged = ds.copy()
     tagged["image"] = ds["magnitude"]
@@ -126,6 +138,8 @@ def test_every_plot_keeps_its_titles_and_labels_inside_the_figure(tracked):
         {"method": "FE penalty, hex8 4320 cells", "seconds": 103.3, "mean": 0.13, "p95": 0.34},
     ]
     figures["error_vs_runtime"] = harpx.plotting.error_vs_runtime(rows)
+    figures["bullseye"] = harpx.plotting.bullseye(cardiac)
+    figures["segment_curves"] = harpx.plotting.segment_curves(cardiac)
     # each single-axes plot has a title naming its frame
     assert axes["phase"].get_title() == "tag y, t = 36 ms, z = 0.0 mm"
     assert {name: _outside(fig) for name, fig in figures.items()} == dict.fromkeys(figures, [])

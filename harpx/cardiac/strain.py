@@ -17,13 +17,20 @@ AHA 17 segments
 Cerqueira et al. (2002): the cavity, from the endocardial apex :math:`z = -c_{endo}` to the
 base plane (template coordinates), is cut into basal, mid and apical thirds of equal length;
 the myocardium below the endocardial apex is segment 17 (apex). Basal (1–6) and mid (7–12)
-rings have six 60° sectors and the apical ring (13–16) four 90° sectors, numbered
-counter-clockwise about the long axis from the angle ``anterior`` (degrees from the
-template's +x axis; in a real heart the anterior right-ventricular insertion; the template
-has no right ventricle, so the caller sets it): basal and mid sector k spans
-``anterior + 60° (k-1) .. anterior + 60° k``, apical sector k is centred on
-``anterior + 90° (k-1)``. Segment values are volume-weighted means
-over the cells (or voxels) whose centre lies in the segment.
+rings have six 60° sectors and the apical ring (13–16) four 90° sectors. Segments 1, 7 and
+13 are centred on the anterior direction, the angle ``anterior`` (degrees about the long
+axis, right-handed about the apex-to-base axis, from the template's +x axis), and the
+numbers run counter-clockwise *seen from the apex*, as in the standard short-axis view and
+bull's-eye (anterior at the top, septum on the left): anterior, anteroseptal, inferoseptal,
+inferior, inferolateral, anterolateral. In the template's right-handed frame that is
+clockwise about its z axis: basal and mid sector k is centred on ``anterior - 60° (k-1)``,
+apical sector k on ``anterior - 90° (k-1)``, so the septum lies at ``anterior - 90°`` and the
+lateral wall at ``anterior + 90°``. The template has no right ventricle: ``anterior`` comes
+from the caller or from the template's ``anterior`` attribute when it has one (the
+direction of the anterior wall, e.g. midway between the right-ventricular insertions
+rotated by 90° towards the lateral wall). Segment values are volume-weighted means over the
+cells (or voxels) with image data whose centre lies in the segment; what that leaves out,
+and which components the tags observed, is described in :mod:`harpx.cardiac.quality`.
 
 Rotation, twist, torsion
 ------------------------
@@ -45,17 +52,29 @@ References
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike
 
-from harpx._typing import FloatArray, IntArray
+from harpx._typing import BoolArray, FloatArray, IntArray
+from harpx.cardiac.quality import (
+    HEART_SIZE_MM,
+    check_body,
+    check_template,
+    seen_fraction,
+    source_labels,
+    template_segment_volume,
+    user_stacklevel,
+)
+from harpx.errors import HarpxWarning
 
 __all__ = [
     "AHA_NAMES",
     "COMPONENTS",
+    "MIN_COVERAGE",
     "aha_segments",
     "cardiac_strain",
     "lv_measures",
@@ -70,6 +89,8 @@ AHA_NAMES = (
 )  # fmt: skip
 #: the normal strain components in the local frame
 COMPONENTS = ("radial", "circumferential", "longitudinal")
+#: least coverage (fraction of its template volume with data) for a segment to get a value
+MIN_COVERAGE = 0.1
 # trilinear corner signs (VTK order) for the cell-centre Jacobian of a hexahedron
 _SIGNS = (
     2.0
@@ -79,6 +100,22 @@ _SIGNS = (
     )
     - 1.0
 )
+
+
+def _segments_local(q: FloatArray, geometry: Any, anterior: float) -> IntArray:
+    """AHA segment of template-coordinate points ``q`` (n, 3), see the module notes."""
+    bottom, top = -geometry.inner[1], geometry.truncation
+    third = (top - bottom) / 3.0
+    # angle from the anterior direction, counter-clockwise seen from the apex (-z rotation)
+    turn = np.deg2rad(anterior) - np.arctan2(q[:, 1], q[:, 0])
+    six = np.floor(np.mod(turn + np.pi / 6.0, 2.0 * np.pi) / (np.pi / 3.0)).astype(np.int64) % 6
+    four = np.floor(np.mod(turn + np.pi / 4.0, 2.0 * np.pi) / (np.pi / 2.0)).astype(np.int64) % 4
+    z = q[:, 2]
+    return np.select(
+        [z < bottom, z < bottom + third, z < bottom + 2.0 * third],
+        [17, 13 + four, 7 + six],
+        default=1 + six,
+    ).astype(np.int64)
 
 
 def aha_segments(points: ArrayLike, template: Any, *, anterior: float = 0.0) -> IntArray:
@@ -91,13 +128,14 @@ def aha_segments(points: ArrayLike, template: Any, *, anterior: float = 0.0) -> 
     template : VentricleTemplate
         The fitted ventricle.
     anterior : float, default 0
-        Angle (degrees, about the long axis from the template's +x axis) where segment 1
-        starts.
+        Direction of the anterior wall (centre of segments 1, 7, 13), degrees about the
+        long axis (right-handed about the apex-to-base axis) from the template's +x axis.
 
     Returns
     -------
     ndarray of int, shape (n,)
-        Segment numbers 1..17 (points above the base plane count as basal).
+        Segment numbers 1..17, counter-clockwise seen from the apex (points above the base
+        plane count as basal).
 
     Examples
     --------
@@ -105,22 +143,33 @@ def aha_segments(points: ArrayLike, template: Any, *, anterior: float = 0.0) -> 
     >>> from harpx.anatomy.ventricle_fit import VentricleTemplate
     >>> from harpx.cardiac.strain import aha_segments
     >>> t = VentricleTemplate(VentricleGeometry((25.0, 70.0), (35.0, 78.0), 10.0))
+    >>> # anterior +x; the septum at -y, the lateral wall at +y; the apex
     >>> aha_segments([[30.0, 1.0, 0.0], [-1.0, -30.0, -40.0], [0.0, 0.0, -74.0]], t).tolist()
-    [1, 11, 17]
+    [1, 9, 17]
     """
     q = template.to_local(points)
-    g = template.geometry
-    bottom, top = -g.inner[1], g.truncation
-    third = (top - bottom) / 3.0
-    angle = np.mod(np.arctan2(q[:, 1], q[:, 0]) - np.deg2rad(anterior), 2.0 * np.pi)
-    six = np.floor(angle / (np.pi / 3.0)).astype(np.int64) % 6
-    four = np.floor(np.mod(angle + np.pi / 4.0, 2.0 * np.pi) / (np.pi / 2.0)).astype(np.int64) % 4
-    z = q[:, 2]
-    return np.select(
-        [z < bottom, z < bottom + third, z < bottom + 2.0 * third],
-        [17, 13 + four, 7 + six],
-        default=1 + six,
-    ).astype(np.int64)
+    return _segments_local(q, template.geometry, float(anterior))
+
+
+def _anterior(anterior: float | None, template: Any) -> tuple[float, str]:
+    """The anterior angle (degrees) and where it came from; warns when nobody knows it."""
+    if anterior is not None:
+        return float(anterior), "argument"
+    value = getattr(template, "anterior", None)
+    try:
+        if value is not None and np.isfinite(float(value)):
+            return float(value), "template"
+    except (TypeError, ValueError):
+        pass
+    warnings.warn(
+        "the anterior direction is unknown (no anterior= and the template has no 'anterior' "
+        "angle): the segments are numbered from the template's +x axis taken as anterior, "
+        "so names such as 'septal' or 'inferior' are not anatomical. Pass anterior= (degrees "
+        "about the long axis from the template's +x axis to the middle of the anterior wall)",
+        HarpxWarning,
+        stacklevel=user_stacklevel(),
+    )
+    return 0.0, "unknown (template +x axis)"
 
 
 def _local_strain(E: FloatArray, basis: tuple[FloatArray, ...]) -> FloatArray:
@@ -129,13 +178,66 @@ def _local_strain(E: FloatArray, basis: tuple[FloatArray, ...]) -> FloatArray:
     return np.einsum("nia,...nij,nja->...na", frame, E, frame)
 
 
-def _rotation(reference: FloatArray, current: FloatArray, template: Any) -> FloatArray:
+def _rotation(q0: FloatArray, current: FloatArray, template: Any) -> FloatArray:
     """Cardiac rotation (degrees, counter-clockwise seen from the apex), (time, n)."""
-    q0 = template.to_local(reference)
     q = np.stack([template.to_local(c) for c in current])  # a few frames
     cross = q0[None, :, 0] * q[..., 1] - q0[None, :, 1] * q[..., 0]
     dot = q0[None, :, 0] * q[..., 0] + q0[None, :, 1] * q[..., 1]
     return -np.rad2deg(np.arctan2(cross, dot))
+
+
+def _ranges(numbers: ArrayLike) -> str:
+    """``"1-4, 7"`` for [1, 2, 3, 4, 7]."""
+    k = [int(v) for v in np.asarray(numbers).ravel()]
+    parts, start = [], 0
+    for i in range(1, len(k) + 1):  # at most 17 segments
+        if i == len(k) or k[i] != k[i - 1] + 1:
+            parts.append(str(k[start]) if i - 1 == start else f"{k[start]}-{k[i - 1]}")
+            start = i
+    return ", ".join(parts)
+
+
+def _peak(values: FloatArray, times: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Signed value of largest magnitude over time (axis 0) and its time; NaN without data."""
+    finite = np.isfinite(values)
+    k = np.argmax(np.where(finite, np.abs(values), -1.0), axis=0)
+    any_ = finite.any(axis=0)
+    peak = np.where(any_, np.take_along_axis(values, k[None], axis=0)[0], np.nan)
+    return peak, np.where(any_, times[k], np.nan)
+
+
+def _warn_quality(coverage: FloatArray, has: BoolArray, source: Any, twist: str,
+                  min_coverage: float) -> str:  # fmt: skip
+    """Warn about segments without data and components the tags did not see; the summary."""
+    empty = np.flatnonzero(~has) + 1
+    if empty.size:
+        named = ", ".join(f"{k} {AHA_NAMES[k - 1]} ({coverage[k - 1]:.2f})" for k in empty)
+        warnings.warn(
+            f"no image data in AHA segment(s) {_ranges(empty)}: {named} (coverage, the "
+            f"fraction of the segment's template volume with data, below {min_coverage:g}); "
+            "their values are NaN (listed in attrs['segments_without_data'])",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
+    unseen = []
+    for c, name in enumerate(COMPONENTS):  # three components
+        for label in ("inferred", "partly inferred"):
+            segs = np.flatnonzero(source[:, c] == label) + 1
+            if segs.size:
+                unseen.append(f"{name} strain {label} in segment(s) {_ranges(segs)}")
+    if twist in ("inferred", "partly inferred"):
+        unseen.append(f"rotation, twist and torsion {twist}")
+    summary = "; ".join(unseen)
+    if unseen:
+        warnings.warn(
+            f"the tags did not observe every component: {summary}. There the values come "
+            "from the mechanical model, not from the images (see 'strain_source' and the "
+            "'source' attribute of rotation, twist and torsion); add tags along the unseen "
+            "direction (e.g. long-axis slices with a through-plane tag) to measure them",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
+    return summary
 
 
 def lv_measures(
@@ -146,7 +248,11 @@ def lv_measures(
     template: Any,
     *,
     time: ArrayLike,
-    anterior: float = 0.0,
+    anterior: float | None = None,
+    observed: ArrayLike | None = None,
+    has_data: ArrayLike | None = None,
+    min_coverage: float = MIN_COVERAGE,
+    heart_size: tuple[float, float] = HEART_SIZE_MM,
 ) -> xr.Dataset:
     """Segment strains, peaks, rotations, twist and torsion from strains at wall points.
 
@@ -164,8 +270,20 @@ def lv_measures(
         The fitted ventricle (local frame and segments).
     time : array_like, shape (ntime,)
         Frame times, ms.
-    anterior : float, default 0
-        Start angle of segment 1, degrees (see :func:`aha_segments`).
+    anterior : float, optional
+        Direction of the anterior wall, degrees (see :func:`aha_segments`); default the
+        template's ``anterior`` attribute, else 0 with a :class:`~harpx.errors.HarpxWarning`.
+    observed : array_like, shape (n, 3), optional
+        Fraction of the image axes x, y, z that the tags see at each point (the tracker's
+        ``observed_fraction``); default not recorded.
+    has_data : array_like of bool, shape (n,), optional
+        Points with image data (default all); the others are left out of every mean.
+    min_coverage : float, default :data:`MIN_COVERAGE`
+        Segments whose points with data fill less than this fraction of their template
+        volume get NaN.
+    heart_size : tuple of 2 float, default (20, 150)
+        Plausible extent of the ventricle, mm (see
+        :func:`~harpx.cardiac.quality.check_template`).
 
     Returns
     -------
@@ -173,63 +291,100 @@ def lv_measures(
         ``segment_strain`` and ``segment_engineering_strain`` (time, segment, component);
         ``peak_strain`` and ``peak_engineering_strain`` (segment, component): the signed
         value of largest magnitude over the frames, with ``peak_time`` (ms);
-        ``segment_volume`` (segment, mm³); ``rotation`` (time, level) in degrees for the
-        ``"base"`` and ``"apex"`` levels, ``twist`` (time, degrees) and ``torsion``
-        (time, degrees/mm); coordinates ``segment`` (1..17), ``segment_name``,
-        ``component`` (radial, circumferential, longitudinal).
+        ``segment_volume`` (segment, mm³, of the points with data) and
+        ``segment_template_volume`` (mm³); ``strain_observed_fraction`` (segment,
+        component): mean fraction of the component's direction the tags see (NaN: not
+        recorded); ``rotation`` (time, level) in degrees for the ``"base"`` and ``"apex"``
+        levels, ``twist`` (time, degrees) and ``torsion`` (time, degrees/mm), each with
+        attributes ``source`` and ``observed_fraction``; coordinates ``segment`` (1..17),
+        ``segment_name``, ``segment_coverage`` (0..1), ``strain_source`` (segment,
+        component: ``"observed"``, ``"partly inferred"``, ``"inferred"``, ``"not
+        recorded"`` or ``"no data"``), ``component`` (radial, circumferential,
+        longitudinal); attributes ``anterior_deg``, ``anterior_source``,
+        ``segments_without_data`` (int array) and ``strain_inferred`` (summary, empty when
+        the tags saw everything). Segments without data are NaN throughout.
+
+    Raises
+    ------
+    TypeError
+        If ``template`` is not a ventricle template.
+    SchemaError
+        If the template's size is not a heart's in mm (metres, µm).
+    VentricleShapeError
+        If the points do not lie in the template's wall.
+
+    Warns
+    -----
+    HarpxWarning
+        When the anterior direction is unknown, when segments have no data (named), and when
+        the tags did not observe a component (named with its segments).
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     E = np.asarray(green_strain, dtype=np.float64)
     x = np.asarray(current, dtype=np.float64)
     w = np.asarray(weights, dtype=np.float64).reshape(-1)
     times = np.asarray(time, dtype=np.float64)
-    segment = aha_segments(p, template, anterior=anterior)
-    local = _local_strain(E, template.local_basis(p))  # (time, n, 3)
+    check_template(template, heart_size)
+    anterior_deg, anterior_source = _anterior(anterior, template)
+    q0 = template.to_local(p)
+    segment = _segments_local(q0, template.geometry, anterior_deg)
+    basis = template.local_basis(p)
+    local = _local_strain(E, basis)  # (time, n, 3)
     engineering = np.sqrt(np.maximum(1.0 + 2.0 * local, 0.0)) - 1.0
     valid = np.all(np.isfinite(local), axis=(0, 2)) & np.all(np.isfinite(x), axis=(0, 2))
-    onehot = (segment[:, None] == np.arange(1, 18)[None, :]) & valid[:, None]  # (n, 17)
+    check_body(p[valid], w[valid], template)
+    data = valid if has_data is None else valid & np.asarray(has_data, dtype=bool).reshape(-1)
+    seen = np.full((len(p), 3), np.nan) if observed is None else seen_fraction(basis, observed)
+    onehot = (segment[:, None] == np.arange(1, 18)[None, :]) & data[:, None]  # (n, 17)
     wseg = onehot * w[:, None]
     volume = wseg.sum(axis=0)
-    norm = np.where(volume > 0, volume, np.nan)
+    template_volume = template_segment_volume(template)
+    coverage = np.minimum(volume / template_volume, 1.0)
+    has = (coverage >= min_coverage) & (volume > 0)
+    norm = np.where(has, volume, np.nan)
 
     def by_segment(values: FloatArray) -> FloatArray:
-        return (
-            np.einsum("tnc,ns->tsc", np.where(valid[None, :, None], values, 0.0), wseg)
-            / norm[None, :, None]
-        )
+        """Volume-weighted segment means of (..., n, c) values -> (..., 17, c)."""
+        filled = np.where(data[:, None], values, 0.0)
+        return np.einsum("...nc,ns->...sc", filled, wseg) / norm[:, None]
 
     seg = by_segment(local)
     seg_eng = by_segment(engineering)
+    seg_seen = by_segment(seen)
+    source = source_labels(seg_seen, has[:, None])
+    peak_e, peak_t = _peak(seg, times)
+    peak_eng, _ = _peak(seg_eng, times)
 
-    def peak(values: FloatArray) -> tuple[FloatArray, FloatArray]:
-        filled = np.where(np.isfinite(values), np.abs(values), -1.0)
-        k = np.argmax(filled, axis=0)  # (segment, component)
-        return np.take_along_axis(values, k[None], axis=0)[0], times[k]
+    rot = _rotation(q0, x, template)
+    levels = {"base": (segment <= 6) & data, "apex": (segment >= 13) & (segment <= 16) & data}
 
-    peak_e, peak_t = peak(seg)
-    peak_eng, _ = peak(seg_eng)
-    rot = _rotation(p, x, template)
-    levels = {"base": (segment <= 6) & valid, "apex": (segment >= 13) & (segment <= 16) & valid}
-    level_rot = np.stack(
-        [
-            (rot[:, m] * w[m]).sum(axis=1) / w[m].sum() if m.any() else np.full(len(times), np.nan)
-            for m in levels.values()
-        ],
-        axis=1,
-    )  # two levels
-    zq = template.to_local(p)[:, 2]
-    height = [
-        float((zq[m] * w[m]).sum() / w[m].sum()) if m.any() else np.nan for m in levels.values()
-    ]
+    def level_mean(values: FloatArray, m: BoolArray) -> FloatArray:
+        """Volume-weighted mean over the points ``m`` along the last axis (NaN if none)."""
+        if not m.any():
+            return np.full(values.shape[:-1], np.nan)
+        return np.asarray((values[..., m] * w[m]).sum(axis=-1) / w[m].sum())
+
+    level_rot = np.stack([level_mean(rot, m) for m in levels.values()], axis=1)
+    height = [float(level_mean(q0[:, 2], m)) for m in levels.values()]
     distance = height[0] - height[1]
     twist = level_rot[:, 1] - level_rot[:, 0]
+    # rotation needs the in-plane motion and which material sits in the plane (longitudinal)
+    level_seen = [level_mean(seen[:, 1:].T, m) for m in levels.values()]
+    twist_seen = float(np.min(level_seen)) if observed is not None else np.nan
+    twist_source = str(source_labels(twist_seen)) if np.isfinite(distance) else "no data"
+    summary = _warn_quality(coverage, has, source, twist_source, min_coverage)
+
     seg_coords = {
         "segment": ("segment", np.arange(1, 18), {"long_name": "AHA segment", "units": "1"}),
         "segment_name": ("segment", np.array(AHA_NAMES, dtype=str), {"long_name": "AHA name"}),
+        "segment_coverage": ("segment", coverage, {
+            "units": "1", "long_name": "fraction of the segment's template volume with data"}),
         "component": ("component", np.array(COMPONENTS, dtype=str), {"long_name": "direction"}),
+        "strain_source": (("segment", "component"), source, {
+            "long_name": "observed by the tags or inferred by the model"}),
         "level": ("level", np.array(list(levels), dtype=str), {"long_name": "short-axis level"}),
         "time": ("time", times, {"units": "ms", "long_name": "time"}),
-    }
+    }  # fmt: skip
     out = xr.Dataset(coords=seg_coords)
     dims3 = ("time", "segment", "component")
 
@@ -247,7 +402,13 @@ def lv_measures(
         peak_eng, ("segment", "component"), "1", "peak segment engineering strain"
     )
     out["peak_time"] = var(peak_t, ("segment", "component"), "ms", "time of peak strain")
-    out["segment_volume"] = var(volume, ("segment",), "mm3", "reference volume of segment")
+    out["segment_volume"] = var(volume, ("segment",), "mm3", "volume of the segment with data")
+    out["segment_template_volume"] = var(
+        template_volume, ("segment",), "mm3", "volume of the segment in the template"
+    )
+    out["strain_observed_fraction"] = var(
+        seg_seen, ("segment", "component"), "1", "mean fraction of the direction the tags see"
+    )
     out["rotation"] = var(
         level_rot, ("time", "level"), "degree", "rotation, counter-clockwise seen from apex"
     )
@@ -259,7 +420,14 @@ def lv_measures(
         "twist per base-apex distance",
     )
     out["torsion"].attrs["level_distance_mm"] = distance
-    out.attrs["anterior_deg"] = float(anterior)
+    for name in ("rotation", "twist", "torsion"):
+        out[name].attrs.update(source=twist_source, observed_fraction=twist_seen)
+    out.attrs.update(
+        anterior_deg=anterior_deg,
+        anterior_source=anterior_source,
+        segments_without_data=np.flatnonzero(~has).astype(np.int64) + 1,
+        strain_inferred=summary,
+    )
     return out
 
 
@@ -288,12 +456,40 @@ def _grid_strain(u: xr.DataArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     return pts, E, pts[None] + disp
 
 
+def _observation(tracked: xr.Dataset) -> tuple[FloatArray | None, BoolArray | None]:
+    """Per-cell seen fraction of x, y, z and cells with data of a finite-element result."""
+    if "observed_fraction" not in tracked:
+        return None, None
+    f = tracked["observed_fraction"].transpose("cell", "axis")
+    if "axis" in f.coords:
+        f = f.sel(axis=["x", "y", "z"])
+    observed = np.asarray(f.values, dtype=np.float64)
+    if "observed_directions" in tracked:
+        has = np.asarray(tracked["observed_directions"].values).reshape(-1) >= 1
+    else:
+        has = observed.sum(axis=1) > 0.0
+    return observed, has
+
+
+def _warn_not_recorded(what: str) -> None:
+    warnings.warn(
+        f"{what} does not record which directions its tags observed (no 'observed_fraction'): "
+        "strain_source is 'not recorded', and a component no tag saw (e.g. longitudinal "
+        "strain and twist with short-axis x/y tags only) would look measured. Track with "
+        "harpx.tracking.track, which records it per cell",
+        HarpxWarning,
+        stacklevel=user_stacklevel(),
+    )
+
+
 def cardiac_strain(
     tracked: xr.Dataset,
     template: Any,
     *,
-    anterior: float = 0.0,
+    anterior: float | None = None,
     body: xr.DataArray | None = None,
+    min_coverage: float = MIN_COVERAGE,
+    heart_size: tuple[float, float] = HEART_SIZE_MM,
 ) -> xr.Dataset:
     """Local-frame strain, AHA segment curves and peaks, twist and torsion of a result.
 
@@ -301,32 +497,50 @@ def cardiac_strain(
     ----------
     tracked : xarray.Dataset
         A finite-element ``tracked/1`` dataset (``points``, ``cells``, ``displacement``,
-        ``green_strain``), or any dataset with a displacement on the image grid
+        ``green_strain``; ``observed_fraction`` and ``observed_directions`` say what the
+        tags saw in each cell), or any dataset with a displacement on the image grid
         (``displacement_grid`` of conventional HARP, or the ``displacement_true`` of a
-        synthetic ``tagged/1`` dataset), whose strain is then taken by central differences
-        between voxel centres.
+        synthetic ``tagged/1`` dataset, taken as fully known), whose strain is then taken
+        by central differences between voxel centres.
     template : VentricleTemplate
         The fitted ventricle: local frame, segments and long axis (e.g.
-        ``fit_ventricle_to_mask(tagged).template``).
-    anterior : float, default 0
-        Start angle of segment 1 in degrees about the long axis from the template's +x
-        axis (see :func:`aha_segments`).
+        ``fit_ventricle_to_mask(tagged).template``), in mm.
+    anterior : float, optional
+        Direction of the anterior wall in degrees about the long axis from the template's
+        +x axis (see :func:`aha_segments`); default the template's ``anterior`` attribute.
     body : xarray.DataArray, optional
         For grid displacements: the voxels to use (``body >= 0.5``), default the
         ``body`` variable of the dataset when present, else every finite voxel.
+    min_coverage : float, default :data:`MIN_COVERAGE`
+        Segments whose cells (voxels) with data fill less than this fraction of their
+        template volume are NaN.
+    heart_size : tuple of 2 float, default (20, 150)
+        Plausible extent of the ventricle in mm; pass smaller bounds for small animals.
 
     Returns
     -------
     xarray.Dataset
         ``tracked`` with the variables of :func:`lv_measures` added, plus, for a
         finite-element result, ``strain_lv`` and ``engineering_strain_lv`` (time, cell,
-        component) and ``aha_segment`` (cell); for a grid result ``aha_segment_grid``
-        (z, y, x, 0 outside the voxels used).
+        component), ``strain_lv_observed`` (cell, component: fraction of each direction
+        the cell's tags see, when recorded) and ``aha_segment`` (cell); for a grid result
+        ``aha_segment_grid`` (z, y, x, 0 outside the voxels used). Finite-element cells
+        without tag data (``observed_directions`` 0) count as cells without data.
 
     Raises
     ------
     ValueError
         If the dataset holds neither a finite-element result nor a grid displacement.
+    SchemaError
+        If the template is not a heart's size in mm (coordinates in metres or µm).
+    VentricleShapeError
+        If the body is not the template's wall (e.g. a cylinder, or another ventricle).
+
+    Warns
+    -----
+    HarpxWarning
+        Segments without data (NaN), components the tags did not observe, an unknown
+        anterior direction, or a dataset that does not record what its tags observed.
     """
     if "time" not in tracked.coords:
         raise ValueError(
@@ -334,6 +548,10 @@ def cardiac_strain(
             "with a 'time' coordinate (ms); this dataset has none"
         )
     times = np.asarray(tracked["time"].values, dtype=np.float64)
+    options: dict[str, Any] = {
+        "time": times, "anterior": anterior, "min_coverage": min_coverage,
+        "heart_size": heart_size,
+    }  # fmt: skip
     fe = (
         {"points", "cells", "displacement", "green_strain"} <= set(tracked.variables)
         and tracked["cells"].attrs.get("element", "hex8") != "points"
@@ -346,13 +564,18 @@ def cardiac_strain(
         centres = pts[cells[:, :8]].mean(axis=1)
         current = (pts[None] + disp)[:, cells[:, :8]].mean(axis=2)
         E = np.asarray(tracked["green_strain"].transpose("time", "cell", "i", "j").values)
+        observed, has_data = _observation(tracked)
+        if observed is None:
+            _warn_not_recorded("this finite-element dataset")
         measures = lv_measures(
-            centres, E, current, _cell_weights(pts, cells), template, time=times,
-            anterior=anterior,
+            centres, E, current, _cell_weights(pts, cells), template, observed=observed,
+            has_data=has_data, **options,
         )  # fmt: skip
-        local = _local_strain(E, template.local_basis(centres))
+        basis = template.local_basis(centres)
+        local = _local_strain(E, basis)
         dims = ("time", "cell", "component")
         out = tracked.assign_coords(measures.coords).assign(measures.data_vars)
+        out.attrs.update(measures.attrs)
         out["strain_lv"] = xr.DataArray(
             local, dims=dims,
             attrs={"units": "1", "long_name": "Green-Lagrange strain in the LV frame"},
@@ -361,9 +584,14 @@ def cardiac_strain(
             np.sqrt(np.maximum(1.0 + 2.0 * local, 0.0)) - 1.0, dims=dims,
             attrs={"units": "1", "long_name": "engineering strain in the LV frame"},
         )  # fmt: skip
+        if observed is not None:
+            out["strain_lv_observed"] = xr.DataArray(
+                seen_fraction(basis, observed), dims=("cell", "component"),
+                attrs={"units": "1", "long_name": "fraction of the direction the tags see"},
+            )  # fmt: skip
         out["aha_segment"] = xr.DataArray(
-            aha_segments(centres, template, anterior=anterior), dims="cell",
-            attrs={"units": "1", "long_name": "AHA segment"},
+            aha_segments(centres, template, anterior=measures.attrs["anterior_deg"]),
+            dims="cell", attrs={"units": "1", "long_name": "AHA segment"},
         )  # fmt: skip
         return out
     name = next((n for n in ("displacement_grid", "displacement_true") if n in tracked), None)
@@ -381,15 +609,19 @@ def cardiac_strain(
     if body is not None:
         use = np.asarray(body.transpose("z", "y", "x").values >= 0.5).ravel()
     finite = use & np.all(np.isfinite(E), axis=(0, 2, 3))
+    n = int(finite.sum())
+    if name == "displacement_grid":
+        _warn_not_recorded(f"'{name}' (method {tracked.attrs.get('method', 'unknown')!r})")
     spacing = [float(np.diff(u[d].values).mean()) for d in ("x", "y", "z")]
     measures = lv_measures(
-        pts[finite], E[:, finite], current[:, finite],
-        np.full(int(finite.sum()), float(np.prod(spacing))), template,
-        time=times, anterior=anterior,
+        pts[finite], E[:, finite], current[:, finite], np.full(n, float(np.prod(spacing))),
+        template, observed=np.ones((n, 3)) if name == "displacement_true" else None,
+        **options,
     )  # fmt: skip
     seg = np.zeros(len(pts), dtype=np.int64)
-    seg[finite] = aha_segments(pts[finite], template, anterior=anterior)
+    seg[finite] = aha_segments(pts[finite], template, anterior=measures.attrs["anterior_deg"])
     out = tracked.assign_coords(measures.drop_vars("time").coords).assign(measures.data_vars)
+    out.attrs.update(measures.attrs)
     shape = tuple(u.sizes[d] for d in ("z", "y", "x"))
     out["aha_segment_grid"] = xr.DataArray(
         seg.reshape(shape), dims=("z", "y", "x"),

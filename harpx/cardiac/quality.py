@@ -1,0 +1,291 @@
+r"""What a cardiac strain result can claim: input checks, segment coverage, observed directions.
+
+Input checks
+------------
+Strain in the ventricle's frame only means something for a left ventricle described by its
+template, in mm. :func:`check_template` refuses a template whose size is not a heart's
+(:data:`HEART_SIZE_MM`, the larger of the epicardial diameter :math:`2 a_{epi}` and the
+length :math:`c_{epi} + z_b` from the epicardial apex to the base plane); metres or µm are
+named with the conversion. :func:`check_body` refuses a body that is not the template's
+wall: at least :data:`IN_WALL_FRACTION` of its volume must lie within the fitted wall, that
+is at a transmural fraction :math:`-\tau \le t \le 1 + \tau` and at most :math:`\tau h` above
+the base plane, with :math:`\tau` = :data:`WALL_TOLERANCE` and :math:`h = a_{epi} -
+a_{endo}` the equatorial wall thickness. A solid cylinder filling the cavity (:math:`t < 0`)
+or a mesh in the wrong units fails.
+
+Coverage
+--------
+The template volume of AHA segment :math:`k` is exact for the truncated ellipsoidal wall
+(a body of revolution cut by the planes of the segment's ring and by its sector):
+
+.. math::
+
+    V(z_1, z_2) = \pi \left[a_{epi}^2 \left(\Delta z - \frac{z_2^3 - z_1^3}{3 c_{epi}^2}\right)
+    - a_{endo}^2 \left(\Delta z - \frac{z_2^3 - z_1^3}{3 c_{endo}^2}\right)\right]
+
+for a ring between :math:`-c_{endo} \le z_1 < z_2`, times :math:`1/6` (basal and mid
+sectors) or :math:`1/4` (apical sectors); the apex (17) is the epicardial cap below
+:math:`z = -c_{endo}`. A segment's *coverage* is the volume of its cells (or voxels) that
+have image data, divided by that template volume and capped at 1 (cells are assigned by
+their centre, so a coarse mesh can put a little more than a segment's volume in it).
+
+Observed and inferred directions
+--------------------------------
+A tag measures motion along its wave vector only; the tracker stores, per cell, the
+fraction of each image axis its tags see, :math:`f_a = |P e_a|^2` (``observed_fraction``,
+:mod:`harpx.tracking.observability`), :math:`P` the projector onto the seen directions. The
+fraction of a local direction :math:`e` (radial, circumferential or longitudinal) that the
+tags see is taken as
+
+.. math::
+
+    s(e) = \sum_a e_a^2 f_a ,
+
+which equals :math:`|P e|^2` whenever the seen subspace is spanned by image axes or is a
+whole image plane (x/y tags of short-axis slices, x/y/z tags: the usual acquisitions), and
+approximates it otherwise. A normal strain :math:`E_{ee}` needs the motion along :math:`e`,
+so a segment's component is *observed* when the volume-weighted mean of :math:`s(e)` over
+its cells with data is at least :data:`OBSERVED_MIN`, *inferred* (the model's guess) below
+:data:`INFERRED_BELOW`, and *partly inferred* in between. Rotation, twist and torsion are
+the in-plane motion of material points at the basal and apical levels; which material sits
+in an imaged plane depends on the through-plane (longitudinal) motion, so they count as
+observed only where both the circumferential and the longitudinal directions are.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from harpx._typing import BoolArray, FloatArray
+from harpx.errors import HarpxError, SchemaError
+
+__all__ = [
+    "HEART_SIZE_MM",
+    "INFERRED_BELOW",
+    "IN_WALL_FRACTION",
+    "OBSERVED_MIN",
+    "WALL_TOLERANCE",
+    "VentricleShapeError",
+    "check_body",
+    "check_template",
+    "seen_fraction",
+    "source_labels",
+    "template_segment_volume",
+]
+
+#: plausible extent of a (human or large-animal) left ventricle, mm
+HEART_SIZE_MM = (20.0, 150.0)
+#: transmural tolerance of the wall test, in wall thicknesses
+WALL_TOLERANCE = 0.3
+#: least fraction of a body's volume that must lie within the template's wall
+IN_WALL_FRACTION = 0.8
+#: least mean seen fraction of a direction for a component to count as observed
+OBSERVED_MIN = 0.9
+#: below this mean seen fraction a component is the model's inference
+INFERRED_BELOW = 0.5
+
+
+class VentricleShapeError(HarpxError, ValueError):
+    """The body is not the wall of the left-ventricle template it is analysed with."""
+
+
+def user_stacklevel() -> int:
+    """``stacklevel`` for :func:`warnings.warn` that names the first caller outside harpx."""
+    frame = sys._getframe(1)
+    level = 1
+    while frame.f_back is not None and frame.f_globals.get("__name__", "").startswith("harpx."):
+        frame = frame.f_back
+        level += 1
+    return level
+
+
+def _extent(template: Any) -> float:
+    g = template.geometry
+    return float(max(2.0 * g.outer[0], g.outer[1] + g.truncation))
+
+
+def check_template(template: Any, heart_size: tuple[float, float] = HEART_SIZE_MM) -> None:
+    """Refuse what is not a ventricle template of a heart's size in mm.
+
+    Parameters
+    ----------
+    template : VentricleTemplate
+        Fitted ventricle (:class:`~harpx.anatomy.ventricle_fit.VentricleTemplate`).
+    heart_size : tuple of 2 float, default :data:`HEART_SIZE_MM`
+        Least and largest plausible extent of the ventricle, mm (the larger of its
+        epicardial diameter and its apex-to-base length).
+
+    Raises
+    ------
+    TypeError
+        If ``template`` has no ``geometry``, ``to_local`` or ``local_basis``.
+    SchemaError
+        If the ventricle's extent is outside ``heart_size`` (the message names metres or
+        µm and the conversion).
+    """
+    missing = [n for n in ("geometry", "to_local", "local_basis") if not hasattr(template, n)]
+    if missing:
+        raise TypeError(
+            f"template must be a VentricleTemplate (e.g. fit_ventricle_to_mask(mask).template); "
+            f"got a {type(template).__name__} without {', '.join(missing)}"
+        )
+    size = _extent(template)
+    lo, hi = (float(v) for v in heart_size)
+    if lo <= size <= hi:
+        return
+    if size < lo:
+        hint = (
+            "coordinates in metres? multiply every coordinate by 1000"
+            if size * 1000.0 >= lo
+            else "coordinates in cm? multiply by 10"
+            if size * 10.0 >= lo
+            else "check the units of the coordinates"
+        )
+    else:
+        hint = (
+            "coordinates in µm? divide every coordinate by 1000"
+            if size / 1000.0 <= hi
+            else "check the units of the coordinates"
+        )
+    raise SchemaError(
+        f"the ventricle template is {size:.4g} across, but harpx works in mm and a left "
+        f"ventricle is {lo:g}-{hi:g} mm across ({hint}: the images' x, y, z and the mesh "
+        "points, then fit the template again); for a small-animal heart pass "
+        "heart_size=(lo, hi) in mm"
+    )
+
+
+def check_body(points: FloatArray, weights: FloatArray, template: Any) -> None:
+    """Refuse a body whose volume does not lie in the template's wall.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        Cell or voxel centres, mm.
+    weights : ndarray, shape (n,)
+        Their volumes, mm³.
+    template : VentricleTemplate
+        The fitted ventricle.
+
+    Raises
+    ------
+    VentricleShapeError
+        If less than :data:`IN_WALL_FRACTION` of the volume lies within the wall (see the
+        module notes), naming where the rest lies (cavity, outside, above the base) and,
+        when the body is a thousand times larger or smaller than the template, the units.
+    """
+    if len(points) == 0:
+        raise VentricleShapeError("the body has no cells or voxels with a finite strain")
+    g = template.geometry
+    q = template.to_local(points)
+    t = g.transmural(q)
+    wall = g.outer[0] - g.inner[0]
+    cavity = t < -WALL_TOLERANCE
+    outside = t > 1.0 + WALL_TOLERANCE
+    above = ~cavity & ~outside & (q[:, 2] > g.truncation + WALL_TOLERANCE * wall)
+    w = np.asarray(weights, dtype=np.float64)
+    total = float(w.sum())
+    fractions = {n: float(w[m].sum()) / total for n, m in
+                 (("in the cavity", cavity), ("outside the epicardium", outside),
+                  ("above the base plane", above))}  # fmt: skip
+    inside = 1.0 - sum(fractions.values())
+    if inside >= IN_WALL_FRACTION:
+        return
+    span = float(np.ptp(points, axis=0).max()) if len(points) > 1 else 0.0
+    ratio = span / _extent(template)
+    units = (
+        f" The body spans {span:.4g} against the template's {_extent(template):.4g} mm: "
+        "are the mesh points or the image coordinates in metres or µm rather than mm?"
+        if ratio < 0.01 or ratio > 100.0
+        else ""
+    )
+    where = ", ".join(f"{100 * f:.0f} % {n}" for n, f in fractions.items() if f > 0.0)
+    raise VentricleShapeError(
+        f"only {100 * inside:.0f} % of the body's volume lies in the wall of the ventricle "
+        f"template ({where}; at least {100 * IN_WALL_FRACTION:.0f} % is needed, with a "
+        f"tolerance of {WALL_TOLERANCE:g} wall thickness): this is not the left ventricle the "
+        "template describes. Analyse a body meshed from the template or from the same "
+        f"segmentation it was fitted to.{units}"
+    )
+
+
+def _ring_volume(template: Any, z1: float, z2: float) -> float:
+    g = template.geometry
+    (ai, ci), (ao, co) = g.inner, g.outer
+
+    def layer(a: float, c: float, lo: float, hi: float) -> float:
+        return float(np.pi * a**2 * ((hi - lo) - (hi**3 - lo**3) / (3.0 * c**2)))
+
+    return layer(ao, co, z1, z2) - layer(ai, ci, z1, z2)
+
+
+def template_segment_volume(template: Any) -> FloatArray:
+    """Volume of each AHA segment of the template's wall (see the module notes).
+
+    Parameters
+    ----------
+    template : VentricleTemplate
+        The fitted ventricle; rings as in :func:`harpx.cardiac.strain.aha_segments`.
+
+    Returns
+    -------
+    ndarray, shape (17,)
+        Volumes in mm³, segment k at index k-1; they sum to the wall volume below the base.
+    """
+    g = template.geometry
+    ci, (ao, co) = g.inner[1], g.outer
+    bottom, top = -ci, g.truncation
+    edges = bottom + (top - bottom) * np.arange(4) / 3.0
+    apical, mid, basal = (_ring_volume(template, edges[k], edges[k + 1]) for k in range(3))
+    apex = float(np.pi * ao**2 * ((co - ci) - (co**3 - ci**3) / (3.0 * co**2)))
+    return np.array([basal / 6.0] * 6 + [mid / 6.0] * 6 + [apical / 4.0] * 4 + [apex])
+
+
+def seen_fraction(basis: tuple[FloatArray, ...], observed: ArrayLike) -> FloatArray:
+    """Fraction of each local direction that the tags see, ``sum_a e_a^2 f_a``.
+
+    Parameters
+    ----------
+    basis : tuple of 3 ndarray, shape (n, 3)
+        Unit radial, circumferential and longitudinal directions (image components).
+    observed : array_like, shape (n, 3)
+        Seen fraction of the image axes x, y, z (``observed_fraction``), in [0, 1].
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        Seen fraction of (e_r, e_c, e_l), in [0, 1].
+    """
+    f = np.clip(np.asarray(observed, dtype=np.float64), 0.0, 1.0)
+    frame = np.stack(basis, axis=1)  # (n, component, axis)
+    return np.clip(np.einsum("nca,na->nc", frame**2, f), 0.0, 1.0)
+
+
+def source_labels(fraction: ArrayLike, has_data: BoolArray | None = None) -> Any:
+    """``"observed"``, ``"partly inferred"``, ``"inferred"`` or ``"no data"`` per value.
+
+    Parameters
+    ----------
+    fraction : array_like
+        Mean seen fraction (NaN: not recorded).
+    has_data : ndarray of bool, optional
+        False where there is no data (label ``"no data"``), broadcast against ``fraction``.
+
+    Returns
+    -------
+    ndarray of str
+        Same shape as ``fraction``; ``"not recorded"`` where the fraction is NaN.
+    """
+    s = np.asarray(fraction, dtype=np.float64)
+    out = np.select(
+        [~np.isfinite(s), s >= OBSERVED_MIN, s >= INFERRED_BELOW],
+        ["not recorded", "observed", "partly inferred"],
+        default="inferred",
+    ).astype("<U15")
+    if has_data is not None:
+        out = np.where(np.broadcast_to(has_data, out.shape), out, "no data")
+    return out

@@ -1,0 +1,254 @@
+"""Comparison figures of the benchmarks and papers: methods against truth, run time, stretch."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import matplotlib.pyplot as plt
+import numpy as np
+import xarray as xr
+
+from harpx._typing import PathLike
+from harpx.errors import SchemaError
+from harpx.plotting._common import _magnitude, _require
+
+
+def displacement_maps(
+    results: Mapping[str, xr.Dataset],
+    truth: xr.Dataset,
+    *,
+    time: float,
+    z: float | None = None,
+    path: PathLike | None = None,
+) -> Any:
+    """Displacement magnitude and error maps on one slice, one column per method.
+
+    Like the paper's Fig. 1 c/d: the top row shows ``|u|`` of each method at ``time`` on the
+    slice nearest ``z``; the bottom row shows the error ``|u − u_true|`` against the truth.
+
+    Parameters
+    ----------
+    results : mapping of str to xarray.Dataset
+        Method name → ``tracked/1`` dataset with ``displacement_grid``.
+    truth : xarray.Dataset
+        Dataset with ``displacement_true``.
+    time : float
+        Frame time, ms (nearest frame).
+    z : float, optional
+        Slice position, mm (default: the middle slice).
+    path : path-like, optional
+        Write the figure here (PNG).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    SchemaError
+        If the dataset is not ``tracked/1`` (the message names the kind it is) or has no
+        ``displacement_grid`` (or ``truth`` has no ``displacement_true``).
+    """
+    if "displacement_true" not in truth.variables:
+        raise SchemaError(
+            "displacement_maps needs 'displacement_true' in truth (the images of a scene, "
+            "e.g. scene.tagged); this dataset has none"
+        )
+    for name, ds in results.items():
+        _require(ds, "tracked", ["displacement_grid"], f"displacement_maps (results[{name!r}])")
+    true = truth["displacement_true"].sel(time=time, method="nearest")
+    zsel = float(true.z[true.sizes["z"] // 2]) if z is None else z
+    true = true.sel(z=zsel, method="nearest")
+    ncol = len(results) + 1
+    fig, axes = plt.subplots(
+        2, ncol, figsize=(3.6 * ncol, 6.6), squeeze=False, layout="constrained"
+    )
+    vmax = float(np.nanmax(_magnitude(true)))
+    extent = [float(true.x[0]), float(true.x[-1]), float(true.y[0]), float(true.y[-1])]
+    axes[0, 0].imshow(_magnitude(true), origin="lower", extent=extent, vmin=0, vmax=vmax)
+    axes[0, 0].set_title("truth: |u| (mm)", fontsize=9)
+    axes[1, 0].axis("off")
+    for col, (name, ds) in enumerate(results.items(), start=1):
+        est = ds["displacement_grid"].sel(time=time, method="nearest")
+        est = (
+            est.interp(z=true.z, y=true.y, x=true.x)
+            if est.sizes["x"] != true.sizes["x"]
+            else est.sel(z=zsel, method="nearest")
+        )
+        mag = _magnitude(est)
+        im = axes[0, col].imshow(mag, origin="lower", extent=extent, vmin=0, vmax=vmax)
+        axes[0, col].set_title(f"{name}: |u| (mm)", fontsize=9)
+        err = _magnitude(est - true.values)
+        im2 = axes[1, col].imshow(
+            err, origin="lower", extent=extent, vmin=0, vmax=2.0, cmap="magma"
+        )
+        axes[1, col].set_title(
+            f"{name}: error (mm)\nslice mean {float(np.nanmean(err)):.2f}", fontsize=9
+        )
+    fig.colorbar(im, ax=axes[0, :].tolist(), shrink=0.8)
+    fig.colorbar(im2, ax=axes[1, 1:].tolist(), shrink=0.8)
+    fig.suptitle(f"t = {float(true.time):.0f} ms, z = {zsel:.1f} mm")
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig
+
+
+def error_vs_runtime(rows: Sequence[Mapping[str, Any]], *, path: PathLike | None = None) -> Any:
+    """Scatter of mean (and 95th percentile) error against wall time, one point per row.
+
+    Parameters
+    ----------
+    rows : sequence of mappings
+        Each with ``method`` (str), ``seconds`` (s), ``mean`` and ``p95`` (mm).
+    path : path-like, optional
+        Write the figure here (PNG).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    rows = list(rows)
+    # the legend sits below the axes (one line per row) so it never hides a point
+    fig, ax = plt.subplots(figsize=(6.5, 3.8 + 0.2 * len(rows)), layout="constrained")
+    for row in rows:
+        ax.errorbar(
+            row["seconds"],
+            row["mean"],
+            yerr=[[0], [row["p95"] - row["mean"]]],
+            fmt="o",
+            capsize=3,
+            label=row["method"],
+        )
+    ax.set_xscale("log")
+    ax.set_xlabel("wall time (s)")
+    ax.set_ylabel("displacement error (mm): mean, bar to p95")
+    ax.grid(alpha=0.3)
+    if rows:
+        fig.legend(fontsize=8, loc="outside lower center", ncol=1)
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig
+
+
+def opening_angle_view(result: Any, ax: Any = None, *, scale: float = 1.0) -> Any:
+    """Top view of a cut ring before (grey) and after the cut (black).
+
+    Parameters
+    ----------
+    result : OpeningAngle
+        Output of :func:`harpx.physiology.cut.opening_angle`.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw in (default: a new 4 × 4 in figure).
+    scale : float, default 1
+        Displacement magnification (dimensionless).
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    if ax is None:
+        _, ax = plt.subplots(figsize=(4, 4))
+    ring = result.ring
+    p0 = ring.nodes
+    p1 = ring.nodes + scale * result.u.reshape(-1, 3)[: len(ring.nodes)]
+    edges = ring.cells[:, [0, 1, 1, 2, 2, 3, 3, 0]].reshape(-1, 2)
+    for pts, colour, lw in ((p0, "0.7", 0.6), (p1, "k", 0.8)):
+        seg = pts[edges][:, :, :2]
+        ax.plot(seg[:, :, 0].T, seg[:, :, 1].T, color=colour, lw=lw)
+    for nodes, colour in zip(result.faces, ("tab:red", "tab:blue"), strict=True):
+        ax.plot(p1[nodes, 0], p1[nodes, 1], ".", color=colour, ms=4)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_title(f"opening angle {result.degrees:.1f}°")
+    return ax
+
+
+def plot_stretch_agreement(
+    comparison: xr.Dataset,
+    *,
+    path: PathLike | None = None,
+    truth: Mapping[str, float] | None = None,
+) -> Any:
+    """Tracked against simulated fibre stretch per muscle and per element (paper Fig. 3c).
+
+    Parameters
+    ----------
+    comparison : xarray.Dataset
+        Output of :func:`harpx.inverse.resimulate` with ``tracked=``.
+    path : str or Path, optional
+        Save the figure there (PNG, 150 dpi).
+    truth : dict of str to float, optional
+        True mean fibre stretch per region, drawn as a third bar.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Left: bars of the volume-weighted mean fibre strain λ − 1 per muscle in % (error
+        bars: sd over the muscle's cells); right: element-by-element scatter of the stretch
+        with the identity line.
+
+    Raises
+    ------
+    ValueError
+        If ``comparison`` has no tracked stretch.
+    """
+    if "stretch_tracked" not in comparison:
+        raise ValueError(
+            "'comparison' has no tracked stretch; run resimulate(..., tracked=tracked)"
+        )
+    from matplotlib.figure import Figure
+
+    names = [str(n) for n in comparison["region"].values]
+    fig = Figure(figsize=(10.0, 4.0), layout="constrained")
+    ax, ax2 = fig.subplots(1, 2)
+    x = np.arange(len(names))
+    bars: list[tuple[str, Any, Any]] = [
+        (
+            "tracked (images)",
+            comparison["stretch_tracked"].values,
+            comparison["stretch_tracked_sd"].values,
+        ),
+        (
+            "simulated (estimate)",
+            comparison["stretch_simulated"].values,
+            comparison["stretch_simulated_sd"].values,
+        ),
+    ]
+    if truth:
+        bars.append(("ground truth", np.array([truth.get(n, np.nan) for n in names]), None))
+    width = 0.8 / len(bars)
+    for k, (label, mean, sd) in enumerate(bars):  # two or three bar groups
+        ax.bar(
+            x + width * (k - (len(bars) - 1) / 2),
+            100.0 * (mean - 1.0),
+            width,
+            yerr=None if sd is None else 100.0 * sd,
+            capsize=3,
+            label=label,
+        )
+    ax.axhline(0.0, color="0.3", lw=0.8)
+    ax.set_xticks(x, names)
+    ax.set_ylabel("mean fibre strain λ − 1 (%)")
+    ax.set_title("fibre stretch per muscle")
+    ax.legend(fontsize=8, loc="lower right")
+    region_of_cell = comparison["region_label"].values
+    tr = comparison["fiber_stretch_tracked"].values
+    sim = comparison["fiber_stretch_simulated"].values
+    for k, n in enumerate(names):  # one colour per muscle
+        sel = region_of_cell == k
+        ax2.scatter(tr[sel], sim[sel], s=8, label=n)
+    both = np.concatenate([tr, sim])
+    lim = (float(np.nanmin(both)) - 0.01, float(np.nanmax(both)) + 0.01)
+    ax2.plot(lim, lim, color="0.3", lw=0.8)
+    ax2.set_xlim(lim)
+    ax2.set_ylim(lim)
+    ax2.set_xlabel("tracked fibre stretch")
+    ax2.set_ylabel("simulated fibre stretch")
+    r = float(comparison["correlation_all"]) if "correlation_all" in comparison else np.nan
+    ax2.set_title(f"per element (r = {r:.2f})")
+    ax2.legend(fontsize=8, markerscale=2)
+    if path is not None:
+        fig.savefig(path, dpi=150)
+    return fig
