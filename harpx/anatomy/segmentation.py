@@ -38,6 +38,7 @@ Units: mm throughout.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -48,15 +49,36 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
+from harpx.errors import HarpxError, HarpxWarning
 from harpx.io.labels import read_labels
 from harpx.mechanics.mesh import MeshSpec, hex_mesh, labelled_spec
 from harpx.mechanics.quality import MeshQuality, scaled_jacobian
 
 __all__ = [
+    "MAX_BYTES",
+    "MAX_LABELS",
+    "SegmentationError",
     "SegmentationMesh",
     "body_from_segmentation",
     "mesh_from_labels",
 ]
+
+#: Default largest number of distinct labels handled at once (a segmentation has a few; an
+#: intensity image passed as labels has thousands).
+MAX_LABELS = 64
+#: Default memory budget (bytes) of one :func:`mesh_from_labels` call, checked beforehand.
+MAX_BYTES = 4 * 2**30
+# memory estimate (bytes): per voxel of the padded volume and label (indicators, level set,
+# gradient, distance transforms), per cube of the bounding box (label fractions, cube
+# bookkeeping) and per cell of the mesh (vertices, skfem connectivity, smoothing graphs,
+# quality arrays); upper bounds of tracemalloc peaks on balls and shells
+_BYTES_PER_VOXEL = 8 * 8
+_BYTES_PER_VOXEL_LABEL = 8
+_BYTES_PER_BOX_CUBE = 24
+_BYTES_PER_BOX_CUBE_LABEL = 8
+_BYTES_PER_CELL = 5000
+# cubes sampled per pass (bounds the temporary sample arrays to ~30 MB)
+_CHUNK = 1 << 15
 
 #: VTK corner offsets (x, y, z) of a hexahedron in a structured grid
 _VTK_OFFSETS = np.array(
@@ -66,6 +88,15 @@ _VTK_OFFSETS = np.array(
 _SUBSAMPLES = 3
 
 FacetPredicate = Callable[[FloatArray, FloatArray], ArrayLike]
+
+
+class SegmentationError(HarpxError, ValueError):
+    """A label volume that cannot be meshed as asked.
+
+    Raised for a volume without foreground, one that is not a segmentation (implausibly many
+    distinct labels, e.g. an intensity image) and a mesh whose estimated memory exceeds the
+    budget; the message states the numbers and what to change.
+    """
 
 
 @dataclass(frozen=True)
@@ -97,26 +128,138 @@ def _axis(values: ArrayLike, name: str) -> tuple[float, float]:
     return float(v[0]), float(d[0])
 
 
-def _label_indicators(
-    values: FloatArray, names: Mapping[int, str] | None
-) -> tuple[list[int], FloatArray, dict[int, str]]:
-    """Labels present, their indicator volumes (nlabel, z, y, x) and their names."""
-    integral = values.dtype == bool or np.all(np.isclose(values, np.rint(values)))
+def _labels_present(values: Any) -> tuple[bool, list[int]]:
+    """Whether ``values`` are integer labels, and the non-zero labels (``[1]`` for a fraction)."""
+    integral = values.dtype == bool or bool(np.all(np.isclose(values, np.rint(values))))
     if not integral:
         if values.min() < 0 or values.max() > 1:
             raise ValueError(
                 f"labels are neither integers nor fractions in [0, 1] (range {values.min():.3g}"
                 f" .. {values.max():.3g}); pass an integer label volume or a tissue fraction"
             )
-        labels, indicators = [1], values[None].astype(np.float64)
-        default = {1: "body"}
-    else:
-        ints = np.rint(values).astype(np.int64)
-        labels = [int(v) for v in np.unique(ints) if v != 0]
-        indicators = np.stack([(ints == v).astype(np.float64) for v in labels])  # few labels
-        default = {v: f"label_{v}" for v in labels}
-    out = default | {int(k): str(v) for k, v in (names or {}).items()}
-    return labels, indicators, out
+        return False, [1] if values.max() > 0 else []
+    labels = np.unique(np.rint(values).astype(np.int64))
+    return True, [int(v) for v in labels if v != 0]
+
+
+def _padded(values: Any, first: IntArray, last: IntArray) -> FloatArray:
+    """Voxels ``first .. last`` (inclusive, (z, y, x) indices) of a volume, 0 beyond it."""
+    shape = np.asarray(values.shape)
+    a, b = np.maximum(first, 0), np.minimum(last, shape - 1)
+    inner = np.asarray(values[a[0] : b[0] + 1, a[1] : b[1] + 1, a[2] : b[2] + 1], dtype=np.float64)
+    pad = [(int(a[k] - first[k]), int(last[k] - b[k])) for k in range(3)]
+    return np.pad(inner, pad, mode="constant", constant_values=0.0)
+
+
+def _cube_ijk(ids: IntArray, n: IntArray) -> IntArray:
+    """(x, y, z) indices (m, 3) of cubes with flat ids (x fastest) on an ``n`` grid."""
+    ids = np.asarray(ids, dtype=np.int64)
+    return np.stack([ids % n[0], (ids // n[0]) % n[1], ids // (n[0] * n[1])], axis=1)
+
+
+def _cube_samples(ijk: IntArray, origin: FloatArray, h: float) -> FloatArray:
+    """The ``_SUBSAMPLES``³ sample points (m·27, 3) of cubes, mm."""
+    sub = (np.arange(_SUBSAMPLES) + 0.5) / _SUBSAMPLES
+    sz, sy, sx = np.meshgrid(sub, sub, sub, indexing="ij")
+    offsets = np.stack([sx.ravel(), sy.ravel(), sz.ravel()], axis=1)
+    return (origin + h * (ijk[:, None, :] + offsets[None])).reshape(-1, 3)
+
+
+def _margin(h: float, step_zyx: FloatArray, sigma: float) -> IntArray:
+    """Background voxels kept or padded around the meshed labels, per (z, y, x) axis.
+
+    Cubes reach 1.5 elements beyond the voxels and vertices move up to one more; the
+    Gaussian reaches 4 sigma.
+    """
+    return np.ceil(3.0 * h / step_zyx).astype(np.int64) + int(np.ceil(4.0 * sigma)) + 2
+
+
+def _estimate(
+    h: float, extent: IntArray, step_zyx: FloatArray, sigma: float, nlabel: int, volume: float
+) -> tuple[float, float, float]:
+    """Estimated bytes, box cubes and cells of a mesh at element size ``h`` (mm).
+
+    ``extent`` is the meshed labels' bounding box in voxels (z, y, x) and ``volume`` their
+    tissue volume, mm³.
+    """
+    voxels = float(np.prod((extent + 2 * _margin(h, step_zyx, sigma)).astype(np.float64)))
+    n = np.ceil(extent * step_zyx / h - 1e-9) + 2
+    box = float(np.prod(n))
+    cells = volume / h**3
+    needed = voxels * (_BYTES_PER_VOXEL + nlabel * _BYTES_PER_VOXEL_LABEL)
+    needed += box * (_BYTES_PER_BOX_CUBE + nlabel * _BYTES_PER_BOX_CUBE_LABEL)
+    return needed + cells * _BYTES_PER_CELL, box, cells
+
+
+def _check_size(
+    h: float,
+    extent: IntArray,
+    step_zyx: FloatArray,
+    sigma: float,
+    nlabel: int,
+    volume: float,
+    max_bytes: float,
+) -> None:
+    """Refuse a mesh whose estimated memory exceeds ``max_bytes``, naming a safe size."""
+    needed, box, cells = _estimate(h, extent, step_zyx, sigma, nlabel, volume)
+    if needed <= max_bytes:
+        return
+    sizes = h * 1.02 ** np.arange(1, 400)  # up to 2700 h, 2 % apart
+    fits = [
+        float(v)
+        for v in sizes
+        if _estimate(v, extent, step_zyx, sigma, nlabel, volume)[0] <= max_bytes
+    ]
+    if not fits:
+        raise SegmentationError(
+            f"the labelled volume ({int(np.prod(extent))} voxels around the tissue, {nlabel} "
+            f"labels) needs more than max_bytes={max_bytes / 2**30:.3g} GiB at any element "
+            "size; crop or downsample the labels (or raise max_bytes)"
+        )
+    raise SegmentationError(
+        f"element_size={h:g} mm gives about {cells:.3g} cells in a box of {box:.3g} cubes and "
+        f"needs about {needed / 2**30:.3g} GiB (more than max_bytes={max_bytes / 2**30:.3g} "
+        f"GiB); choose element_size >= {np.ceil(fits[0] * 100.0) / 100.0:.3g} mm (or raise "
+        "max_bytes)"
+    )
+
+
+def _surface_distance(
+    points: FloatArray,
+    level: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
+    phi: FloatArray,
+    lo: FloatArray,
+    step: FloatArray,
+) -> FloatArray:
+    """Distance (mm) of points from the 0.5 level of ``phi`` (see :func:`mesh_from_labels`)."""
+    x = points.copy()
+    todo = np.ones(len(x), dtype=bool)
+    for _ in range(12):  # Newton steps onto the level set, each at most one voxel
+        value, g = level(x[todo])
+        g2 = np.einsum("ni,ni->n", g, g)
+        done = np.abs(value) < 1e-4
+        ok = (g2 > 0) & ~done
+        delta = np.zeros_like(g)
+        delta[ok] = -(value[ok] / g2[ok])[:, None] * g[ok]
+        length = np.linalg.norm(delta, axis=1, keepdims=True)
+        delta *= np.minimum(1.0, float(step.min()) / np.maximum(length, 1e-300))
+        idx = np.nonzero(todo)[0]
+        x[idx] += delta
+        todo[idx[done | (g2 == 0)]] = False
+        if not todo.any():
+            break
+    value, _ = level(x)
+    out = np.linalg.norm(x - points, axis=1)
+    # where the smoothed level set is flat (far from the surface) Newton does not reach it:
+    # the Euclidean distance transform of the thresholded level set, to half a voxel
+    lost = np.abs(value) > 1e-3
+    if lost.any():
+        inside = phi >= 0.5
+        edt = ndi.distance_transform_edt(~inside, sampling=step[::-1])
+        edt = edt + ndi.distance_transform_edt(inside, sampling=step[::-1])
+        coarse = _sample(np.asarray(edt), points[lost], lo, step) - 0.5 * float(step.max())
+        out[lost] = np.maximum(coarse, 0.0)
+    return out
 
 
 def _sample(volume: FloatArray, points: FloatArray, lo: FloatArray, step: FloatArray) -> FloatArray:
@@ -151,8 +294,10 @@ def mesh_from_labels(
     min_quality: float = 0.2,
     boundaries: Mapping[str, FacetPredicate] | None = None,
     fibers: Callable[[FloatArray], ArrayLike] | None = None,
+    max_labels: int = MAX_LABELS,
+    max_bytes: float = MAX_BYTES,
 ) -> SegmentationMesh:
-    """Hexahedral mesh following the boundary of a labelled segmentation.
+    r"""Hexahedral mesh following the boundary of a labelled segmentation.
 
     Parameters
     ----------
@@ -180,20 +325,49 @@ def mesh_from_labels(
         centres (n, 3) in mm and outward unit normals (n, 3).
     fibers : callable, optional
         Fibre field ``fibers(points) -> (n, 3)`` evaluated at the cell centres (mm).
+    max_labels : int, default :data:`MAX_LABELS`
+        Largest number of distinct non-zero labels handled (all labels without
+        ``mesh_labels``; the meshed labels and those beside them with it): each costs one
+        indicator volume and one sampling pass.
+    max_bytes : float, default :data:`MAX_BYTES`
+        Memory budget in bytes; the need is estimated before anything large is allocated,
+        from the cubes of the bounding box and the expected cell count (tissue volume /
+        ``element_size``³).
 
     Returns
     -------
     SegmentationMesh
         ``spec``: regions named after the meshed labels, boundary facets named after the
         label on their outer side (``"exterior"`` for background) plus ``boundaries``;
-        ``quality``: the :class:`~harpx.mechanics.quality.MeshQuality` report.
+        ``quality``: the :class:`~harpx.mechanics.quality.MeshQuality` report, whose
+        ``max_boundary_offset`` (mm) is the largest distance of a boundary vertex from the
+        smoothed iso-surface :math:`\phi = \tfrac12`: the length of the Newton path
+        :math:`x \leftarrow x - (\phi - \tfrac12)\nabla\phi/|\nabla\phi|^2` onto it,
+        or, where :math:`\phi` is flat and Newton does not reach it, the Euclidean distance
+        transform of :math:`\phi \ge \tfrac12` less half the largest voxel step.
 
     Raises
     ------
+    SegmentationError
+        (a ``ValueError``) If the volume has no foreground, holds more than ``max_labels``
+        distinct labels (e.g. an intensity image), the estimated memory exceeds
+        ``max_bytes`` (the message names the smallest element size that fits) or no cube is
+        at least half covered.
     ValueError
-        If the element size, labels or quality bound are invalid, or no cube is covered.
+        If the element size, labels or quality bound are invalid.
     RuntimeError
         If a cell is inverted after all (never expected: the voxel mesh is the fallback).
+
+    Warns
+    -----
+    HarpxWarning
+        If a predicate of ``boundaries`` selects no facet.
+
+    Notes
+    -----
+    Voxels are taken to fill their extent: the volume is padded with background beyond its
+    grid, so the 0.5 level of the interpolated labels lies half a step beyond the outermost
+    voxel centres (the face of a slab of slices, not the centre of its last slice).
 
     Examples
     --------
@@ -221,42 +395,79 @@ def mesh_from_labels(
     values = np.asarray(da.values)
     if not np.all(np.isfinite(values)):
         raise ValueError("labels contain NaN or inf; fill them (e.g. labels.fillna(0))")
-    present, indicators, label_names = _label_indicators(values, names)
+    integral, present = _labels_present(values)
+    if not present:
+        raise SegmentationError(
+            f"labels {getattr(da, 'name', None) or ''!s} of shape {values.shape} hold no "
+            "foreground (every voxel is 0); pass the segmentation, not an empty mask"
+        )
+    if mesh_labels is None and len(present) > max_labels:
+        raise SegmentationError(
+            f"labels hold {len(present)} distinct non-zero values (more than max_labels="
+            f"{max_labels}), which looks like an intensity image rather than a segmentation; "
+            "pass an integer label volume, or mesh_labels=[...] to mesh only some labels"
+        )
     meshed = list(present) if mesh_labels is None else [int(v) for v in mesh_labels]
     missing = sorted(set(meshed) - set(present))
     if missing or not meshed:
         raise ValueError(
             f"mesh_labels={mesh_labels!r}: labels {missing!r} are not in the volume "
-            f"(present: {present!r})"
+            f"(present: {present[:20]!r}{' ...' if len(present) > 20 else ''})"
         )
-    is_meshed = np.isin(present, meshed)
-    foreground = indicators[is_meshed].sum(axis=0)
 
-    # 1. cubes over the bounding box of the meshed labels, one cube of margin
-    where = np.argwhere(foreground > 0)[:, ::-1]  # (n, 3) voxel indices as (x, y, z)
+    # the volume around the meshed labels, padded with background beyond the grid: each
+    # voxel fills its extent (half a step either side of its centre), so the 0.5 level of
+    # the linear interpolant lies on the outer voxel faces, also at the ends of the grid
+    meshed_voxels = np.isin(np.rint(values), meshed) if integral else values > 0
+    where = np.argwhere(meshed_voxels)  # (n, 3) voxel indices as (z, y, x)
     if where.size == 0:
-        raise ValueError(f"labels {meshed!r} cover no voxel; nothing to mesh")
-    box_lo = lo + (where.min(axis=0) - 0.5) * step
-    box_hi = lo + (where.max(axis=0) + 0.5) * step
+        raise SegmentationError(f"labels {meshed!r} cover no voxel; nothing to mesh")
+    step_zyx = step[::-1]
+    # the memory need, before anything large is allocated
+    tissue = float(meshed_voxels.sum()) * float(np.prod(step))  # mm³
+    extent = where.max(axis=0) - where.min(axis=0) + 1
+    nlabel = min(len(present), max_labels)
+    _check_size(h, extent, step_zyx, float(sigma), nlabel, tissue, max_bytes)
+    margin = _margin(h, step_zyx, float(sigma))
+    first = where.min(axis=0) - margin
+    last = where.max(axis=0) + margin
+    crop = _padded(values, first, last)
+    lo = lo + first[::-1] * step
+    if integral:
+        ints = np.rint(crop).astype(np.int64)
+        present = sorted(set(meshed) | {int(v) for v in np.unique(ints) if v != 0})
+        if len(present) > max_labels:
+            raise SegmentationError(
+                f"the labels to mesh {meshed[:20]!r} touch {len(present) - len(meshed)} other "
+                f"distinct values ({len(present)} > max_labels={max_labels}), which looks like "
+                "an intensity image rather than a segmentation; pass an integer label volume"
+            )
+    label_names = {v: ("body" if not integral else f"label_{v}") for v in present}
+    label_names |= {int(k): str(v) for k, v in (names or {}).items()}
+    is_meshed = np.isin(present, meshed)
+
+    # 1. cubes over the voxel extent of the meshed labels, one cube of margin
+    box_lo = lo + (margin[::-1] - 0.5) * step
+    box_hi = lo + (np.asarray(crop.shape[::-1]) - 1 - margin[::-1] + 0.5) * step
     n = np.ceil((box_hi - box_lo) / h - 1e-9).astype(np.int64) + 2  # cubes per axis (x, y, z)
     origin = 0.5 * (box_lo + box_hi) - 0.5 * n * h
-    s = _SUBSAMPLES
-    sub = (np.arange(s) + 0.5) / s
-    k, j, i = np.meshgrid(*(np.arange(m) for m in n[::-1]), indexing="ij")
-    corner = np.stack([i.ravel(), j.ravel(), k.ravel()], axis=1).astype(np.float64)
-    sz, sy, sx = np.meshgrid(sub, sub, sub, indexing="ij")
-    offsets = np.stack([sx.ravel(), sy.ravel(), sz.ravel()], axis=1)
-    samples = (origin + h * (corner[:, None, :] + offsets[None])).reshape(-1, 3)
-    fractions = np.stack(
-        [
-            _sample(ind, samples, lo, step).reshape(len(corner), -1).mean(axis=1)
-            for ind in indicators
-        ]
-    )  # (nlabel, ncube), one pass per label
+    indicators = (
+        np.stack([(ints == v).astype(np.float64) for v in present])  # a few labels
+        if integral
+        else crop[None].astype(np.float64)
+    )
+    foreground = indicators[is_meshed].sum(axis=0)
+    ncube = int(np.prod(n))
+    fractions = np.empty((len(present), ncube))
+    for start in range(0, ncube, _CHUNK):  # bounded temporary arrays
+        ids = np.arange(start, min(start + _CHUNK, ncube))
+        samples = _cube_samples(_cube_ijk(ids, n), origin, h)
+        for k, ind in enumerate(indicators):  # a few labels
+            fractions[k, ids] = _sample(ind, samples, lo, step).reshape(len(ids), -1).mean(axis=1)
     active = fractions[is_meshed].sum(axis=0) >= 0.5
     components, count = ndi.label(active.reshape(tuple(n[::-1])))
     if count == 0:
-        raise ValueError(
+        raise SegmentationError(
             f"no cube of {h:g} mm is at least half covered by labels {meshed!r}; choose a "
             "smaller element_size"
         )
@@ -264,7 +475,7 @@ def mesh_from_labels(
     keep = components.ravel() == 1 + int(np.argmax(sizes))
     dropped = int(active.sum() - keep.sum())
     cube_ids = np.nonzero(keep)[0]
-    cube_ijk = corner[cube_ids].astype(np.int64)  # (ncell, 3) as (x, y, z)
+    cube_ijk = _cube_ijk(cube_ids, n)  # (ncell, 3) as (x, y, z)
     meshed_ids = np.nonzero(is_meshed)[0]
     cell_label = np.asarray(present)[meshed_ids[np.argmax(fractions[meshed_ids][:, cube_ids], 0)]]
 
@@ -283,9 +494,9 @@ def mesh_from_labels(
     fverts = mesh.facets[:, bfacets].T  # (nb, 4)
     bverts = np.unique(fverts)
 
-    # level set and its gradient on the image grid
+    # level set and its gradient on the (padded) image grid
     phi = ndi.gaussian_filter(np.clip(foreground, 0.0, 1.0), sigma=float(sigma), mode="constant")
-    grad = np.gradient(phi, *step[::-1])  # d/dz, d/dy, d/dx
+    grad = np.gradient(phi, *step_zyx)  # d/dz, d/dy, d/dx
 
     def level(p: FloatArray) -> tuple[FloatArray, FloatArray]:
         g = np.stack([_sample(grad[2 - a], p, lo, step) for a in range(3)], axis=1)
@@ -335,8 +546,7 @@ def mesh_from_labels(
     quality = scaled_jacobian(x, cells)
     if np.any(quality <= 0):  # pragma: no cover - the voxel mesh is the fallback
         raise RuntimeError(f"{int((quality <= 0).sum())} inverted cells after smoothing")
-    value, g = level(x[bverts])
-    far = np.abs(value) / np.maximum(np.linalg.norm(g, axis=1), 1e-12)
+    far = _surface_distance(x[bverts], level, phi, lo, step)
     mesh = hex_mesh(x, cells)
 
     # names: regions from labels, facets from the label on their outer side
@@ -367,6 +577,15 @@ def mesh_from_labels(
         for name, predicate in boundaries.items():
             hit = np.asarray(predicate(centres, normals), dtype=bool)
             named[name] = np.sort(bfacets[hit]).astype(np.int64)
+            if not hit.any():
+                warnings.warn(
+                    f"boundary {name!r} selects none of the {len(bfacets)} boundary facets "
+                    "(its predicate is False everywhere); a load or condition on it would act "
+                    "on nothing: check the predicate (e.g. the template's base plane against "
+                    "the extent of the mask)",
+                    HarpxWarning,
+                    stacklevel=2,
+                )
     cell_fibers = None
     if fibers is not None:
         cell_fibers = np.asarray(fibers(x[cells].mean(axis=1)), dtype=np.float64)
@@ -410,7 +629,7 @@ def body_from_segmentation(
     from harpx.mechanics.body import Body
 
     mesh_keys = {"variable", "names", "mesh_labels", "smoothing", "sigma", "min_quality",
-                 "boundaries", "fibers"}  # fmt: skip
+                 "boundaries", "fibers", "max_labels", "max_bytes"}  # fmt: skip
     mesh_options = {k: v for k, v in options.items() if k in mesh_keys}
     body_options = {k: v for k, v in options.items() if k not in mesh_keys}
     result = mesh_from_labels(labels, element_size=element_size, **mesh_options)

@@ -45,6 +45,7 @@ from numpy.typing import ArrayLike
 from scipy import sparse
 
 from harpx._typing import FloatArray, IntArray
+from harpx.errors import HarpxError
 from harpx.mechanics import kinematics
 from harpx.mechanics.assembly import sparsity
 
@@ -54,6 +55,7 @@ if TYPE_CHECKING:
 __all__ = [
     "BodyForce",
     "Dirichlet",
+    "EmptyBoundaryError",
     "Fixed",
     "Prescribed",
     "Pressure",
@@ -89,6 +91,24 @@ class Dirichlet(Protocol):
         ...
 
 
+class EmptyBoundaryError(HarpxError, ValueError):
+    """A condition or load names a boundary that has no facet: it would act on nothing."""
+
+
+def _facets(body: Body, facet: Any, what: str) -> IntArray:
+    """Facet ids of ``facet``, refusing a named boundary without facets."""
+    facets = body.facets(facet)
+    if isinstance(facet, str) and facets.size == 0:
+        filled = sorted(k for k, v in body.boundaries.items() if len(v))
+        empty = sorted(k for k, v in body.boundaries.items() if not len(v))
+        raise EmptyBoundaryError(
+            f"{what} on boundary {facet!r}, which has no facets (empty boundaries: {empty!r}); "
+            f"it would constrain nothing. Non-empty boundaries: {filled!r}; name one of them, "
+            "or check how the boundary was built (e.g. a predicate that matched nothing)"
+        )
+    return facets
+
+
 def _components(components: Sequence[int]) -> tuple[int, ...]:
     comps = tuple(int(c) for c in components)
     if not comps or any(c not in (0, 1, 2) for c in comps) or len(set(comps)) != len(comps):
@@ -115,8 +135,14 @@ class Fixed:
         object.__setattr__(self, "components", _components(self.components))
 
     def dofs(self, body: Body) -> IntArray:
-        """Constrained dof ids."""
-        return body.facet_dofs(self.facet, self.components)
+        """Constrained dof ids.
+
+        Raises
+        ------
+        EmptyBoundaryError
+            If ``facet`` names a boundary without facets.
+        """
+        return body.facet_dofs(_facets(body, self.facet, "Fixed"), self.components)
 
     def values(self, body: Body, s: float) -> FloatArray:
         """Zeros (mm)."""
@@ -152,8 +178,14 @@ class Prescribed:
         object.__setattr__(self, "components", _components(self.components))
 
     def dofs(self, body: Body) -> IntArray:
-        """Constrained dof ids."""
-        return body.facet_dofs(self.facet, self.components)
+        """Constrained dof ids.
+
+        Raises
+        ------
+        EmptyBoundaryError
+            If ``facet`` names a boundary without facets.
+        """
+        return body.facet_dofs(_facets(body, self.facet, "Prescribed"), self.components)
 
     def values(self, body: Body, s: float) -> FloatArray:
         """Prescribed values (mm) of ``dofs(body)``."""
@@ -180,7 +212,7 @@ class _FacetQuadrature:
 
 def _facet_quadrature(body: Body, facet: Any) -> _FacetQuadrature:
     cache = body.__dict__.setdefault("_facet_quadrature", {})
-    facets = body.facets(facet)
+    facets = _facets(body, facet, "Pressure")
     key = facets.tobytes()
     if key in cache:
         return cache[key]
@@ -234,7 +266,13 @@ class Pressure:
     def residual_tangent(
         self, body: Body, u: FloatArray, s: float
     ) -> tuple[FloatArray, sparse.csr_matrix]:
-        """Residual contribution (mN) and consistent (non-symmetric) tangent."""
+        """Residual contribution (mN) and consistent (non-symmetric) tangent.
+
+        Raises
+        ------
+        EmptyBoundaryError
+            If ``facet`` names a boundary without facets.
+        """
         q = _facet_quadrature(body, self.facet)
         p = self.value(s)
         ue = np.asarray(u)[q.dofs]  # (nf, nb, 3)

@@ -144,3 +144,48 @@ def test_nifti_affine_becomes_lps_coordinates(monkeypatch, tmp_path):
     fake.load = lambda path: types.SimpleNamespace(dataobj=data, affine=oblique)
     with pytest.raises(ValueError, match="oblique affine"):
         read_labels(tmp_path / "mask.nii")
+
+
+@pytest.mark.parametrize(("element_size", "measured"), [(2.0, 0.789), (4.0, 1.548)])
+def test_max_boundary_offset_is_the_distance_to_the_smoothed_surface(element_size, measured):
+    # independent truth: along each boundary vertex's ray from the centre, bisect the
+    # trilinear interpolant of the smoothed ball for its 0.5 crossing (the surface is a
+    # sphere to within the voxel staircase, so the ray meets it nearly normally)
+    import scipy.ndimage as ndi
+
+    ball = (_radius() < R).astype(np.int64)
+    result = mesh_from_labels(_grid(ball), element_size=element_size)
+    phi = ndi.gaussian_filter(ball.astype(np.float64), 1.0, mode="constant")
+    mesh = result.spec.mesh
+    p = mesh.p[:, np.unique(mesh.facets[:, mesh.boundary_facets()])].T
+    radius = np.linalg.norm(p, axis=1)
+    lo, hi = np.full(len(p), R - 4.0), np.full(len(p), R + 3.0)
+    for _ in range(50):  # bisection to 1e-14 mm
+        mid = 0.5 * (lo + hi)
+        q = (p / radius[:, None]) * mid[:, None]
+        inside = ndi.map_coordinates(phi, (q[:, ::-1] - COORD[0]).T, order=1) > 0.5
+        lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
+    truth = float(np.abs(radius - 0.5 * (lo + hi)).max())
+    # both 0.789 and 1.548 mm; the Newton path stops within 1e-4 of phi = 1/2 (about 1e-3
+    # mm); it was |phi - 1/2| / |grad phi|, 25 % and 45 % too large here
+    assert result.quality.max_boundary_offset == pytest.approx(truth, abs=0.01)
+    assert truth == pytest.approx(measured, abs=0.01)
+
+
+def test_slab_of_slices_is_meshed_to_its_faces():
+    # 3 slices 6 mm apart of a disc: each voxel fills its 6 mm thickness, so the body spans
+    # z = -9 .. 9 mm, not only the slice centres -6 .. 6 mm
+    z = np.array([-6.0, 0.0, 6.0])
+    Z, Y, X = np.meshgrid(z, COORD, COORD, indexing="ij")
+    disc = xr.DataArray(
+        (X**2 + Y**2 < 100.0).astype(np.int64), dims=("z", "y", "x"),
+        coords={"z": z, "y": COORD, "x": COORD},
+    )  # fmt: skip
+    result = mesh_from_labels(disc, element_size=2.0)
+    zs = result.spec.mesh.p[2]
+    # measured -8.96 .. 8.96 (before: -7 .. 7, the voxel mesh's last cubes, with the level
+    # set cut off at the slice centres)
+    assert zs.min() == pytest.approx(-9.0, abs=0.3) and zs.max() == pytest.approx(9.0, abs=0.3)
+    # a distance (measured 1.29 mm at the rim, where the 6 mm slices are smoothed by one
+    # slice); it was 5e11 mm, a division by the zero gradient beyond the grid
+    assert 0.5 < result.quality.max_boundary_offset < 2.0
