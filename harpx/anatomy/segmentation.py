@@ -332,7 +332,7 @@ def mesh_from_labels(
     max_bytes : float, default :data:`MAX_BYTES`
         Memory budget in bytes; the need is estimated before anything large is allocated,
         from the cubes of the bounding box and the expected cell count (tissue volume /
-        ``element_size``³).
+        ``element_size`` cubed).
 
     Returns
     -------
