@@ -401,9 +401,12 @@ def _aha_segments(theta: FloatArray, sigma: FloatArray, sigma_cap: float) -> dic
     apical = ~apex & (sigma < 0.45)
     mid = (sigma >= 0.45) & (sigma < 0.75)
     basal = sigma >= 0.75
-    ang = np.mod(theta, 2.0 * np.pi)
-    six = np.floor(ang / (np.pi / 3.0)).astype(np.int64) % 6
-    four = np.floor(np.mod(ang + np.pi / 4.0, 2.0 * np.pi) / (np.pi / 2.0)).astype(np.int64) % 4
+    # the sectors of harpx.cardiac.strain.aha_segments with the anterior wall at +x:
+    # numbered counter-clockwise seen from the apex (a negative turn about +z), segments
+    # 1, 7 and 13 centred on +x
+    turn = -theta
+    six = np.floor(np.mod(turn + np.pi / 6.0, 2.0 * np.pi) / (np.pi / 3.0)).astype(np.int64) % 6
+    four = np.floor(np.mod(turn + np.pi / 4.0, 2.0 * np.pi) / (np.pi / 2.0)).astype(np.int64) % 4
     out: dict[str, IntArray] = {}
     for k in range(6):  # 17 named sets
         out[f"aha_{k + 1:02d}"] = np.nonzero(basal & (six == k))[0]
@@ -450,10 +453,14 @@ def ventricle(
     fiber_endo, fiber_epi : float, default 60, -60
         Helix angles in degrees at the endocardium and epicardium (linear in between).
     segments : bool, default True
-        Also name AHA-like segments ``"aha_01"`` ... ``"aha_17"`` (basal and mid rings of
-        six 60° sectors from θ = 0 at +x counter-clockwise, four apical 90° sectors
-        centred on the axes, the apex cap); the angular origin is arbitrary here (no
-        right ventricle).
+        Also name AHA-like segments ``"aha_01"`` ... ``"aha_17"``: basal and mid rings of
+        six 60° sectors and four apical 90° sectors numbered counter-clockwise seen from
+        the apex with segments 1, 7 and 13 centred on +x (the sectors of
+        :func:`harpx.cardiac.strain.aha_segments` with ``anterior=0``; the template has no
+        right ventricle, so +x stands for the anterior wall), and the apex cap. The rings
+        split the wall by arc length along the meridian, so near a ring border a cell may
+        fall in the neighbouring ring of the cardiac analysis, which splits the cavity's
+        length in thirds.
     curved : bool, default False
         Return curved hexahedra (a :class:`skfem.MeshHex2`, 27-node triquadratic
         geometry; :func:`~harpx.mechanics.mesh.curved_hex_mesh`) for an isoparametric

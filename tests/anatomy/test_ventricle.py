@@ -62,6 +62,27 @@ def test_cell_count_boundaries_and_regions():
     np.testing.assert_array_equal(np.sort(segs), spec.regions["myocardium"])
 
 
+def test_aha_regions_follow_the_cardiac_numbering():
+    # the mesh's named sectors are those the cardiac analysis reads (anterior at +x):
+    # every cell of a ring lands in the same sector number there, so a region called
+    # aha_10 (mid inferior) is the inferior wall, not its mirror
+    from harpx.anatomy.ventricle_fit import VentricleTemplate
+    from harpx.cardiac.strain import aha_segments
+
+    spec = ventricle()
+    template = VentricleTemplate(VentricleGeometry(INNER, OUTER, BASE))
+    centres = spec.mesh.p[:, spec.mesh.t].mean(axis=1).T
+    labels = aha_segments(centres, template, anterior=0.0)
+    for k in range(1, 17):
+        cells = spec.regions[f"aha_{k:02d}"]
+        ring = [0, 6, 12][(k - 1) // 6] if k <= 12 else 12
+        sector = (labels[cells] - 1 - ring) % (6 if k <= 12 else 4)
+        # in the ring's sector of the same number wherever the ring splits agree
+        same_ring = (labels[cells] - 1) // 6 == (k - 1) // 6 if k <= 12 else labels[cells] >= 13
+        assert same_ring.mean() > 0.6, k
+        assert np.all(sector[same_ring & (labels[cells] < 17)] == (k - 1 - ring)), k
+
+
 def test_endo_and_epi_nodes_lie_on_their_ellipsoids():
     spec = _coarse()
     m = spec.mesh
