@@ -21,11 +21,13 @@ only when there is work to do.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import hashlib
 import inspect
 import json
+import numbers
 import os
 import pickle
 import uuid
@@ -39,7 +41,7 @@ from harpx._progress import progress_bar
 from harpx._typing import PathLike
 from harpx.errors import ArchiveError, HarpxError, SchemaError
 from harpx.io.netcdf import open_dataset, to_netcdf
-from harpx.schema import validate
+from harpx.schema import newer_schema, validate
 
 __all__ = [
     "CohortError",
@@ -161,12 +163,23 @@ def track_many(
         After every other subject is written, if some subjects failed (missing or unreadable
         input, ``body_factory`` or tracking errors, a lost worker); ``err.failures`` maps
         each failed input to its error. Re-running resumes with the failed ones only.
+        Subjects that ran out of memory (``MemoryError``, or a worker killed by its nanny)
+        are told apart in the message: they need fewer workers or more memory, not a fix
+        of their input.
+    MemoryError
+        If checking an existing archive runs out of memory (it is not taken for an
+        incomplete archive and redone). ``KeyboardInterrupt`` stops the call as well, after
+        cancelling the subjects still queued.
     ValueError
-        If both ``client`` and ``address`` are given, ``n_workers < 1``, or two inputs share
-        a file stem.
+        If ``paths`` is empty, both ``client`` and ``address`` are given, ``n_workers`` is
+        not a whole number ≥ 1, two inputs share a file stem, or a tracking setting in
+        ``track_kwargs`` is out of range (checked once, before any work).
     TypeError
-        If ``track_kwargs`` has a name :func:`~harpx.tracking.track.track` does not take,
-        or ``body_factory`` cannot be pickled.
+        If ``paths`` holds something that is not a path, ``track_kwargs`` has a name
+        :func:`~harpx.tracking.track.track` does not take, or ``body_factory`` cannot be
+        pickled.
+    FileExistsError
+        If ``output_dir`` is a file.
     ImportError
         If there is work to do and dask.distributed is not installed.
 
@@ -191,10 +204,26 @@ def track_many(
             f"paths must be an iterable of input files, got the single path {paths!r} (which "
             f"would be read character by character); pass a list: [{paths!r}]"
         )
-    inputs = [Path(p) for p in paths]
+    if not isinstance(paths, Iterable):
+        raise TypeError(f"paths must be an iterable of input files, got {paths!r}")
+    given = list(paths)
+    wrong = [p for p in given if not isinstance(p, str | os.PathLike)]
+    if wrong:
+        raise TypeError(
+            f"paths holds {len(wrong)} entries that are not file paths (e.g. {wrong[0]!r}); "
+            "pass str or os.PathLike"
+        )
+    if not given:
+        raise ValueError("paths is empty: there is no subject to track (did a glob match no file?)")
+    inputs = [Path(p) for p in given]
     kwargs = dict(track_kwargs or {})
     _check_arguments(inputs, body_factory, client, address, n_workers, kwargs)
     out_dir = Path(output_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise FileExistsError(
+            f"output_dir {str(out_dir)!r} is a file, not a folder; choose a folder for the "
+            "tracked archives"
+        )
     out_dir.mkdir(parents=True, exist_ok=True)
     outputs = [output_path(p, out_dir) for p in inputs]
     settings = settings_fingerprint(body_factory, kwargs)
@@ -274,9 +303,10 @@ def track_subject(
     ds = open_dataset(source)
     kind = ds.attrs.get("harpx_schema")
     if kind not in ("tagged/1", "phase/1"):
+        newer = newer_schema(kind)
         raise SchemaError(
             f"input {str(source)!r} has harpx_schema {kind!r}; track_many needs 'tagged/1' "
-            "or 'phase/1' archives"
+            "or 'phase/1' archives" + (f" ({newer})" if newer else "")
         )
     tracked = track(ds, body_factory(ds), **dict(track_kwargs or {}))
     tracked.attrs[_SOURCE_ATTR] = source.name
@@ -446,8 +476,9 @@ def _check_arguments(
 ) -> None:
     if client is not None and address is not None:
         raise ValueError("pass either client= or address=, not both")
-    if client is None and address is None and int(n_workers) < 1:
-        raise ValueError(f"n_workers={n_workers!r} must be at least 1")
+    whole = isinstance(n_workers, numbers.Integral) and not isinstance(n_workers, bool)
+    if client is None and address is None and not (whole and n_workers >= 1):
+        raise ValueError(f"n_workers={n_workers!r} must be a whole number of processes, at least 1")
     stems: dict[str, list[str]] = {}
     for p in inputs:
         stems.setdefault(p.stem, []).append(str(p))
@@ -471,6 +502,13 @@ def _check_arguments(
             f"track_kwargs has {unknown!r}, which harpx.tracking.track.track does not take; "
             f"allowed: {allowed!r}"
         )
+    names = {f.name for f in dataclasses.fields(TrackingSettings)}
+    try:  # values out of range fail here, once, not once per subject on the workers
+        TrackingSettings.build(
+            kwargs.get("settings"), **{k: v for k, v in kwargs.items() if k in names}
+        )
+    except (TypeError, ValueError) as exc:
+        raise type(exc)(f"track_kwargs: {exc}") from exc
     try:
         import cloudpickle
 
@@ -512,6 +550,11 @@ def _is_complete(target: Path, digest: str, settings: str) -> bool:
                 if var.chunks is not None:  # read every block, one at a time
                     for block in var.data.to_delayed().ravel():
                         block.compute(scheduler="synchronous")
+    except MemoryError as exc:  # not a sign of a bad archive: redoing it would not help
+        raise MemoryError(
+            f"ran out of memory while checking the existing archive {str(target)!r}; free "
+            "memory, or pass overwrite=True to redo the subject without checking it"
+        ) from exc
     except Exception:  # unreadable, invalid or truncated (a block fails to read): redo it
         return False
     return True
@@ -532,6 +575,7 @@ def _run(
 ) -> None:
     Client, as_completed = _distributed("track_many", "Client", "as_completed")
     owned: list[Any] = []  # cluster/client opened here, closed in `finally`
+    futures: dict[Any, int] = {}
     try:
         if client is None:
             if address is not None:
@@ -562,9 +606,22 @@ def _run(
             except Exception as exc:  # one subject's failure never stops the others
                 failures[i] = exc
             bar.update(1)
+    except BaseException:  # e.g. KeyboardInterrupt here: stop the subjects still queued
+        if client is not None and not owned:  # a cluster opened here is closed below
+            with contextlib.suppress(Exception):
+                client.cancel([f for f in futures if not f.done()])
+        raise
     finally:
         for thing in owned:
             thing.close()
+
+
+def _out_of_memory(exc: BaseException) -> bool:
+    """Whether a subject failed for lack of memory rather than because of its input."""
+    if isinstance(exc, MemoryError):
+        return True
+    # dask.distributed.KilledWorker: the worker died (most often killed for its memory)
+    return type(exc).__name__ == "KilledWorker"
 
 
 def _cohort_error(
@@ -576,9 +633,18 @@ def _cohort_error(
         first = (str(exc).strip().splitlines() or [""])[0]
         lines.append(f"  {str(inputs[i])!r}: {type(exc).__name__}: {first}")
     n_ok = len(inputs) - len(failures)
+    memory = sorted(i for i in failures if _out_of_memory(failures[i]))
+    advice = "\nfix these subjects and run track_many again: finished subjects are skipped"
+    if memory:
+        advice = (
+            f"\n{len(memory)} of them ran out of memory (MemoryError or a killed worker), "
+            "which says nothing about their input: run track_many again with fewer workers "
+            "(n_workers=) or on workers with more memory; finished subjects are skipped"
+        )
+        if len(memory) < len(failures):
+            advice += "; fix the other subjects first"
     message = (
         f"{len(failures)} of {len(inputs)} subjects failed; the other {n_ok} archives are in "
-        f"{str(out)!r}:\n" + "\n".join(lines) + "\nfix these subjects and run track_many "
-        "again: finished subjects are skipped"
+        f"{str(out)!r}:\n" + "\n".join(lines) + advice
     )
     return CohortError(message, {inputs[i]: failures[i] for i in failures}, outputs)

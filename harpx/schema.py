@@ -57,6 +57,7 @@ __all__ = [
     "UNITS",
     "VarSpec",
     "fill_standard_attrs",
+    "newer_schema",
     "standard_attrs",
     "validate",
 ]
@@ -67,6 +68,49 @@ SCHEMA_TRACKED = "tracked/1"
 
 #: Short kind name → schema attribute value.
 KINDS: dict[str, str] = {"tagged": SCHEMA_TAGGED, "phase": SCHEMA_PHASE, "tracked": SCHEMA_TRACKED}
+
+
+def newer_schema(attr: Any) -> str:
+    """A sentence if ``attr`` names a later version of a schema than this harpx reads.
+
+    Parameters
+    ----------
+    attr : object
+        A ``harpx_schema`` attribute value, e.g. ``"tracked/2"``.
+
+    Returns
+    -------
+    str
+        Empty unless ``attr`` is ``"<kind>/<n>"`` for a known kind with ``n`` above the
+        version this harpx reads; then what that means and to upgrade harpx.
+
+    Examples
+    --------
+    >>> newer_schema("tracked/1")
+    ''
+    >>> newer_schema("tracked/2")[:54]
+    "'tracked/2' is a newer version of the tracked schema t"
+    """
+    if not isinstance(attr, str):
+        return ""
+    kind, _, version = attr.strip().partition("/")
+    if kind not in KINDS or not version.isdigit():
+        return ""
+    known = KINDS[kind]
+    if int(version) <= int(known.partition("/")[2]):
+        return ""
+    try:
+        from importlib.metadata import version as installed
+
+        release = f"harpx {installed('harpx')}"
+    except Exception:  # not installed as a distribution (e.g. a source checkout on sys.path)
+        release = "this harpx"
+    return (
+        f"{attr!r} is a newer version of the {kind} schema than {release} reads "
+        f"({known!r}): the file was written by a newer harpx; upgrade harpx "
+        "(pip install --upgrade harpx) to read it"
+    )
+
 
 #: Physical axes, in the column order of every (n, 3) point array.
 AXES: tuple[str, str, str] = ("x", "y", "z")
@@ -225,12 +269,22 @@ def fill_standard_attrs(ds: xr.Dataset) -> xr.Dataset:
     xarray.Dataset
         A shallow copy (data shared) with the standard attributes added.
 
+    Raises
+    ------
+    TypeError
+        If ``ds`` is not an xarray.Dataset.
+
     Examples
     --------
     >>> ds = fill_standard_attrs(xr.Dataset(coords={"x": [0.5, 1.5]}))
     >>> ds.x.attrs
     {'units': 'mm', 'long_name': 'x position of voxel centre', 'axis': 'X'}
     """
+    if not isinstance(ds, xr.Dataset):
+        raise TypeError(
+            f"fill_standard_attrs needs an xarray.Dataset, got {type(ds).__name__!r} (for a "
+            "DataArray use da.to_dataset())"
+        )
     out = ds.copy(deep=False)
     for name, var in out.variables.items():
         if str(name) in UNITS:
@@ -374,8 +428,10 @@ def validate(ds: xr.Dataset, kind: str | None = None) -> None:
             f"missing dataset attribute 'harpx_schema'; set ds.attrs['harpx_schema'] = {schema!r}"
         )
     elif not isinstance(attr_schema, str) or attr_schema != schema:
+        newer = newer_schema(attr_schema)
         problems.append(
             f"dataset attribute 'harpx_schema' is {attr_schema!r} but {schema!r} was expected"
+            + (f": {newer}" if newer else "")
         )
     for attr in _REQUIRED_ATTRS[schema]:
         if attr not in ds.attrs:
@@ -476,8 +532,10 @@ def _resolve_kind(ds: xr.Dataset, kind: str | None) -> str:
                 "(e.g. 'tagged/1')"
             )
         if not isinstance(attr, str) or attr not in SCHEMAS:
+            newer = newer_schema(attr)
             raise SchemaError(
-                f"dataset attribute 'harpx_schema' is {attr!r}; known schemas: {sorted(SCHEMAS)}"
+                f"dataset attribute 'harpx_schema' is {attr!r}; "
+                + (newer if newer else f"known schemas: {sorted(SCHEMAS)}")
             )
         return str(attr)
     if not isinstance(kind, str):

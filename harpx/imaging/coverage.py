@@ -5,14 +5,15 @@ When no constraint point of a body has valid phase, the causes look alike from t
 them in order and returns one sentence for the first that applies:
 
 1. a tag's ``mask`` is all False (no acquisition has data anywhere);
-2. the frame's images are all zero (a blank or missing frame);
+2. the frame's images have no tag pattern (a blank, constant or missing frame);
 3. the points lie outside the field of view (wrong units or origin);
 4. the points lie outside every tag's mask (the slab of slices misses the body);
-5. a tag's phase varies along another axis than its ``tag_direction`` (directions
+5. the points lie where the frame has no tissue signal (the tissue moved away from them);
+6. a tag's phase varies along another axis than its ``tag_direction`` (directions
    swapped between tags, or row/column confused when reading DICOM).
 
-Only a few voxels per tag and frame are read (the frame's magnitude and a 1-voxel phase
-difference), so it is cheap enough to run before raising an error.
+Only the frame in question is read (per tag its magnitude and a 1-voxel phase difference),
+so it is cheap enough to run before raising an error.
 """
 
 from __future__ import annotations
@@ -51,8 +52,8 @@ def explain_missing_data(phase: xr.Dataset, points: ArrayLike, time_index: int =
     ...     {"magnitude": (("tag", "time", "z", "y", "x"), np.zeros((1, 1, 2, 2, 2)))},
     ...     coords={"tag": ["x"], "z": [0.0, 1.0], "y": [0.0, 1.0], "x": [0.0, 1.0]},
     ... )
-    >>> explain_missing_data(ds, [[0.5, 0.5, 0.5]])[:48]
-    "frame 0 of tag 'x' is all zero (magnitude max 0)"
+    >>> explain_missing_data(ds, [[0.5, 0.5, 0.5]])[:47]
+    "frame 0 of tag 'x' has no tag pattern (harmonic"
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     tags = [str(t) for t in np.asarray(phase["tag"].values).ravel()]
@@ -69,8 +70,9 @@ def explain_missing_data(phase: xr.Dataset, points: ArrayLike, time_index: int =
             peak = float(np.nanmax(np.abs(phase["magnitude"].isel(tag=t, time=time_index))))
             if not peak > 0:
                 return (
-                    f"frame {time_index} of tag {tag!r} is all zero (magnitude max {peak:g}): "
-                    f"a blank frame; drop it (ds.drop_isel(time={time_index})) or fix its images"
+                    f"frame {time_index} of tag {tag!r} has no tag pattern (harmonic "
+                    f"magnitude max {peak:g}): its image is blank or constant (one value "
+                    f"everywhere); drop it (ds.drop_isel(time={time_index})) or fix its images"
                 )
     low, high = [], []
     for axis in AXES:
@@ -86,18 +88,58 @@ def explain_missing_data(phase: xr.Dataset, points: ArrayLike, time_index: int =
             f"{np.round(pts.min(axis=0), 3).tolist()} to {np.round(pts.max(axis=0), 3).tolist()}"
             " mm): check the mesh's units (mm) and origin"
         )
+    sel = {d: xr.DataArray(pts[inside, AXES.index(d)], dims="point") for d in GRID_DIMS}
     if mask is not None:
-        sel = {d: xr.DataArray(pts[inside, AXES.index(d)], dims="point") for d in GRID_DIMS}
         hit = mask.transpose("tag", *GRID_DIMS).sel(sel, method="nearest")
         if not bool(hit.any()):
             return (
                 "the points lie inside the field of view but outside every tag's 'mask' (the "
                 "acquired slices miss the body); check the slice positions or the mask"
             )
+    if "magnitude" in phase.variables:
+        signal = _with_signal(phase, sel, time_index)
+        if signal < FAINT_FRACTION:
+            later = (
+                "the tissue has moved away from the tracked body: most likely it moved a tag "
+                "period or more between two frames, which the phase cannot tell from no "
+                "motion (check target_reached of the frames before; track with more frames)"
+                if time_index > 0
+                else "the mesh lies off the tissue: check its position against the images"
+            )
+            return (
+                f"the points lie inside the field of view and the masks but where frame "
+                f"{time_index} has no tissue signal (only {100 * signal:.1f} % of them have a "
+                f"harmonic magnitude above {MAGNITUDE_FLOOR:g} of its 99th percentile in "
+                f"every tag): {later}"
+            )
     mismatch = phase_direction_mismatch(phase, time_index)
     if mismatch:
         return mismatch
     return "check that the mesh (mm) and the image grid (coords x, y, z) overlap"
+
+
+#: Fraction of a frame's 99th-percentile harmonic magnitude below which a point has no
+#: tissue signal (the default floor of :class:`harpx.imaging.sample.PhaseSampler`).
+MAGNITUDE_FLOOR = 0.05
+#: Below this fraction of points with tissue signal, missing signal is the diagnosis.
+FAINT_FRACTION = 0.05
+
+
+def _with_signal(phase: xr.Dataset, sel: dict[str, xr.DataArray], time_index: int) -> float:
+    """Fraction of the selected voxels above every tag's magnitude floor in one frame."""
+    signal = np.ones(sel[GRID_DIMS[0]].size, dtype=bool)
+    for t in range(phase.sizes["tag"]):
+        frame = phase["magnitude"].isel(tag=t, time=time_index)
+        values = np.abs(np.asarray(frame.values, dtype=np.float64))
+        if "mask" in phase.variables:
+            inside = np.asarray(phase["mask"].isel(tag=t).transpose(*frame.dims).values, bool)
+            values = values[inside] if inside.any() else values
+        finite = values[np.isfinite(values)]
+        if not finite.size:
+            continue
+        floor = MAGNITUDE_FLOOR * float(np.percentile(finite, 99))
+        signal &= np.abs(np.asarray(frame.sel(sel, method="nearest").values)) >= floor
+    return float(signal.mean()) if signal.size else 1.0
 
 
 def phase_direction_mismatch(phase: xr.Dataset, time_index: int = 0) -> str:

@@ -10,6 +10,7 @@ labels the result.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Hashable
 from typing import Literal
 
@@ -17,7 +18,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from harpx.errors import SchemaError
+from harpx.errors import HarpxWarning, SchemaError
 from harpx.imaging._kernels import refine_linear, refine_positions
 from harpx.imaging.bandpass import harmonic_phase
 from harpx.imaging.fft import default_threads
@@ -27,11 +28,15 @@ from harpx.schema import AXES, GRID_DIMS, standard_attrs, validate
 __all__ = ["extract_phase", "refinement_factors"]
 
 
-def _check_options(upsample: int, radius: float) -> None:
+def _check_upsample(upsample: int) -> None:
     if isinstance(upsample, bool) or not isinstance(upsample, int | np.integer) or upsample < 1:
         raise ValueError(
             f"'upsample' must be an integer >= 1 (1 = native resolution), got {upsample!r}"
         )
+
+
+def _check_options(upsample: int, radius: float) -> None:
+    _check_upsample(upsample)
     if (
         isinstance(radius, bool)
         or not isinstance(radius, float | int | np.floating)
@@ -40,6 +45,50 @@ def _check_options(upsample: int, radius: float) -> None:
         raise ValueError(
             f"'radius' must be in (0, 1] (filter radius as a fraction of the tag frequency), "
             f"got {radius!r}"
+        )
+
+
+def _warn_constant_frames(ds: xr.Dataset) -> None:
+    """HarpxWarning naming the frames whose image is one value within the tag's mask.
+
+    Such a frame has no tag pattern: its harmonic magnitude is zero and its phase
+    meaningless. Only images held in memory are checked (a dask image is not computed).
+    """
+    values = (
+        ds["image"].transpose("tag", "time", *GRID_DIMS).values
+        if isinstance(ds["image"].variable.data, np.ndarray)
+        else None
+    )
+    if values is None:
+        return
+    mask = None
+    if "mask" in ds.variables:
+        mask = np.asarray(ds["mask"].transpose("tag", *GRID_DIMS).values, dtype=bool)
+    found: list[str] = []
+    dropped: set[int] = set()
+    for t, tag in enumerate(str(v) for v in np.asarray(ds["tag"].values).ravel()):
+        frames = values[t].reshape(values.shape[1], -1)
+        if mask is not None:
+            if not mask[t].any():
+                continue  # no data at all: validate and the tracker name that
+            frames = frames[:, mask[t].ravel()]
+        low, high = frames.min(axis=1), frames.max(axis=1)
+        flat = np.flatnonzero(low == high)
+        if flat.size:
+            value = float(low[flat[0]])
+            where = "in its mask " if mask is not None else ""
+            found.append(
+                f"tag {tag!r} frame(s) {flat[:10].tolist()}{' …' if flat.size > 10 else ''} "
+                f"(every voxel {where}is {value:g}{': a blank frame' if value == 0 else ''})"
+            )
+            dropped.update(int(n) for n in flat)
+    if found:
+        warnings.warn(
+            f"constant images: {'; '.join(found)}. A constant image has no tag pattern, so "
+            "its phase carries no motion (harmonic magnitude 0) and tracking cannot use it; "
+            f"fix those frames or drop them (ds.drop_isel(time={sorted(dropped)[:10]}))",
+            HarpxWarning,
+            stacklevel=3,
         )
 
 
@@ -75,7 +124,10 @@ def refinement_factors(ds: xr.Dataset, upsample: int) -> tuple[int, int, int]:
     ------
     SchemaError
         If an in-plane axis has fewer than 2 voxels.
+    ValueError
+        If ``upsample`` is not an integer >= 1.
     """
+    _check_upsample(upsample)
     slice_axes = [str(s) for s in np.asarray(ds["slice_axis"].values).ravel()]
     inplane = sorted({d for s in slice_axes for d in GRID_DIMS if d != s}, key=GRID_DIMS.index)
     spacing = {}
@@ -235,6 +287,13 @@ def extract_phase(
     ValueError
         If ``upsample``, ``radius``, ``threads`` or ``dtype`` is out of range.
 
+    Warns
+    -----
+    HarpxWarning
+        If a frame of a tag's image is one value within the tag's mask (blank or constant:
+        no tag pattern, so no phase); names the frames and the value. Only images held in
+        memory are checked.
+
     Notes
     -----
     The cubic-spline upsampling is applied in the Fourier domain through its exact transfer
@@ -256,6 +315,7 @@ def extract_phase(
     """
     validate(ds, "tagged")
     _check_options(upsample, radius)
+    _warn_constant_frames(ds)
     if str(dtype) not in ("float32", "float64"):
         raise ValueError(f"'dtype' must be 'float32' or 'float64', got {dtype!r}")
     real = np.dtype(str(dtype))

@@ -23,6 +23,8 @@ wrong tag line (a "tag jump"), and points near tissue edges follow the blurred p
 
 from __future__ import annotations
 
+import math
+import numbers
 import time as _time
 import warnings
 from collections.abc import Callable
@@ -35,7 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 from harpx._blas import matmul_one_thread
 from harpx.errors import HarpxWarning, SchemaError
 from harpx.imaging.sample import PhaseSampler, wrap
-from harpx.schema import AXES, GRID_DIMS, standard_attrs, validate
+from harpx.schema import AXES, GRID_DIMS, newer_schema, standard_attrs, validate
 
 __all__ = ["track_harp"]
 
@@ -70,9 +72,10 @@ def track_harp(
         ``cells`` (empty, ``element="points"``), ``displacement`` (time, node, axis) in mm
         (NaN only outside the acquired field of view: off the grid or outside a tag's
         ``mask``; a point whose harmonic magnitude falls below the sampler's floor, i.e. that
-        has left the tissue signal, keeps its last position), attribute ``points_lost``
-        (points valid at frame 0 that are NaN in some later frame), per-frame ``epsilon``
-        (mean absolute wrapped residual over the points with a valid phase, rad),
+        has left the tissue signal, keeps its last position), attributes ``points_lost``
+        (points valid at frame 0 that are NaN in some later frame) and ``points_unseen``
+        (given points without valid phase at frame 0, NaN in every frame), per-frame
+        ``epsilon`` (mean absolute wrapped residual over the points with a valid phase, rad),
         ``iterations`` (sweeps run) and ``wall_time`` (s), and
         ``displacement_grid`` (time, axis, z, y, x) when ``points`` is None (NaN outside the
         tracked voxels).
@@ -80,14 +83,16 @@ def track_harp(
     Raises
     ------
     SchemaError
-        If ``ds`` is neither a valid ``phase/1`` nor a ``tagged/1`` dataset.
+        If ``ds`` is neither a valid ``phase/1`` nor a ``tagged/1`` dataset, or a
+        ``points`` dataset has no ``z``, ``y``, ``x`` coordinates.
+    ValueError
+        If ``points`` is not a non-empty (n, 3) array of finite numbers (names the rows
+        with NaN or inf), or ``iterations`` is not a whole number ≥ 1.
 
     Warns
     -----
     HarpxWarning
-        If any point is lost (``points_lost > 0``).
-    ValueError
-        If ``points`` is not (n, 3) or ``iterations < 1``.
+        If any point is lost (``points_lost > 0``) or unseen (``points_unseen > 0``).
 
     Notes
     -----
@@ -118,8 +123,7 @@ def track_harp(
     >>> np.round(out.displacement.sel(axis="x").values[:, 0], 4).tolist()
     [0.0, 1.5]
     """
-    if int(iterations) < 1:
-        raise ValueError(f"iterations={iterations!r} must be at least 1")
+    iterations = _iterations(iterations)
     ds = _as_phase(ds)
     grid = ds if points is None else points if isinstance(points, xr.Dataset) else None
     grid_points = grid is not None
@@ -127,11 +131,7 @@ def track_harp(
     if grid is not None:
         X, flat_index = _grid_candidates(grid)
     else:
-        X = np.asarray(points, dtype=np.float64)
-        if X.ndim != 2 or X.shape[1] != 3:
-            raise ValueError(
-                f"points must have shape (n, 3) with columns (x, y, z) in mm; got {X.shape}"
-            )
+        X = _explicit_points(points)
     # every sampler prepares only the box the points can reach (see _reach)
     reference = PhaseSampler(ds, 0, region=_bounds(X, np.isfinite(X).all(axis=1), 0.0))
     phi0, valid0 = reference.phase(X)
@@ -170,6 +170,18 @@ def track_harp(
     out = _assemble(ds, X, displacement, epsilon, sweeps, wall, int(iterations))
     lost = int(np.count_nonzero(valid0 & np.isnan(displacement[1:, :, 0]).any(axis=0)))
     out.attrs["points_lost"] = lost
+    unseen = int(np.count_nonzero(~valid0))  # only given points: grid points are selected
+    out.attrs["points_unseen"] = unseen
+    if unseen:
+        first = np.flatnonzero(~valid0)[:5].tolist()
+        warnings.warn(
+            f"{unseen} of {n} points have no valid phase in frame 0 (e.g. rows {first}): they "
+            "lie outside the field of view, a tag's mask or the tissue signal, so they were "
+            "not tracked and their displacement is NaN in every frame "
+            "(out.attrs['points_unseen']); pass points inside the imaged tissue",
+            HarpxWarning,
+            stacklevel=2,
+        )
     if lost:
         warnings.warn(
             f"conventional HARP lost {lost} of {int(valid0.sum())} points "
@@ -186,6 +198,41 @@ def track_harp(
     return out
 
 
+def _iterations(value: Any) -> int:
+    """``iterations`` as an int ≥ 1 (a whole number; numpy integers accepted)."""
+    whole = isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
+    if not (whole and math.isfinite(value) and value == int(value) and value >= 1):
+        raise ValueError(
+            f"iterations={value!r} must be a whole number of Gauss–Newton steps ≥ 1 "
+            "(e.g. iterations=10)"
+        )
+    return int(value)
+
+
+def _explicit_points(points: Any) -> NDArray[np.float64]:
+    """Given points as a finite (n, 3) float array, n ≥ 1, else a ValueError naming why."""
+    try:
+        X = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(
+            f"points must be numbers, an (n, 3) array of (x, y, z) in mm ({exc})"
+        ) from exc
+    if X.ndim != 2 or X.shape[1] != 3:
+        raise ValueError(
+            f"points must have shape (n, 3) with columns (x, y, z) in mm; got {X.shape}"
+        )
+    if X.shape[0] == 0:
+        raise ValueError("points is empty: pass at least one (x, y, z) position in mm")
+    bad = np.flatnonzero(~np.isfinite(X).all(axis=1))
+    if bad.size:
+        raise ValueError(
+            f"points has {bad.size} rows with NaN or inf (rows {bad[:10].tolist()}"
+            f"{' …' if bad.size > 10 else ''}); drop them, e.g. points[np.isfinite(points)"
+            ".all(axis=1)]"
+        )
+    return X
+
+
 def _as_phase(ds: xr.Dataset) -> xr.Dataset:
     schema = ds.attrs.get("harpx_schema")
     if schema == "tagged/1":
@@ -193,9 +240,10 @@ def _as_phase(ds: xr.Dataset) -> xr.Dataset:
 
         ds = extract_phase(ds)
     elif schema != "phase/1":
+        newer = newer_schema(schema)
         raise SchemaError(
             f"track_harp needs a 'phase/1' or 'tagged/1' dataset; attrs['harpx_schema'] is "
-            f"{schema!r}"
+            f"{schema!r}" + (f": {newer}" if newer else "")
         )
     validate(ds, kind="phase")
     return ds
@@ -206,6 +254,12 @@ def _grid_candidates(ds: xr.Dataset) -> tuple[NDArray[np.float64], NDArray[np.in
 
     The caller keeps those valid in the reference frame (above the magnitude floor).
     """
+    missing = [d for d in GRID_DIMS if d not in ds.coords]
+    if missing:
+        raise SchemaError(
+            f"points dataset has no coordinate(s) {missing!r}; pass a dataset on an image "
+            "grid (coords z, y, x in mm, e.g. the tagged/1 images) or an (n, 3) array"
+        )
     z, y, x = (np.asarray(ds[d].values, np.float64) for d in GRID_DIMS)
     inside = np.ones((z.size, y.size, x.size), bool)
     if "mask" in ds.variables:

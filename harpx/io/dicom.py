@@ -48,6 +48,7 @@ spacing (no interpolation at all in that case) and it covers the union of all sl
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import warnings
 from collections.abc import Mapping, Sequence
@@ -63,6 +64,7 @@ from numpy.typing import NDArray
 from harpx._typing import FloatArray, PathLike
 from harpx.errors import HarpxError, HarpxWarning
 from harpx.imaging.stacks import SliceStack, common_grid, resample_stack, tagged_dataset
+from harpx.io.netcdf import _available_memory
 from harpx.schema import AXES, SEQUENCES
 
 __all__ = ["read_tagged", "voxel_positions"]
@@ -297,8 +299,10 @@ def voxel_positions(images: Any) -> FloatArray:
     Raises
     ------
     HarpxError
-        If a geometry attribute is missing (the message names it and the file), or the images
-        of a sequence differ in matrix size.
+        If a geometry attribute is missing (the message names it and the file), the images
+        of a sequence differ in matrix size, or there are no images.
+    TypeError
+        If an image is not a pydicom dataset (e.g. a file name: read it first).
     ImportError
         If pydicom is not installed.
 
@@ -321,9 +325,18 @@ def voxel_positions(images: Any) -> FloatArray:
     >>> voxel_positions(im)[1, 2]  # row 1, column 2
     array([11., 22., 30.])
     """
-    _pydicom()
-    single = not isinstance(images, Sequence)
+    pydicom = _pydicom()
+    single = not isinstance(images, Sequence) or isinstance(images, str | bytes)
     headers = [images] if single else list(images)
+    if not headers:
+        raise HarpxError("voxel_positions got no images; pass a pydicom.Dataset or a list")
+    for header in headers:
+        if not isinstance(header, pydicom.Dataset):
+            raise TypeError(
+                f"voxel_positions needs pydicom datasets (pydicom.dcmread(path)), got "
+                f"{type(header).__name__!r}"
+                + (": read the file first" if isinstance(header, str | os.PathLike) else "")
+            )
     records: list[_Image] = []
     for header in headers:
         records.extend(_images_of(header, Path(str(getattr(header, "filename", "<dataset>")))))
@@ -555,8 +568,17 @@ def _discover(paths_or_folder: PathLike | Sequence[PathLike]) -> list[_Image]:
     pydicom = _pydicom()
     if isinstance(paths_or_folder, str | os.PathLike):
         entries = [Path(paths_or_folder)]
-    else:
+    elif isinstance(paths_or_folder, Sequence) and all(
+        isinstance(p, str | os.PathLike) for p in paths_or_folder
+    ):
         entries = [Path(p) for p in paths_or_folder]
+    else:
+        raise TypeError(
+            f"paths_or_folder must be a folder, a DICOM file or a list of them (str or "
+            f"os.PathLike), got {paths_or_folder!r}"
+        )
+    if not entries:
+        raise HarpxError("paths_or_folder is an empty list; pass a folder or DICOM files")
     images: list[_Image] = []
     no_series: list[Path] = []
     seen: set[Path] = set()
@@ -660,6 +682,11 @@ def _series_listing(images: list[_Image]) -> str:
 def _parse_tags(tag_directions: Any, images: list[_Image]) -> list[tuple[str, str, Any]]:
     """(series selector, tag label, direction) triples from the user's specification."""
     example = "tag_directions={'SA tagged': [('x', 'row'), ('y', 'column')]}"
+    if isinstance(tag_directions, str | bytes):
+        raise HarpxError(
+            f"tag_directions is the string {tag_directions!r}; say which tags the series "
+            f"carries, e.g. {example}"
+        )
     if tag_directions is None:
         raise HarpxError(
             "tag_directions is required: say which series carries which tag direction, e.g. "
@@ -669,6 +696,11 @@ def _parse_tags(tag_directions: Any, images: list[_Image]) -> list[tuple[str, st
     triples: list[tuple[str, str, Any]] = []
     if isinstance(tag_directions, Mapping):
         for selector, entries in tag_directions.items():
+            if isinstance(entries, str | bytes):
+                raise HarpxError(
+                    f"tag_directions[{selector!r}] is {entries!r}; expected a (label, "
+                    f"direction) pair or a list of them, e.g. {example}"
+                )
             single = (
                 isinstance(entries, tuple | list)
                 and len(entries) == 2
@@ -842,7 +874,11 @@ def read_tagged(
         a missing geometry or timing attribute (names it and the file); slices of a series
         that are not parallel or shifted in plane; different frame counts or trigger times
         across slices or series; a series selector that matches no or several series; a
-        missing ``tag_period``, ``tag_directions`` or ``sequence``.
+        missing ``tag_period``, ``tag_directions`` or ``sequence``; a ``spacing`` or
+        ``time_tolerance`` that is not a number in range; an output grid larger than half
+        the memory available (pass a coarser ``spacing``).
+    TypeError
+        If ``paths_or_folder`` is not a path or a list of paths.
     SchemaError
         If the result breaks ``tagged/1`` (e.g. tag frequency above the grid's Nyquist
         limit: choose a finer ``spacing``).
@@ -861,8 +897,19 @@ def read_tagged(
     The grid covers the union of the stacks' bounding boxes; two orthogonal stacks of a
     heart at 1.4 mm spacing give ~20 million voxels per frame, so pass a coarser ``spacing``
     for large fields of view (a :class:`~harpx.errors.HarpxWarning` flags outputs above
-    2 GiB).
+    2 GiB; above half the available memory the call is refused before allocating).
     """
+    if spacing is not None and (isinstance(spacing, bool) or not isinstance(spacing, numbers.Real)):
+        raise HarpxError(f"spacing is {spacing!r}; expected a positive grid spacing in mm")
+    if (
+        isinstance(time_tolerance, bool)
+        or not isinstance(time_tolerance, numbers.Real)
+        or not (math.isfinite(time_tolerance) and time_tolerance >= 0)
+    ):
+        raise HarpxError(
+            f"time_tolerance is {time_tolerance!r}; expected a finite number of ms >= 0 (the "
+            "largest disagreement of trigger times within one frame)"
+        )
     images = _discover(paths_or_folder)
     triples = _parse_tags(tag_directions, images)
     by_series: dict[str, _Stack] = {}
@@ -902,6 +949,14 @@ def read_tagged(
         raise HarpxError(f"spacing is {spacing!r}; expected a positive grid spacing in mm")
     x, y, z = common_grid([s.geometry for s in stacks], step)
     nbytes = len(triples) * times.size * x.size * y.size * z.size * 8
+    limit = _available_memory() // 2
+    if nbytes > limit:
+        raise HarpxError(
+            f"the resampled image would need {nbytes / 2**30:.1f} GiB ({z.size}x{y.size}x"
+            f"{x.size} voxels at {step:g} mm, {len(triples)} tags, {times.size} frames), more "
+            f"than half the memory available ({limit / 2**30:.1f} GiB); pass a coarser "
+            "spacing= (in mm)"
+        )
     if nbytes > LARGE_OUTPUT_BYTES:
         warnings.warn(
             f"the resampled image needs {nbytes / 2**30:.1f} GiB ({z.size}x{y.size}x{x.size} "

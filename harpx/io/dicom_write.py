@@ -8,10 +8,18 @@ mask), in the grid's patient coordinates (LPS, mm), with ``SliceThickness`` equa
 grid spacing along that axis, ``TriggerTime`` from ``time`` and the pixel values stored as
 ``uint16`` with one ``RescaleSlope``/``RescaleIntercept`` per series (quantisation error at
 most half a slope, i.e. range/131070). pydicom is needed (``pip install harpx[dicom]``).
+
+Every call writes a new study: fresh Study, Series and SOP Instance UIDs, so two exports
+never share a series. The files are written into a hidden folder beside the target and
+moved into place when all are written, so an interrupted export leaves nothing behind.
 """
 
 from __future__ import annotations
 
+import os
+import re
+import shutil
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +27,8 @@ import numpy as np
 import xarray as xr
 
 from harpx._typing import PathLike
+from harpx.errors import SchemaError
+from harpx.io.netcdf import remove_stale_temporaries, temporary_prefix
 from harpx.schema import validate
 
 __all__ = ["write_tagged"]
@@ -34,10 +44,15 @@ _IMAGE_DIMS = {"z": ("y", "x"), "y": ("z", "x"), "x": ("z", "y")}
 
 
 def _decimal(value: float) -> str:
-    return f"{value:.10g}"  # DICOM decimal strings hold at most 16 characters
+    """``value`` as a DICOM decimal string: as many digits (≤ 10) as fit 16 characters."""
+    for digits in range(10, 5, -1):
+        text = f"{value:.{digits}g}"
+        if len(text) <= 16:
+            return text
+    return text
 
 
-def write_tagged(ds: xr.Dataset, folder: PathLike) -> dict[str, str]:
+def write_tagged(ds: xr.Dataset, folder: PathLike, *, overwrite: bool = False) -> dict[str, str]:
     """Write every tag of a ``tagged/1`` dataset as one DICOM series under ``folder``.
 
     Parameters
@@ -45,7 +60,12 @@ def write_tagged(ds: xr.Dataset, folder: PathLike) -> dict[str, str]:
     ds : xarray.Dataset
         ``tagged/1`` dataset (uniform grid, mm; ``time`` in ms).
     folder : str or os.PathLike
-        Output folder (created); files go to ``folder/<tag>/``.
+        Output folder, created with its parents; files go to ``folder/<tag>/``. It must be
+        absent or empty: a reader of the folder would otherwise see the old files too.
+    overwrite : bool, default False
+        Replace the content of a non-empty ``folder``, provided it holds only what an
+        earlier export wrote (sub-folders of ``.dcm`` files). The old content is removed
+        only once the new export is complete.
 
     Returns
     -------
@@ -56,19 +76,118 @@ def write_tagged(ds: xr.Dataset, folder: PathLike) -> dict[str, str]:
     Raises
     ------
     SchemaError
-        If ``ds`` is not a valid ``tagged/1`` dataset.
+        If ``ds`` is not a valid ``tagged/1`` dataset, its images are not finite, or a tag
+        label cannot be a folder name (letters, digits, ``_``, ``-`` and ``.`` only).
+    FileExistsError
+        If ``folder`` is not empty and ``overwrite`` is False, or holds files that an export
+        did not write (even with ``overwrite=True``), or is a file or a symbolic link.
+        Nothing is written.
+    PermissionError
+        If the folder that holds ``folder`` is not writable (the export is staged there).
     ImportError
         Without pydicom.
     """
     validate(ds, "tagged")
     try:
         import pydicom  # noqa: F401
-        from pydicom.dataset import FileDataset, FileMetaDataset
-        from pydicom.uid import ExplicitVRLittleEndian, MRImageStorage, generate_uid
+        from pydicom.uid import generate_uid
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise ImportError("writing DICOM needs pydicom: pip install harpx[dicom]") from exc
-    root = Path(folder)
-    study = generate_uid(entropy_srcs=[str(root), "study"])
+    labels = [str(t) for t in np.asarray(ds["tag"].values).ravel()]
+    bad = [label for label in labels if not _SAFE_LABEL.fullmatch(label) or set(label) == {"."}]
+    if bad:
+        raise SchemaError(
+            f"tag labels {bad!r} cannot name the series' folders; use letters, digits, '_', "
+            "'-' and '.' only (e.g. ds.assign_coords(tag=['x', 'y', 'z']))"
+        )
+    root = Path(os.path.abspath(folder))  # "." and "out/.." name their folder too
+    _check_target(root, overwrite)
+    root.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(root.parent, root.name)  # of exports that were killed
+    staging = root.parent / f"{temporary_prefix(root.name)}{uuid.uuid4().hex[:12]}.tmp"
+    try:
+        staging.mkdir()
+    except OSError as exc:
+        raise PermissionError(
+            f"cannot create the staging folder {str(staging)!r} ({exc.strerror or exc}); the "
+            f"export is written beside {str(root)!r} first so that an interrupted export "
+            f"leaves nothing behind: make {str(root.parent)!r} writable or write elsewhere"
+        ) from exc
+    try:
+        described = _write_series(ds, staging, generate_uid())
+        _move_into_place(staging, root)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return described
+
+
+#: Tag labels usable as folder names.
+_SAFE_LABEL = re.compile(r"[A-Za-z0-9_.-]+")
+
+
+def _check_target(root: Path, overwrite: bool) -> None:
+    """Refuse a target that is a file, or a non-empty folder unless it is an old export."""
+    if root.is_symlink():
+        raise FileExistsError(
+            f"DICOM output folder {str(root)!r} is a symbolic link; pass the folder it points "
+            f"to ({str(root.resolve())!r}) or another path"
+        )
+    if root.exists() and not root.is_dir():
+        raise FileExistsError(
+            f"DICOM output folder {str(root)!r} is a file, not a folder; choose another path"
+        )
+    if not root.is_dir():
+        return
+    entries = sorted(root.iterdir())
+    if not entries:
+        return
+    if not overwrite:
+        raise FileExistsError(
+            f"DICOM output folder {str(root)!r} is not empty ({len(entries)} entries, e.g. "
+            f"{entries[0].name!r}); its old files would be read back together with the new "
+            "series. Write into a new or empty folder, or pass overwrite=True to replace an "
+            "earlier export"
+        )
+    foreign = [
+        e
+        for e in entries
+        if not e.is_dir() or e.is_symlink() or any(not _is_dicom_file(f) for f in e.iterdir())
+    ]
+    if foreign:
+        raise FileExistsError(
+            f"refusing to overwrite {str(root)!r}: {foreign[0].name!r} there is not a folder "
+            "of .dcm files that write_tagged writes, so it may be other data; choose a new "
+            "or empty folder"
+        )
+
+
+def _is_dicom_file(path: Path) -> bool:
+    return path.is_file() and not path.is_symlink() and path.suffix.lower() == ".dcm"
+
+
+def _move_into_place(staging: Path, root: Path) -> None:
+    """Rename the finished export to ``root``; an old export there is removed after."""
+    if root.is_dir() and not any(root.iterdir()):
+        root.rmdir()
+    if not root.exists():
+        os.replace(staging, root)
+        return
+    old = root.parent / f"{temporary_prefix(root.name)}{uuid.uuid4().hex[:12]}-old.tmp"
+    os.replace(root, old)
+    try:
+        os.replace(staging, root)
+    except BaseException:
+        os.replace(old, root)  # put the earlier export back
+        raise
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def _write_series(ds: xr.Dataset, root: Path, study: str) -> dict[str, str]:
+    """Write every tag's series under ``root`` (fresh UIDs) and return their descriptions."""
+    from pydicom.dataset import FileDataset, FileMetaDataset
+    from pydicom.uid import ExplicitVRLittleEndian, MRImageStorage, generate_uid
+
     described: dict[str, str] = {}
     times = np.asarray(ds["time"].values, dtype=np.float64)
     for number, tag in enumerate(ds["tag"].values, start=1):  # one series per tag (≤ 3)
@@ -78,6 +197,11 @@ def write_tagged(ds: xr.Dataset, folder: PathLike) -> dict[str, str]:
         r, c = _PLANES[axis]
         image = ds["image"].sel(tag=tag).transpose("time", axis, rows_dim, cols_dim)
         values = np.asarray(image.values, dtype=np.float64)
+        if not np.all(np.isfinite(values)):  # a lazy dataset is only checked here
+            raise SchemaError(
+                f"'image' of tag {label!r} has {int(np.count_nonzero(~np.isfinite(values)))} "
+                "non-finite values (NaN/inf); DICOM stores numbers only: fill or drop them"
+            )
         planes = np.arange(ds.sizes[axis])
         if "mask" in ds:
             mask = ds["mask"].sel(tag=tag).transpose(axis, rows_dim, cols_dim).values
@@ -87,7 +211,7 @@ def write_tagged(ds: xr.Dataset, folder: PathLike) -> dict[str, str]:
         stored = np.rint((values - lo) / slope).clip(0, 65535).astype("<u2")
         coords = {d: np.asarray(ds[d].values, dtype=np.float64) for d in ("x", "y", "z")}
         spacing = {d: float(np.diff(v).mean()) if v.size > 1 else 1.0 for d, v in coords.items()}
-        series = generate_uid(entropy_srcs=[str(root), label])
+        series = generate_uid()
         description = f"tagged {label}"
         described[label] = description
         out = root / label
@@ -100,7 +224,7 @@ def write_tagged(ds: xr.Dataset, folder: PathLike) -> dict[str, str]:
                 path = out / f"{label}_{int(k):04d}_{t:03d}.dcm"
                 meta = FileMetaDataset()
                 meta.MediaStorageSOPClassUID = MRImageStorage
-                meta.MediaStorageSOPInstanceUID = generate_uid(entropy_srcs=[str(path)])
+                meta.MediaStorageSOPInstanceUID = generate_uid()
                 meta.TransferSyntaxUID = ExplicitVRLittleEndian
                 f: Any = FileDataset(str(path), {}, file_meta=meta, preamble=b"\0" * 128)
                 f.SOPClassUID = MRImageStorage

@@ -63,12 +63,14 @@ import xarray as xr
 from harpx._typing import FloatArray, IntArray, PathLike
 from harpx.errors import ArchiveError, SchemaError
 from harpx.io.netcdf import (
+    _check_path,
     _fsync_directory,
     check_writable_target,
     remove_stale_temporaries,
     temporary_prefix,
 )
 from harpx.mechanics.body import Body
+from harpx.mechanics.cells import volume_blocks, vtk_hex_corner_jacobians
 from harpx.mechanics.mesh import MeshSpec, hex_mesh
 from harpx.schema import validate
 
@@ -90,11 +92,6 @@ MESHIO_CELL_TYPES: dict[str, str] = {
 _SUFFIXES: dict[str, tuple[str, ...]] = {"xdmf": (".xdmf", ".xmf"), "vtu": (".pvd", ".vtu")}
 _REGION_FIELD = "region:"
 _XDMF_INFO = "harpx_region_names"
-# The 8 corners of the reference hexahedron in VTK order, as (xi, eta, zeta) in {-1, 1}.
-_HEX_CORNERS = np.array(
-    [[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
-     [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=np.float64
-)  # fmt: skip
 
 
 # --- export ------------------------------------------------------------------------------
@@ -137,6 +134,8 @@ def to_meshio(
         If ``series`` is unknown or the suffix of ``path`` belongs to the other series.
     FileNotFoundError
         If the directory of ``path`` does not exist.
+    TypeError
+        If ``tracked`` is not an xarray.Dataset or ``path`` not a str or os.PathLike.
 
     Notes
     -----
@@ -172,6 +171,11 @@ def to_meshio(
     >>> bool((back.cells == body.cells).all() and (back.dof_points == body.dof_points).all())
     True
     """
+    if not isinstance(tracked, xr.Dataset):
+        raise TypeError(
+            f"to_meshio needs a tracked/1 xarray.Dataset, got {type(tracked).__name__!r}"
+        )
+    _check_path(path)
     if series not in _SUFFIXES:
         raise ValueError(f"series={series!r} is not supported; use 'xdmf' or 'vtu'")
     target = _target_path(Path(path), series)
@@ -393,7 +397,8 @@ def read_body_mesh(path: PathLike) -> MeshSpec:
     path : str or os.PathLike
         A ``.pvd`` collection or ``.xdmf`` time series written by :func:`to_meshio` (the
         mesh of its first frame is read), one of its ``.vtu`` frames, or any file meshio
-        reads with ``hexahedron`` or ``hexahedron20`` cells (mm).
+        reads with ``hexahedron`` or ``hexahedron20`` cells (mm; several blocks of one
+        of these kinds are merged in block order).
 
     Returns
     -------
@@ -412,13 +417,15 @@ def read_body_mesh(path: PathLike) -> MeshSpec:
     ArchiveError
         If the file cannot be parsed (truncated, corrupt, unknown format); names the path.
     SchemaError
-        If the file has no hexahedra, or some hexahedra are inverted or degenerate (a
-        non-positive Jacobian at a corner); the message lists their ids.
+        If the file has no hexahedra, has other volume cells besides them (e.g. a
+        tetrahedron; blocks of hexahedra are merged), or some hexahedra are inverted or
+        degenerate (a non-positive Jacobian at a corner); the message lists their ids.
 
     See Also
     --------
     to_meshio : writes the files this reads; its example rebuilds a Body.
     """
+    _check_path(path)
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"cannot read mesh {str(path)!r}: no such file")
@@ -468,7 +475,8 @@ def read_body(path: PathLike, material: Any, **kwargs: Any) -> Body:
     ArchiveError
         If meshio cannot parse the file; names the path.
     ValueError
-        If the file has no hexahedra or tetrahedra (names the path and its cell blocks).
+        If the file has no hexahedra or tetrahedra (names the path and its cell blocks),
+        or volume cells of several kinds (counts each; blocks of one kind are merged).
 
     See Also
     --------
@@ -487,9 +495,8 @@ def read_body(path: PathLike, material: Any, **kwargs: Any) -> Body:
     >>> back.ncell, back.ndof == body.ndof
     (8, True)
     """
-    return Body.from_meshio(
-        read_meshio(path), material, source=f"mesh file {os.fspath(path)!r}", **kwargs
-    )
+    mesh = read_meshio(path)
+    return Body.from_meshio(mesh, material, source=f"mesh file {os.fspath(path)!r}", **kwargs)
 
 
 def read_meshio(path: PathLike) -> meshio.Mesh:
@@ -512,6 +519,7 @@ def read_meshio(path: PathLike) -> meshio.Mesh:
         If meshio cannot parse the file (meshio's own ``ReadError`` and the ``sys.exit``
         it calls for unreadable files are turned into this); names the path.
     """
+    _check_path(path)
     path = Path(path)
     if path.is_dir():
         raise FileNotFoundError(f"cannot read mesh {str(path)!r}: it is a directory, not a file")
@@ -582,51 +590,41 @@ def _read_xdmf_series(path: Path) -> tuple[meshio.Mesh, dict[str, int]]:
 
 
 def _mesh_spec(mesh: meshio.Mesh, names: Mapping[str, int], path: Path) -> MeshSpec:
-    hexes = [k for k, c in enumerate(mesh.cells) if c.type in ("hexahedron", "hexahedron20")]
-    if len(hexes) != 1:
-        kinds = sorted({c.type for c in mesh.cells})
-        raise SchemaError(
-            f"mesh file {str(path)!r} has cell blocks {kinds!r}; expected exactly one block of "
-            "'hexahedron' or 'hexahedron20' cells"
+    try:  # blocks of hexahedra merged; other volume cells refused, never dropped
+        _, hexes, data = volume_blocks(
+            mesh, f"mesh file {str(path)!r}", ("hexahedron", "hexahedron20"), "hexahedra"
         )
-    k = hexes[0]
-    corners = np.asarray(mesh.cells[k].data, dtype=np.int64)[:, :8]
-    used, inverse = np.unique(corners, return_inverse=True)
+    except ValueError as exc:
+        raise SchemaError(str(exc)) from None
+    used, inverse = np.unique(hexes[:, :8], return_inverse=True)
     points = np.asarray(mesh.points, dtype=np.float64)[used]
     cells = inverse.reshape(-1, 8)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise SchemaError(
+            f"mesh file {str(path)!r} has points of shape {points.shape}; expected (n, 3) in mm"
+        )
+    bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
+    if bad.size:
+        raise SchemaError(
+            f"mesh file {str(path)!r} has {bad.size} nodes with a NaN or infinite coordinate "
+            f"(nodes {used[bad[:10]].tolist()} of the file); fix or remove them"
+        )
     _check_hexahedra(points, cells, path)
     regions: dict[str, IntArray] = {}
-    if "region" in mesh.cell_data:
-        label = np.asarray(mesh.cell_data["region"][k]).astype(np.int64).ravel()
+    if "region" in data:
+        label = np.asarray(data["region"]).astype(np.int64).ravel()
         by_code = {code: name for name, code in names.items()}
         for code in np.unique(label[label >= 0]):  # loop over the few region labels
             regions[by_code.get(int(code), f"region{int(code)}")] = np.flatnonzero(label == code)
     fibers = None
-    if "fiber" in mesh.cell_data:
-        fibers = np.asarray(mesh.cell_data["fiber"][k], dtype=np.float64)
+    if "fiber" in data:
+        fibers = np.asarray(data["fiber"], dtype=np.float64)
     return MeshSpec(hex_mesh(points, cells), regions=regions, fibers=fibers)
-
-
-def _corner_gradients() -> FloatArray:
-    """``dN_a/dxi_k`` of the trilinear hexahedron at its 8 corners, shape (corner, a, k)."""
-    xi = _HEX_CORNERS
-    f = 1.0 + xi[None, :, :] * xi[:, None, :]  # (corner, a, j): 1 + xi_aj xi_cj
-    dN = np.empty((8, 8, 3))
-    for k in range(3):  # loop over the 3 reference axes
-        others = [j for j in range(3) if j != k]
-        dN[:, :, k] = xi[None, :, k] * f[:, :, others[0]] * f[:, :, others[1]] / 8.0
-    return dN
-
-
-_DN_CORNERS = _corner_gradients()
 
 
 def _check_hexahedra(points: FloatArray, cells: IntArray, path: Path) -> None:
     """SchemaError listing hexahedra with a non-positive corner Jacobian (VTK order)."""
-    X = points[cells]  # (ncell, 8, 3)
-    J = np.einsum("cak,eai->ecik", _DN_CORNERS, X)  # dx_i/dxi_k at each corner
-    det = np.linalg.det(J)  # (ncell, 8)
-    size = np.ptp(X, axis=1).max(axis=1)  # cell extent, mm
+    det, size = vtk_hex_corner_jacobians(points, cells)
     bad = np.flatnonzero(np.any(det <= 1e-12 * size[:, None] ** 3, axis=1))
     if bad.size:
         shown = ", ".join(str(int(c)) for c in bad[:10]) + (", ..." if bad.size > 10 else "")

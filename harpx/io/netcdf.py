@@ -49,6 +49,7 @@ import shutil
 import socket
 import stat
 import tempfile
+import warnings
 from collections.abc import Hashable, Mapping
 from pathlib import Path
 from typing import Any, Literal
@@ -57,7 +58,7 @@ import numpy as np
 import xarray as xr
 
 from harpx._typing import PathLike
-from harpx.errors import ArchiveError
+from harpx.errors import ArchiveError, HarpxWarning
 
 __all__ = ["open_dataset", "to_netcdf"]
 
@@ -112,6 +113,8 @@ def to_netcdf(ds: xr.Dataset, path: PathLike) -> Path:
         node or a read-only file (never replaced: :func:`check_writable_target`), or writing
         fails (a full disk is named as such); the previous content of ``path`` is then left
         intact.
+    TypeError
+        If ``ds`` is not an xarray.Dataset or ``path`` not a str or os.PathLike.
 
     Notes
     -----
@@ -134,6 +137,10 @@ def to_netcdf(ds: xr.Dataset, path: PathLike) -> Path:
     >>> back.identical(ds)
     True
     """
+    if not isinstance(ds, xr.Dataset):
+        hint = "; convert with da.to_dataset(name=...)" if isinstance(ds, xr.DataArray) else ""
+        raise TypeError(f"to_netcdf needs an xarray.Dataset, got {type(ds).__name__!r}{hint}")
+    _check_path(path)
     if "harpx_schema" in ds.attrs:
         from harpx.schema import validate
 
@@ -339,7 +346,25 @@ def open_dataset(
         If the file does not exist or is a directory, is truncated or corrupt, is not
         NetCDF, or declares more data than ``max_bytes`` for an eager load; the message
         names the path.
+    TypeError
+        If ``path`` is not a str or os.PathLike.
+    ValueError
+        If ``chunks`` or ``max_bytes`` is not of the kinds above (e.g. a negative size).
+
+    Warns
+    -----
+    HarpxWarning
+        If the archive declares a newer ``harpx_schema`` version than this harpx reads
+        (e.g. ``"tracked/2"``): upgrade harpx.
     """
+    _check_path(path)
+    _check_chunks(chunks)
+    if max_bytes is not None and (
+        isinstance(max_bytes, bool)
+        or not isinstance(max_bytes, numbers.Integral)
+        or int(max_bytes) < 1
+    ):
+        raise ValueError(f"max_bytes={max_bytes!r} must be a positive whole number of bytes")
     path = Path(path)
     if path.is_dir():
         raise ArchiveError(
@@ -360,7 +385,7 @@ def open_dataset(
             with ds:
                 _check_size(ds, path, max_bytes)
                 ds = ds.load()
-        return _decode(ds)
+        ds = _decode(ds)
     except ArchiveError:
         raise
     except Exception as exc:
@@ -368,6 +393,51 @@ def open_dataset(
             f"cannot read {str(path)!r} as a NetCDF archive ({type(exc).__name__}: {exc}); "
             "the file may be truncated, corrupt or not NetCDF"
         ) from exc
+    from harpx.schema import newer_schema
+
+    newer = newer_schema(ds.attrs.get("harpx_schema"))
+    if newer:
+        warnings.warn(
+            f"archive {str(path)!r}: {newer}. Until then its variables may be misread, and "
+            "validate() and the trackers refuse it",
+            HarpxWarning,
+            stacklevel=2,
+        )
+    return ds
+
+
+def _check_path(path: Any) -> None:
+    """TypeError naming ``path`` unless it is a str or os.PathLike."""
+    if not isinstance(path, str | os.PathLike):
+        raise TypeError(
+            f"path={path!r} must be a file path (str or os.PathLike), not {type(path).__name__}"
+        )
+
+
+def _check_chunks(chunks: Any) -> None:
+    """ValueError naming a ``chunks`` argument xarray would misreport as a corrupt file."""
+    if chunks is None or isinstance(chunks, str) and chunks == "auto":
+        return
+    if not isinstance(chunks, Mapping):
+        raise ValueError(
+            f"chunks={chunks!r} must be None, 'auto' or a mapping of dimension name to chunk "
+            "size (e.g. {'time': 1}; {} keeps the file's own chunks)"
+        )
+    for dim, size in chunks.items():
+        ok = (
+            size is None
+            or size == "auto"
+            or (
+                isinstance(size, numbers.Integral)
+                and not isinstance(size, bool)
+                and (int(size) >= 1 or int(size) == -1)
+            )
+        )
+        if not ok:
+            raise ValueError(
+                f"chunks[{dim!r}] is {size!r}; expected a positive chunk size, -1 (the whole "
+                "dimension), 'auto' or None"
+            )
 
 
 def _available_memory() -> int:

@@ -26,6 +26,8 @@ __all__ = [
     "Volumetric",
     "curved_tet_mesh",
     "default_element",
+    "volume_blocks",
+    "vtk_hex_corner_jacobians",
 ]
 
 #: Element names a :class:`Body` accepts.
@@ -113,50 +115,209 @@ def default_element(mesh: Any) -> ElementName:
     return "hex8"
 
 
+#: meshio cell types of 3D cells (prefixes): a block of one of them is part of the body.
+_VOLUME_TYPES = ("tetra", "hexahedron", "wedge", "pyramid", "polyhedron")
+
+
+def volume_blocks(
+    m: meshio.Mesh, source: str, kinds: tuple[str, ...], what: str
+) -> tuple[str, IntArray, dict[str, np.ndarray]]:
+    """The volume cells of a meshio mesh: one kind, its blocks merged, and their cell data.
+
+    Parameters
+    ----------
+    m : meshio.Mesh
+        The mesh; blocks of surface, line and vertex cells (boundaries) are ignored.
+    source : str
+        What the mesh is called in errors (e.g. its file name).
+    kinds : tuple of str
+        The meshio cell types accepted, e.g. ``("hexahedron", "hexahedron20")``.
+    what : str
+        Those cells in words, for errors (e.g. ``"hexahedra"``).
+
+    Returns
+    -------
+    kind : str
+        The one accepted type the mesh's volume cells have.
+    cells : ndarray of int, shape (ncell, nvertex)
+        Every block of that type, in block order.
+    cell_data : dict of str to ndarray
+        Each cell data field over those cells (blocks concatenated in the same order).
+
+    Raises
+    ------
+    TypeError
+        If ``m`` is not a :class:`meshio.Mesh`.
+    ValueError
+        If the mesh has no cells of an accepted type, or volume cells of more than one type
+        (e.g. hexahedra and tetrahedra, or wedges harpx has no element for): the message
+        gives the count of each, so no cell is dropped silently. Also if a cell names a node
+        the mesh does not have, or repeats another cell's nodes.
+    """
+    if not isinstance(m, meshio.Mesh):
+        raise TypeError(
+            f"expected a meshio.Mesh for {source}, got {type(m).__name__!r}; read a file "
+            "with harpx.io.mesh.read_body(path, material)"
+        )
+    counts: dict[str, int] = {}
+    for block in m.cells:
+        if len(block.data) and block.type.startswith(_VOLUME_TYPES):
+            counts[block.type] = counts.get(block.type, 0) + len(block.data)
+    present = [k for k in kinds if counts.get(k)]
+    if not present:
+        every: dict[str, int] = {}
+        for block in m.cells:
+            every[block.type] = every.get(block.type, 0) + len(block.data)
+        raise ValueError(
+            f"{source} has no {what} (cell blocks {every!r}); expected "
+            f"{' or '.join(repr(k) for k in kinds)} cells"
+        )
+    if len(counts) > 1:
+        raise ValueError(
+            f"{source} mixes volume cells of several kinds {counts!r}; a body is built from "
+            f"one kind ({', '.join(repr(k) for k in kinds)}), so some cells would be dropped. "
+            "Mesh it with one kind (e.g. split hexahedra into tetrahedra with "
+            "harpx.mechanics.mesh.tetrahedralize) or remove the blocks you do not want"
+        )
+    kind = present[0]
+    blocks = [i for i, c in enumerate(m.cells) if c.type == kind and len(c.data)]
+    cells = np.concatenate([np.asarray(m.cells[i].data, dtype=np.int64) for i in blocks])
+    npoint = len(m.points)
+    outside = np.flatnonzero(((cells < 0) | (cells >= npoint)).any(axis=1))
+    if outside.size:
+        raise ValueError(
+            f"{source} has {outside.size} {kind!r} cells that name nodes it does not have "
+            f"(cells {outside[:10].tolist()}; node ids must lie in [0, {npoint - 1}]); the file "
+            "is truncated or its points and cells do not belong together"
+        )
+    corners = np.sort(cells[:, : 4 if kind.startswith("tetra") else 8], axis=1)
+    _, first, repeats = np.unique(corners, axis=0, return_index=True, return_counts=True)
+    if np.any(repeats > 1):
+        twice = np.setdiff1d(np.arange(len(cells)), first)
+        raise ValueError(
+            f"{source} has {twice.size} {kind!r} cells that repeat another cell's nodes "
+            f"(e.g. cells {twice[:10].tolist()}, counted over its blocks in order): the same "
+            "volume would count twice. Remove the repeats (a mesh exported with its cells "
+            "in several groups lists them once per group)"
+        )
+    cell_data: dict[str, np.ndarray] = {}
+    for name, per_block in m.cell_data.items():
+        parts = [np.asarray(per_block[i]) for i in blocks]
+        if len({p.shape[1:] for p in parts}) > 1:
+            raise ValueError(
+                f"cell data {name!r} of {source} has shapes {[p.shape for p in parts]} in its "
+                f"{kind!r} blocks; each block needs the same per-cell shape"
+            )
+        cell_data[name] = np.concatenate(parts)
+    return kind, cells, cell_data
+
+
+# The 8 corners of the reference hexahedron in VTK order, as (xi, eta, zeta) in {-1, 1}.
+_VTK_HEX_CORNERS = np.array(
+    [[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
+     [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=np.float64
+)  # fmt: skip
+
+
+def _corner_gradients() -> FloatArray:
+    """``dN_a/dxi_k`` of the trilinear hexahedron at its 8 corners, shape (corner, a, k)."""
+    xi = _VTK_HEX_CORNERS
+    f = 1.0 + xi[None, :, :] * xi[:, None, :]  # (corner, a, j): 1 + xi_aj xi_cj
+    dN = np.empty((8, 8, 3))
+    for k in range(3):  # loop over the 3 reference axes
+        others = [j for j in range(3) if j != k]
+        dN[:, :, k] = xi[None, :, k] * f[:, :, others[0]] * f[:, :, others[1]] / 8.0
+    return dN
+
+
+_DN_CORNERS = _corner_gradients()
+
+
+def vtk_hex_corner_jacobians(points: FloatArray, cells: IntArray) -> tuple[FloatArray, FloatArray]:
+    """Jacobian determinants at the corners of hexahedra given in VTK vertex order.
+
+    Parameters
+    ----------
+    points : ndarray, shape (npoint, 3)
+        Node positions, mm.
+    cells : ndarray of int, shape (ncell, 8)
+        Corner node ids per cell, VTK order (bottom face 0-1-2-3 counter-clockwise seen
+        from the top face 4-5-6-7).
+
+    Returns
+    -------
+    det : ndarray, shape (ncell, 8)
+        ``det(dx/dxi)`` at each corner, mm³: all positive for a valid cell in VTK order,
+        all negative for a mirrored one, of both signs for a twisted one, ~0 if collapsed.
+    size : ndarray, shape (ncell,)
+        Largest extent of each cell along x, y or z, mm (``size**3`` scales ``det``).
+    """
+    X = np.asarray(points, dtype=np.float64)[np.asarray(cells)[:, :8]]  # (ncell, 8, 3)
+    J = np.einsum("cak,eai->ecik", _DN_CORNERS, X)  # dx_i/dxi_k at each corner
+    return np.linalg.det(J), np.ptp(X, axis=1).max(axis=1)
+
+
 def _skfem_mesh(m: meshio.Mesh, source: str) -> tuple[Any, FloatArray | None]:
     """The scikit-fem mesh and cell fibres of a hexahedral or tetrahedral meshio mesh.
 
     ``hexahedron``, ``hexahedron20`` (straight-edged geometry from the corners; the edge
     nodes become element dofs again), ``tetra`` and ``tetra10`` (curved: the edge nodes
-    are kept as geometry, a ``skfem.MeshTet2``) cells are accepted; cell data ``fiber``
-    (one vector per cell) becomes the fibres. ``source`` names the mesh in errors.
+    are kept as geometry, a ``skfem.MeshTet2``) cells are accepted; several blocks of one
+    kind are merged (:func:`volume_blocks`), volume cells of several kinds are refused.
+    Cell data ``fiber`` (one vector per cell) becomes the fibres. ``source`` names the
+    mesh in errors.
     """
-    kinds = m.cells_dict
-    known = ("hexahedron", "hexahedron20", "tetra", "tetra10")
-    present = [k for k in known if len(kinds.get(k, ()))]
-    if not present:
-        raise ValueError(
-            f"{source} has no hexahedra or tetrahedra (cell blocks "
-            f"{ {k: len(v) for k, v in kinds.items()}!r}); expected 'hexahedron', "
-            "'hexahedron20', 'tetra' or 'tetra10' cells"
-        )
-    kind = present[0]
-    k = [i for i, c in enumerate(m.cells) if c.type == kind][0]
+    kinds = ("hexahedron", "hexahedron20", "tetra", "tetra10")
+    kind, cells, data = volume_blocks(m, source, kinds, "hexahedra or tetrahedra")
     fibers = None
-    if "fiber" in m.cell_data:
-        fibers = np.asarray(m.cell_data["fiber"][k], dtype=np.float64)
-    cell_data = {name: [np.asarray(v[k])] for name, v in m.cell_data.items()}
+    if "fiber" in data:
+        fibers = np.asarray(data["fiber"], dtype=np.float64)
+    cell_data = {name: [v] for name, v in data.items()}
+    if kind.startswith("hexahedron"):
+        _check_vtk_hexahedra(np.asarray(m.points, dtype=np.float64), cells, source)
     if kind == "hexahedron20":
-        corners = m.cells[k].data[:, :8]
-        used, inv = np.unique(corners, return_inverse=True)
+        used, inv = np.unique(cells[:, :8], return_inverse=True)
         m = meshio.Mesh(m.points[used], [("hexahedron", inv.reshape(-1, 8))], cell_data=cell_data)
     elif kind == "tetra10":
         # skfem numbers the vertices first; keep the corner points, rebuild the edge nodes
         # from the file (so curved edges stay curved)
-        cells = m.cells[k].data
         used, inv = np.unique(cells[:, :4], return_inverse=True)
         t = inv.reshape(-1, 4)
         base = skfem.MeshTet1(np.ascontiguousarray(m.points[used].T), np.ascontiguousarray(t.T))
         base = _orient_tets(base)
         return curved_tet_mesh(base, _edge_points(base, t, m.points[cells[:, 4:]])), fibers
-    else:  # keep these cells and their nodes (drop other cell blocks and stray points)
-        used, inv = np.unique(m.cells[k].data, return_inverse=True)
-        nv = m.cells[k].data.shape[1]
+    else:  # keep these cells and their nodes (drop boundary blocks and stray points)
+        used, inv = np.unique(cells, return_inverse=True)
+        nv = cells.shape[1]
         m = meshio.Mesh(m.points[used], [(kind, inv.reshape(-1, nv))], cell_data=cell_data)
     mesh = skfem.io.meshio.from_meshio(m)
     if isinstance(mesh, skfem.MeshTet1):
         mesh = _orient_tets(mesh)
     return mesh, fibers
+
+
+def _check_vtk_hexahedra(points: FloatArray, cells: IntArray, source: str) -> None:
+    """ValueError naming twisted or collapsed hexahedra (VTK order) before skfem maps them.
+
+    A mirrored cell (every corner Jacobian negative) is a valid cell that scikit-fem
+    reorders; a twisted one (both signs) or a collapsed one (a vanishing Jacobian) is not.
+    Cells with a non-finite node are left to the Body's own check, which names the node.
+    """
+    if points.ndim != 2 or points.shape[1] != 3:
+        return  # the Body names the shape
+    finite = np.isfinite(points[cells[:, :8]]).all(axis=(1, 2))
+    det, size = vtk_hex_corner_jacobians(points, cells[finite])
+    small = np.abs(det) <= 1e-12 * size[:, None] ** 3
+    bad = np.flatnonzero(finite)[
+        np.any(small, axis=1) | ((det > 0).any(axis=1) & (det < 0).any(axis=1))
+    ]
+    if bad.size:
+        raise ValueError(
+            f"{source} has {bad.size} twisted or collapsed hexahedra (the corner Jacobian "
+            f"changes sign or vanishes): cells {bad[:10].tolist()}; order each cell's vertices "
+            "as VTK does (bottom face 0-1-2-3 counter-clockwise seen from the top face "
+            "4-5-6-7) and remove collapsed cells"
+        )
 
 
 # VTK hexahedron edges grouped by the reference direction they run along (xi, eta, zeta)

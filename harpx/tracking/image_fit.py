@@ -3,21 +3,30 @@
 :func:`check_fits_image` compares a body's nodes (mm) with the image's field of view and
 voxel size and estimates the constraint quadrature the tracker would place, so a mesh in the
 wrong units, with stray nodes, or too coarse for the voxels is refused with numbers before
-anything large is allocated.
+anything large is allocated. :func:`check_coverage` then measures, from the constraint
+points, how much of the body lies outside the images' field of view or masks, and warns
+when that part is large enough to bias the tracked motion of the rest.
 """
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
-import skfem
+import xarray as xr
+from numpy.typing import ArrayLike
 
-from harpx.errors import SchemaError
+from harpx.errors import HarpxWarning, SchemaError
 from harpx.mechanics.body import Body
 from harpx.mechanics.cells import _VTK_TET_EDGES
+from harpx.schema import AXES, GRID_DIMS
 
-__all__ = ["check_fits_image"]
+__all__ = ["OUTSIDE_WARN", "check_coverage", "check_fits_image"]
+
+#: Fraction of the body's volume outside the images' field of view or every tag's mask
+#: (in the reference frame) above which :func:`check_coverage` warns.
+OUTSIDE_WARN = 0.05
 
 _EDGES_BY_DIRECTION = np.array(
     [[[0, 1], [3, 2], [4, 5], [7, 6]], [[0, 3], [1, 2], [4, 7], [5, 6]],
@@ -55,6 +64,8 @@ def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> 
 
     Raises
     ------
+    TypeError
+        If ``body`` is not a Body or ``grid`` has no coordinates.
     NotImplementedError
         For a body on curved hexahedra (``skfem.MeshHex2``): tracking samples the body
         through the straight-cell point locator.
@@ -78,6 +89,14 @@ def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> 
     ...     print(str(err).split(": ")[-1])
     are its coordinates in micrometres (divide by 1000)?
     """
+    import skfem
+
+    if not isinstance(body, Body):
+        raise TypeError(f"body must be a harpx Body, got {type(body).__name__!r}")
+    if not hasattr(grid, "coords"):
+        raise TypeError(
+            f"grid must be a tagged/1 or phase/1 xarray.Dataset, got {type(grid).__name__!r}"
+        )
     if isinstance(body.mesh, skfem.MeshHex2):
         raise NotImplementedError(
             "tracking a body on curved hexahedra (skfem.MeshHex2) is not implemented: the "
@@ -101,7 +120,12 @@ def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> 
     voxel = float(grid.attrs.get("upsample", 1)) * min(step) if step else fov
     nodes = np.asarray(body.nodes)
     size = float(np.ptp(nodes, axis=0).max())
-    ratio = size / fov if fov > 0 else np.inf
+    if not fov > 0:
+        raise SchemaError(
+            f"the image grid has a single voxel along every axis (x, y, z at "
+            f"{lo.round(3).tolist()} mm): there is no field of view to track in"
+        )
+    ratio = size / fov
     hint = ""
     if ratio > 20:
         hint = (
@@ -152,3 +176,94 @@ def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> 
             f"limit max_points={max_points:.3g}): {longest}{hint or ''}; refine the "
             "mesh (smaller cells) or check its units (mm)"
         )
+
+
+def check_coverage(
+    phase: xr.Dataset,
+    points: ArrayLike,
+    volume: ArrayLike,
+    valid: ArrayLike,
+    *,
+    threshold: float = OUTSIDE_WARN,
+) -> float:
+    """Warn when much of a body lies outside the images' field of view or masks.
+
+    Constraint points without data from any tag in the reference frame carry no force:
+    there the tracked motion comes from the mechanics alone, and it drags the cells that
+    are imaged. This measures the part of the body (by volume) whose points have no data
+    *because* they lie outside the field of view or outside every tag's ``mask``; points
+    inside both that only lack tissue signal (a blurred tissue edge) are not counted.
+
+    Parameters
+    ----------
+    phase : xarray.Dataset
+        ``phase/1`` dataset: coordinates ``z``, ``y``, ``x`` (mm), optional ``mask``.
+    points : array_like, shape (n, 3)
+        Reference positions (x, y, z) of the constraint points, mm.
+    volume : array_like, shape (n,)
+        Reference volume of each point, mm³.
+    valid : array_like of bool, shape (n, ntag)
+        Which tags have data at each point in the reference frame
+        (``PhaseConstraint.reference_valid``).
+    threshold : float, default :data:`OUTSIDE_WARN`
+        Volume fraction above which to warn, in [0, 1].
+
+    Returns
+    -------
+    float
+        Volume fraction of the body outside the field of view or every tag's mask, in
+        [0, 1] (for the result's attributes).
+
+    Warns
+    -----
+    HarpxWarning
+        If that fraction is above ``threshold``; the message gives the fractions outside the
+        field of view and outside the masks, and the fix.
+
+    Raises
+    ------
+    ValueError
+        If the arrays do not match in length or ``points`` is not (n, 3).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    weight = np.asarray(volume, dtype=np.float64).ravel()
+    seen = np.asarray(valid, dtype=bool)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(weight) != len(pts) or len(seen) != len(pts):
+        raise ValueError(
+            f"points {pts.shape}, volume {weight.shape} and valid {seen.shape} must describe "
+            "the same n constraint points: (n, 3), (n,) and (n, ntag)"
+        )
+    total = float(weight.sum())
+    if not len(pts) or not total > 0:
+        return 0.0
+    unseen = ~seen.reshape(len(pts), -1).any(axis=1)
+    low, high = np.empty(3), np.empty(3)
+    for column, axis in enumerate(AXES):
+        values = np.asarray(phase[axis].values, dtype=np.float64)
+        half = 0.5 * float(np.ptp(values)) / max(values.size - 1, 1) if values.size > 1 else 0.5
+        low[column], high[column] = values.min() - half, values.max() + half
+    in_view = np.all((pts >= low) & (pts <= high), axis=1)
+    in_mask = np.ones(len(pts), dtype=bool)
+    check = unseen & in_view
+    if "mask" in phase.variables and check.any():
+        inside = pts[check]
+        sel = {d: xr.DataArray(inside[:, AXES.index(d)], dims="point") for d in GRID_DIMS}
+        mask = phase["mask"].transpose("tag", *GRID_DIMS).sel(sel, method="nearest")
+        in_mask[check] = np.asarray(mask.values, dtype=bool).any(axis=0)
+    off_view = float(weight[unseen & ~in_view].sum()) / total
+    off_mask = float(weight[unseen & in_view & ~in_mask].sum()) / total
+    outside = off_view + off_mask
+    if outside > threshold:
+        count = int(np.count_nonzero(unseen & ~(in_view & in_mask)))
+        warnings.warn(
+            f"{100 * outside:.0f} % of the body ({count} of {len(pts)} constraint points) lies "
+            f"outside the images in frame 0: {100 * off_view:.0f} % outside the field of view "
+            f"(x, y, z from {np.round(low, 3).tolist()} to {np.round(high, 3).tolist()} mm) "
+            f"and {100 * off_mask:.0f} % outside every tag's mask. No tag pulls that part, so "
+            "its motion comes from the mechanics alone and biases the tracked motion of the "
+            "imaged part next to it (cells there have observed_directions 0). Crop the mesh "
+            "to the imaged region, or image (or resample onto) a larger field of view",
+            HarpxWarning,
+            stacklevel=3,
+        )
+    return outside

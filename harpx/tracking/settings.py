@@ -8,8 +8,11 @@ solves, so every value is checked in one place and recorded in the result's attr
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any, Literal
+
+import numpy as np
 
 Method = Literal["penalty", "augmented-lagrangian"]
 Predictor = Literal["none", "linear"]
@@ -20,19 +23,31 @@ PREDICTORS: tuple[str, ...] = ("none", "linear")
 REGULARIZATIONS: tuple[str, ...] = ("increment", "total")
 
 
+def _is_number(value: Any) -> bool:
+    """A real scalar: Python or numpy int/float (numpy scalars come from arrays), not bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
+
+
+def _not_a_number(name: str, value: Any, what: str) -> TypeError:
+    hint = ""
+    if isinstance(value, np.ndarray):
+        hint = " (a scalar, not an array: e.g. value.item())"
+    return TypeError(f"{name}={value!r} must be {what}, not {type(value).__name__}{hint}")
+
+
 def _positive(name: str, value: Any, *, allow_none: bool = False) -> float | None:
     if value is None and allow_none:
         return None
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise TypeError(f"{name}={value!r} must be a number")
+    if not _is_number(value):
+        raise _not_a_number(name, value, "a number")
     if not (math.isfinite(value) and value > 0):
         raise ValueError(f"{name}={value!r} must be a positive finite number")
     return float(value)
 
 
 def _count(name: str, value: Any, *, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise TypeError(f"{name}={value!r} must be a whole number")
+    if not _is_number(value):
+        raise _not_a_number(name, value, "a whole number")
     if not math.isfinite(value) or value != int(value) or value < minimum:
         raise ValueError(f"{name}={value!r} must be a whole number ≥ {minimum}")
     return int(value)

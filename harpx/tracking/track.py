@@ -32,7 +32,7 @@ from harpx.tracking.blur import blur_correction, deblurred
 from harpx.tracking.constraint import PhaseConstraint
 from harpx.tracking.equilibrium import Timings, split_dirichlet
 from harpx.tracking.frame import FrameOutcome, FrameProblem
-from harpx.tracking.image_fit import check_fits_image
+from harpx.tracking.image_fit import check_coverage, check_fits_image
 from harpx.tracking.observability import describe_direction
 from harpx.tracking.penalty import track_frame_penalty
 from harpx.tracking.results import tracked_dataset
@@ -242,6 +242,9 @@ def track(
         body, phase, intorder=settings.intorder, robust_scale=settings.effective_robust_scale
     )
     _check_data(phase, constraint)
+    outside = check_coverage(
+        phase, constraint.points, constraint.volume, constraint.reference_valid
+    )
     fixed, _ = split_dirichlet(body, dirichlet)
     seen = constraint.observe(fixed)
     _warn_unseen(constraint)
@@ -278,6 +281,7 @@ def track(
         "seen_directions": int(seen.body_rank),
         "unseen_directions": "; ".join(seen.unseen_directions) or "none",
         "rigid_modes_removed": int(seen.unseen_modes.shape[0]),
+        "outside_fraction": float(outside),
         "blur_passes_applied": int(passes),
         "iterations_per_pass": np.asarray(pass_iterations, dtype=np.int64),
         **timings.as_attrs(),
@@ -373,9 +377,10 @@ def _track_frames(
             plateau=settings.accepted_plateau(out.floor[n]), warm=earlier is not None,
         )  # fmt: skip
         if not np.isfinite(outcome.epsilon) or outcome.state is None:
+            where = explain_missing_data(phase, constraint.current_points(u0), n)
             raise SchemaError(
                 f"frame {n} (time={float(phase['time'][n])!r} ms) has no valid phase at any "
-                f"constraint point of the body: {explain_missing_data(phase, constraint.points, n)}"
+                f"constraint point of the body: {where}"
             )
         U[n] = outcome.u
         out.eps[n] = outcome.epsilon

@@ -85,3 +85,74 @@ def test_missing_mesh_file_is_named(tmp_path: Path) -> None:
 def test_directory_as_mesh_is_named(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match="is a directory, not a file"):
         read_body(tmp_path, MAT)
+
+
+# --- round three: raw numpy/skfem/xarray errors found by probing, now named ----------------
+
+
+def _vtk_box() -> meshio.Mesh:
+    return Body(_box(), MAT).to_meshio()  # 18 hexahedra in VTK order
+
+
+def test_twisted_hexahedra_are_named_not_a_zero_jacobian_exception() -> None:
+    # before: scikit-fem's bare "Exception: Zero Jacobian determinant"
+    m = _vtk_box()
+    twisted = m.cells_dict["hexahedron"][:, [0, 1, 3, 2, 4, 5, 7, 6]]
+    with pytest.raises(ValueError, match=r"has 18 twisted or collapsed hexahedra .*cells \[0, 1"):
+        Body.from_meshio(meshio.Mesh(m.points, [("hexahedron", twisted)]), MAT)
+    mirrored = m.cells_dict["hexahedron"][:, [4, 5, 6, 7, 0, 1, 2, 3]]  # valid, reordered
+    assert Body.from_meshio(meshio.Mesh(m.points, [("hexahedron", mirrored)]), MAT).ncell == 18
+
+
+def test_cells_naming_missing_nodes_are_named_not_an_index_error() -> None:
+    m = _vtk_box()
+    with pytest.raises(ValueError, match=r"cells that name nodes it does not have .*\[0, 9\]"):
+        Body.from_meshio(meshio.Mesh(m.points[:10], m.cells), MAT)
+
+
+def test_nan_node_in_a_mesh_file_is_named_not_a_runtime_warning(tmp_path: Path) -> None:
+    from harpx.errors import SchemaError
+    from harpx.io.mesh import read_body_mesh
+
+    m = _vtk_box()
+    points = m.points.copy()
+    points[3] = np.nan
+    meshio.write(tmp_path / "nan.vtu", meshio.Mesh(points, m.cells))
+    with pytest.raises(
+        SchemaError, match=r"1 nodes with a NaN or infinite coordinate \(nodes \[3\]"
+    ):
+        read_body_mesh(tmp_path / "nan.vtu")
+
+
+def _wrong_type_calls() -> list:
+    from harpx.io.mesh import to_meshio
+    from harpx.io.netcdf import open_dataset, to_netcdf
+    from harpx.schema import fill_standard_attrs
+    from harpx.tracking.image_fit import check_fits_image
+    from tests.test_schema import make_tagged
+
+    body, tagged = Body(_box(), MAT), make_tagged()
+    dataset = r"needs an xarray.Dataset"
+    return [
+        pytest.param(lambda d: to_netcdf(None, d / "a.nc"), dataset, id="to_netcdf"),
+        pytest.param(
+            lambda d: to_netcdf(tagged.image, d / "a.nc"), r"'DataArray'; convert", id="da"
+        ),
+        pytest.param(lambda d: to_netcdf(tagged, 5), r"path=5 must be a file path", id="path"),
+        pytest.param(lambda d: open_dataset(None), r"path=None must be a file", id="open"),
+        pytest.param(lambda d: fill_standard_attrs(None), dataset, id="fill"),
+        pytest.param(lambda d: to_meshio(None, d / "a.xdmf"), r"tracked/1 xarray", id="meshio"),
+        pytest.param(lambda d: read_body(None, MAT), r"path=None must be a file", id="read_body"),
+        pytest.param(
+            lambda d: Body.from_meshio("m.vtu", MAT), r"expected a meshio.Mesh .*'str'", id="body"
+        ),
+        pytest.param(lambda d: check_fits_image(None, tagged), r"must be a harpx Body", id="fit"),
+        pytest.param(lambda d: check_fits_image(body, None), r"grid must be a", id="grid"),
+    ]
+
+
+@pytest.mark.parametrize(("call", "match"), _wrong_type_calls())
+def test_wrong_types_are_named_not_attribute_errors(call, match: str, tmp_path: Path) -> None:
+    with pytest.raises(TypeError, match=match):
+        call(tmp_path)
+    assert list(tmp_path.iterdir()) == []  # nothing written

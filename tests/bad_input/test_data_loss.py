@@ -8,6 +8,7 @@ import socket
 import stat
 from pathlib import Path
 
+import numpy as np
 import pytest
 import xarray as xr
 
@@ -154,3 +155,112 @@ def test_local_cluster_listens_on_loopback_only(monkeypatch: pytest.MonkeyPatch)
     local_cluster(1)  # the arguments it starts the cluster with, without starting one
     assert seen["host"] == "127.0.0.1"
     assert seen["dashboard_address"] == "127.0.0.1:0"  # was ":0": every interface
+
+
+# --- DICOM export: never mixed with an older export, never half written --------------------
+
+
+def _dicom_roundtrip(folder: Path, ds: xr.Dataset) -> xr.Dataset:
+    from harpx.io.dicom import read_tagged
+
+    directions = {f"tagged {t}": [(t, tuple(np.eye(3)[i]))] for i, t in enumerate("xyz")}
+    return read_tagged(folder, tag_period=8.0, tag_directions=directions)
+
+
+def _two_exports(rng: np.random.Generator) -> tuple[xr.Dataset, xr.Dataset]:
+    from tests.io.test_dicom_write import _tagged
+
+    three = _tagged(rng)
+    three = three.isel(time=[0, 1, 1]).assign_coords(time=("time", [0.0, 30.0, 60.0]))
+    three["time"].attrs.update(_tagged(rng)["time"].attrs)
+    return three, _tagged(rng)  # 3 frames, then 2
+
+
+def test_dicom_export_into_an_earlier_export_is_refused(tmp_path: Path, rng) -> None:
+    pytest.importorskip("pydicom")
+    from harpx.io.dicom_write import write_tagged
+
+    old, new = _two_exports(rng)
+    write_tagged(old, tmp_path / "dicom")
+    before = sorted(p.relative_to(tmp_path) for p in (tmp_path / "dicom").rglob("*"))
+    # before: the 2-frame export joined the 3-frame one's series (3 frames read back)
+    with pytest.raises(FileExistsError, match=r"'.*dicom' is not empty .*overwrite=True"):
+        write_tagged(new, tmp_path / "dicom")
+    assert sorted(p.relative_to(tmp_path) for p in (tmp_path / "dicom").rglob("*")) == before
+    assert sorted(os.listdir(tmp_path)) == ["dicom"]  # no staging left
+    assert _dicom_roundtrip(tmp_path / "dicom", old).sizes["time"] == 3
+
+
+def test_dicom_overwrite_replaces_the_earlier_export_with_fresh_uids(tmp_path: Path, rng) -> None:
+    pydicom = pytest.importorskip("pydicom")
+    from harpx.io.dicom_write import write_tagged
+
+    old, new = _two_exports(rng)
+    write_tagged(old, tmp_path / "dicom")
+    uid = pydicom.dcmread(next((tmp_path / "dicom" / "x").iterdir())).SeriesInstanceUID
+    write_tagged(new, tmp_path / "dicom", overwrite=True)
+    back = _dicom_roundtrip(tmp_path / "dicom", new)
+    assert back.sizes["time"] == 2  # only the new frames
+    assert uid not in back.attrs["dicom_series"]  # each export is its own series
+    assert sorted(os.listdir(tmp_path)) == ["dicom"]
+
+
+def test_dicom_overwrite_never_deletes_other_files(tmp_path: Path, rng) -> None:
+    pytest.importorskip("pydicom")
+    from harpx.io.dicom_write import write_tagged
+
+    folder = tmp_path / "study"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("precious")
+    with pytest.raises(FileExistsError, match=r"'notes.txt' there is not a folder of \.dcm"):
+        write_tagged(_two_exports(rng)[1], folder, overwrite=True)
+    assert os.listdir(folder) == ["notes.txt"] and sorted(os.listdir(tmp_path)) == ["study"]
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(FileExistsError, match=r"'.*file' is a file, not a folder"):
+        write_tagged(_two_exports(rng)[1], tmp_path / "file")
+    (tmp_path / "link").symlink_to(folder)
+    with pytest.raises(FileExistsError, match=r"'.*link' is a symbolic link; pass the folder"):
+        write_tagged(_two_exports(rng)[1], tmp_path / "link", overwrite=True)
+    assert os.listdir(folder) == ["notes.txt"]
+
+
+def test_interrupted_dicom_export_leaves_nothing_and_keeps_the_old(
+    tmp_path: Path, rng, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    pydicom = pytest.importorskip("pydicom")
+    from harpx.io.dicom_write import write_tagged
+
+    old, new = _two_exports(rng)
+    write_tagged(old, tmp_path / "dicom")
+    calls = {"n": 0}
+    save = pydicom.dataset.FileDataset.save_as
+
+    def save_then_fail(self: object, *args: object, **kwargs: object) -> None:
+        calls["n"] += 1
+        if calls["n"] == 5:
+            raise KeyboardInterrupt  # e.g. the user stops the kernel mid-export
+        save(self, *args, **kwargs)
+
+    monkeypatch.setattr(pydicom.dataset.FileDataset, "save_as", save_then_fail)
+    with pytest.raises(KeyboardInterrupt):
+        write_tagged(new, tmp_path / "dicom", overwrite=True)
+    calls["n"] = 0
+    with pytest.raises(KeyboardInterrupt):
+        write_tagged(new, tmp_path / "fresh")
+    assert sorted(os.listdir(tmp_path)) == ["dicom"]  # no staging, no half export
+    assert _dicom_roundtrip(tmp_path / "dicom", old).sizes["time"] == 3  # the old, intact
+
+
+def test_dicom_export_refuses_unsafe_labels_and_nan_images(tmp_path: Path, rng) -> None:
+    pytest.importorskip("pydicom")
+    from harpx.errors import SchemaError
+    from harpx.io.dicom_write import write_tagged
+
+    ds = _two_exports(rng)[1]
+    with pytest.raises(SchemaError, match=r"tag labels \['\.\.'\] cannot name the series"):
+        write_tagged(ds.assign_coords(tag=("tag", ["x", "..", "z"], ds.tag.attrs)), tmp_path / "a")
+    lazy = ds.copy(deep=True)
+    lazy["image"][0, 1, 2, 3, 4] = np.nan
+    with pytest.raises(SchemaError, match=r"'image' of tag 'x' has 1 non-finite values"):
+        write_tagged(lazy.chunk({"time": 1}), tmp_path / "b")
+    assert os.listdir(tmp_path) == []

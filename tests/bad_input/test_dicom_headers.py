@@ -116,3 +116,57 @@ def test_non_numeric_trigger_time_is_named_not_missing(tmp_path: Path) -> None:
     write_classic(tmp_path, SA, edit=late)
     with pytest.raises(HarpxError, match=r"'TriggerTime' of .* is 'late', which is not a finite"):
         read_tagged(tmp_path, **SA_ONLY)
+
+
+@pytest.fixture(scope="module")
+def sa_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("sa")
+    write_classic(folder, SA)
+    return folder
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        pytest.param({"spacing": "1"}, r"spacing is '1'; expected a positive", id="spacing"),
+        pytest.param(
+            {"time_tolerance": float("nan")}, r"time_tolerance is nan; expected a finite", id="nan"
+        ),
+        pytest.param({"time_tolerance": -1.0}, r"time_tolerance is -1.0; expected", id="negative"),
+        pytest.param({"tag_directions": "SA"}, r"tag_directions is the string 'SA'", id="str"),
+        pytest.param(
+            {"tag_directions": {"SA tagged": "row"}},
+            r"tag_directions\['SA tagged'\] is 'row'; expected a \(label, direction\) pair",
+            id="direction-str",
+        ),
+    ],
+)
+def test_read_tagged_arguments_are_named(sa_folder: Path, kwargs: dict, match: str) -> None:
+    # before: a raw TypeError (spacing), no check at all (NaN tolerance: every frame
+    # "matched"), or a message about the first character of a string
+    with pytest.raises(HarpxError, match=match):
+        read_tagged(sa_folder, **{**SA_ONLY, **kwargs})
+
+
+def test_read_tagged_refuses_a_grid_larger_than_memory_before_allocating(
+    sa_folder: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # before: a warning above 2 GiB, then the allocation (83 GiB at spacing=0.01 here)
+    import harpx.io.dicom
+
+    monkeypatch.setattr(harpx.io.dicom, "_available_memory", lambda: 2**14)  # 16 KiB
+    with pytest.raises(HarpxError, match=r"would need .* GiB .*more than half the memory"):
+        read_tagged(sa_folder, spacing=0.5, **SA_ONLY)
+
+
+def test_read_tagged_and_voxel_positions_name_wrong_types() -> None:
+    from harpx.io.dicom import voxel_positions
+
+    with pytest.raises(TypeError, match=r"paths_or_folder must be a folder, a DICOM file"):
+        read_tagged(None, **SA_ONLY)  # type: ignore[arg-type]
+    with pytest.raises(HarpxError, match=r"paths_or_folder is an empty list"):
+        read_tagged([], **SA_ONLY)
+    with pytest.raises(TypeError, match=r"needs pydicom datasets .*got 'str': read the file"):
+        voxel_positions("a.dcm")
+    with pytest.raises(HarpxError, match=r"voxel_positions got no images"):
+        voxel_positions([])

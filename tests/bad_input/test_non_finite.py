@@ -63,3 +63,14 @@ def test_one_nan_block_of_a_lazy_phase_leaves_the_rest_valid(order: int) -> None
     near = np.array([[1.0, 1.0, 2.0]])  # inside the NaN block
     _, _, valid = sampler.sample(np.vstack([far, near]))
     assert valid.tolist() == [True, True, False]
+
+
+@pytest.mark.parametrize("value", [np.nan, np.inf], ids=["nan", "inf"])
+def test_non_finite_harp_points_are_named(value: float) -> None:
+    # before: tracked as "no data", NaN in every frame, and points_lost said 0
+    from harpx.imaging.harptrack import track_harp
+    from tests.test_schema import make_phase
+
+    points = [[5.0, 5.0, 0.0], [5.0, value, 0.0], [7.0, 7.0, 0.0]]
+    with pytest.raises(ValueError, match=r"points has 1 rows with NaN or inf \(rows \[1\]\)"):
+        track_harp(make_phase(), points=points)

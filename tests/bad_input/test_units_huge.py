@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import skfem
@@ -78,8 +80,8 @@ def test_tetrahedral_point_budget_names_points_per_edge() -> None:
     assert "voxels" not in message.split("):")[1].replace("1.5 voxels", "")
 
 
-def test_cohort_completeness_check_streams_a_huge_archive(tmp_path) -> None:
-    # an archive declaring 2e9 float64 (15 GiB) is judged incomplete without loading it
+def test_cohort_completeness_check_decides_from_attributes_first(tmp_path) -> None:
+    # an archive declaring 2e9 float64 (15 GiB) of another input is judged stale at once
     import netCDF4
 
     from harpx.batch import _is_complete
@@ -91,3 +93,138 @@ def test_cohort_completeness_check_streams_a_huge_archive(tmp_path) -> None:
         nc.harpx_schema = "tracked/1"
         nc.source_sha256 = "other"
     assert _is_complete(path, "abc", "settings") is False  # digest differs: decided from attributes
+
+
+def _complete_archive_declaring(path, values: int) -> None:
+    """A valid tracked/1 archive of this input and settings, plus ``values`` float64."""
+    import shutil
+
+    import netCDF4
+
+    import harpx.datasets
+
+    shutil.copy(harpx.datasets.path("phantom-small", "tracked"), path)
+    with netCDF4.Dataset(path, "a") as nc:
+        nc.createDimension("extra_n", values)
+        var = nc.createVariable(
+            "extra", "f8", ("extra_n",), zlib=True, chunksizes=(min(values, 1 << 20),)
+        )
+        var.units, var.long_name = "1", "unwritten filler"
+        nc.source_sha256, nc.settings_sha256 = "abc", "settings"
+
+
+def test_cohort_completeness_check_streams_a_large_complete_archive(tmp_path) -> None:
+    # matching digest and settings: the check must read every block, one chunk at a time
+    import tracemalloc
+
+    from harpx.batch import _is_complete
+
+    path = tmp_path / "s0_tracked.nc"
+    _complete_archive_declaring(path, 1 << 25)  # 256 MiB of float64 in 8 MiB chunks
+    assert _is_complete(path, "abc", "other") is False  # warm up the imports
+    tracemalloc.start()
+    try:
+        assert _is_complete(path, "abc", "settings") is True
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 64 * 2**20, f"the check held {peak / 2**20:.0f} MiB of a 256 MiB archive"
+
+
+def test_running_out_of_memory_in_the_check_is_not_an_incomplete_archive(
+    tmp_path, monkeypatch
+) -> None:
+    # before: `except Exception` took the MemoryError for a bad archive and redid the subject
+    import harpx.batch
+
+    path = tmp_path / "s0_tracked.nc"
+    _complete_archive_declaring(path, 8)
+
+    def no_memory(*args: object, **kwargs: object) -> None:
+        raise MemoryError
+
+    monkeypatch.setattr(harpx.batch, "validate", no_memory)
+    with pytest.raises(MemoryError, match=r"checking the existing archive '.*s0_tracked\.nc'"):
+        harpx.batch._is_complete(path, "abc", "settings")
+    assert path.stat().st_size > 0  # left as it was
+
+
+class _Future:
+    def __init__(self, error: BaseException | None) -> None:
+        self.error = error
+
+    def result(self) -> None:
+        if self.error is not None:
+            raise self.error
+
+    def done(self) -> bool:
+        return False
+
+
+class _Client:
+    """Stands in for a user's dask client: hands out futures, records cancellations."""
+
+    def __init__(self, errors: list[BaseException | None]) -> None:
+        self.futures = [_Future(e) for e in errors]
+        self._queue = iter(self.futures)
+        self.cancelled: list[_Future] = []
+
+    def submit(self, *args: object, **kwargs: object) -> _Future:
+        return next(self._queue)
+
+    def cancel(self, futures: list[_Future]) -> None:
+        self.cancelled.extend(futures)
+
+
+def _run_with(client: _Client, monkeypatch, stop_after: int | None = None):
+    import harpx.batch
+
+    def as_completed(futures):
+        for k, future in enumerate(futures):
+            if stop_after is not None and k == stop_after:
+                raise KeyboardInterrupt
+            yield future
+
+    monkeypatch.setattr(harpx.batch, "_distributed", lambda *names: (None, as_completed))
+    inputs = [Path(f"s{k}.nc") for k in range(len(client.futures))]
+    failures: dict[int, BaseException] = {}
+
+    class Bar:
+        def update(self, n: int) -> None:
+            pass
+
+    harpx.batch._run(
+        [(k, "digest") for k in range(len(inputs))],
+        inputs,
+        [Path(f"out/s{k}_tracked.nc") for k in range(len(inputs))],
+        len,
+        {},
+        client,
+        None,
+        1,
+        failures,
+        Bar(),
+        ("sha", "text"),
+    )
+    return inputs, failures
+
+
+def test_a_subject_out_of_memory_is_told_apart_from_bad_input(monkeypatch) -> None:
+    from harpx.batch import _cohort_error
+
+    client = _Client([None, MemoryError("Unable to allocate 12 GiB"), ValueError("bad mesh")])
+    inputs, failures = _run_with(client, monkeypatch)
+    assert sorted(failures) == [1, 2]
+    message = str(_cohort_error(inputs, [Path("o")] * 3, failures, Path("out")))
+    assert "'s1.nc': MemoryError: Unable to allocate 12 GiB" in message
+    assert "1 of them ran out of memory" in message and "fewer workers (n_workers=)" in message
+    assert "fix the other subjects first" in message
+
+
+def test_keyboard_interrupt_stops_the_cohort_and_cancels_the_queued_subjects(
+    monkeypatch,
+) -> None:
+    client = _Client([None, None, None])
+    with pytest.raises(KeyboardInterrupt):
+        _run_with(client, monkeypatch, stop_after=1)
+    assert client.cancelled == client.futures  # none reported done: all cancelled

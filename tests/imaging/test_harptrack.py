@@ -155,9 +155,11 @@ def test_tag_jump_beyond_half_a_period() -> None:
 
 def test_points_outside_the_data_are_nan() -> None:
     ds = moving_phase(translation((0.5, 0.0, 0.0)), ntime=2, shape=(1, 12, 12))
-    out = track_harp(ds, points=[[5.0, 5.0, 0.0], [50.0, 5.0, 0.0]])
+    with pytest.warns(HarpxWarning, match=r"1 of 2 points have no valid phase in frame 0"):
+        out = track_harp(ds, points=[[5.0, 5.0, 0.0], [50.0, 5.0, 0.0]])
     assert np.isfinite(out.displacement.values[:, 0]).all()
     assert out.attrs["points_lost"] == 0  # a point without data at frame 0 is not "lost"
+    assert out.attrs["points_unseen"] == 1  # but it is counted
     assert np.isnan(out.displacement.values[:, 1]).all()
 
 
@@ -188,7 +190,7 @@ def test_tagged_input_is_phase_extracted_first(monkeypatch: pytest.MonkeyPatch) 
     ("kwargs", "error", "match"),
     [
         pytest.param(
-            {"iterations": 0}, ValueError, "iterations=0 must be at least 1", id="iterations"
+            {"iterations": 0}, ValueError, "iterations=0 must be a whole number", id="iterations"
         ),
         pytest.param(
             {"points": np.zeros((3, 2))},

@@ -327,7 +327,7 @@ def test_read_body_mesh_errors_name_the_file(tmp_path: Path) -> None:
         read_body_mesh(tmp_path / "missing.vtu")
     tri = tmp_path / "tri.vtu"
     meshio.write(tri, meshio.Mesh(np.eye(3), [("triangle", [[0, 1, 2]])]))
-    with pytest.raises(SchemaError, match=r"tri\.vtu' has cell blocks \['triangle'\]"):
+    with pytest.raises(SchemaError, match=r"tri\.vtu' has no hexahedra \(cell blocks \{'triangle'"):
         read_body_mesh(tri)
     pvd = tmp_path / "lost.pvd"
     pvd.write_text(
