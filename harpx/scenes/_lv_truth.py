@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import xarray as xr
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
@@ -24,6 +25,7 @@ from harpx.mechanics.linsolve import LinearSolver
 from harpx.mechanics.loads import Pressure
 from harpx.mechanics.locate import HexLocator, trilinear
 from harpx.mechanics.newton import equilibrate
+from harpx.tracking.results import tracked_dataset
 
 __all__ = ["FEMotion", "Systole", "simulate_systole"]
 
@@ -63,15 +65,19 @@ def _advance(
     tol: float,
     max_iterations: int,
     step: float | None = None,
+    tension: FloatArray | float = 1.0,
 ) -> list[tuple[float, FloatArray]]:
-    """Newton continuation in the activation level from ``a_from`` to ``a_to``."""
+    """Newton continuation in the activation level from ``a_from`` to ``a_to``.
+
+    ``tension`` scales the active tension per cell (``a t_max tension``).
+    """
     done = a_from
     step = a_to - a_from if step is None else step
     accepted: list[tuple[float, FloatArray]] = []
     while done < a_to - 1e-12:
         # the level grows at most geometrically: the response is strongly nonlinear early on
         a = min(a_to, done + step, 2.0 * done) if done > 0 else min(a_to, step)
-        body.set_t_max(systole.t_max * a)
+        body.set_t_max(systole.t_max * a * tension)
         loads = [*dirichlet, Pressure("endo", systole.pressure * a)]
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             r = equilibrate(
@@ -111,6 +117,7 @@ def simulate_systole(
     tol: float = 1e-7,
     max_iterations: int = 10,
     linear_solver: str = "auto",
+    tension: ArrayLike | None = None,
 ) -> tuple[FloatArray, dict[str, Any]]:
     """Quasi-static systole whose cavity volume follows an ejection curve over the frames.
 
@@ -138,6 +145,10 @@ def simulate_systole(
         Newton iterations before a continuation step is halved.
     linear_solver : str, default "auto"
         See :mod:`harpx.mechanics.linsolve`.
+    tension : array_like, shape (ncell,), optional
+        Factor of the active tension per cell, in [0, 1] (dimensionless): a cell's active
+        tension parameter is ``a · t_max · tension``. Default 1 everywhere; 0 leaves a cell
+        passive (a transmural infarct, :func:`harpx.scenes.lv.lv`).
 
     Returns
     -------
@@ -151,11 +162,21 @@ def simulate_systole(
     ------
     ConvergenceError
         If the continuation stalls.
+    ValueError
+        If ``frames`` < 2, or ``tension`` is not (ncell,) values in [0, 1].
     """
     from harpx.anatomy.ventricle import cavity_volume
 
     if int(frames) < 2:
         raise ValueError(f"frames={frames!r} must be >= 2")
+    scale: FloatArray | float = 1.0
+    if tension is not None:
+        scale = np.asarray(tension, dtype=np.float64)
+        if scale.shape != (body.ncell,) or not np.all((scale >= 0.0) & (scale <= 1.0)):
+            raise ValueError(
+                f"tension must hold one factor in [0, 1] per cell, shape ({body.ncell},); "
+                f"got shape {scale.shape!r}"
+            )
     start = _time.perf_counter()
     solver = LinearSolver(linear_solver)
     info: dict[str, Any] = {"iterations": 0, "steps": 0, "cutbacks": 0}
@@ -173,6 +194,7 @@ def simulate_systole(
         tol=tol,
         max_iterations=max_iterations,
         step=1.0 / 64.0,
+        tension=scale,
     )
     levels = np.array([a for a, _ in path])
     ejected = np.maximum.accumulate(np.array([v0 - cavity_volume(body, u) for _, u in path]))
@@ -203,8 +225,9 @@ def simulate_systole(
             info,
             tol=tol,
             max_iterations=max_iterations,
+            tension=scale,
         )[-1][1]
-    body.set_t_max(systole.t_max)
+    body.set_t_max(systole.t_max * scale)
     info["levels"] = frame_levels
     info["ejection_fraction"] = np.array([1.0 - cavity_volume(body, u) / v0 for u in U])
     info["wall_time"] = _time.perf_counter() - start
@@ -318,6 +341,42 @@ class FEMotion:
         X[inside] = np.einsum("ma,mai->mi", N, self.body.nodes[self.body.cells[cells[inside]]])
         self._last_inverse = (X, inside)
         return X
+
+    def as_tracked(self, grid: xr.Dataset) -> xr.Dataset:
+        """The motion as a finite-element result on its own (fine) mesh, ``tracked/1``.
+
+        Parameters
+        ----------
+        grid : xarray.Dataset
+            Dataset with the ``time`` coordinate (ms, the motion's frame times) and the
+            ``z``, ``y``, ``x`` voxel centres (mm) of ``displacement_grid``, e.g. the
+            scene's ``tagged`` images.
+
+        Returns
+        -------
+        xarray.Dataset
+            ``tracked/1`` (:func:`harpx.tracking.results.tracked_dataset`): ``points``,
+            ``cells``, ``displacement`` (mm), ``green_strain``, ``fiber_stretch`` and
+            ``displacement_grid`` of the forward simulation, ``observed_fraction`` 1 for
+            every cell and axis (the truth knows every direction) and ``attrs["method"] =
+            "forward simulation"``; what :func:`harpx.cardiac.strain.cardiac_strain`
+            takes to give the true segment strains.
+
+        Raises
+        ------
+        ValueError
+            If the grid's times are not the motion's.
+        """
+        times = np.asarray(grid["time"].values, dtype=np.float64)
+        if times.shape != self.times.shape or not np.allclose(times, self.times):
+            raise ValueError(
+                f"the grid's times {times.tolist()!r} ms are not the motion's "
+                f"{self.times.tolist()!r}"
+            )
+        known: dict[str, Any] = {
+            "observed_fraction": (("cell", "axis"), np.ones((self.body.ncell, 3)))
+        }
+        return tracked_dataset(self.body, self.U, grid, known, {"method": "forward simulation"})
 
     def density(self, X: ArrayLike) -> FloatArray:
         """1 inside the reference mesh, 0 outside (n,)."""

@@ -17,6 +17,18 @@ tracker never shares the truth's discretisation (no inverse crime):
 * the base held in z (``Fixed("base", (2,))``) and pinned in-plane at four mid-wall points
   (x-pins at ±y, y-pins at ±x), which removes the in-plane rigid motions.
 
+A regional infarct (``lv(infarct=(7, 8, 13, 14))``: mid anterior, mid anteroseptal,
+apical anterior, apical septal, the territory of the left anterior descending artery)
+scales the active tension of the truth cells whose centre lies in the given AHA segments by
+``scar_activation``. The segments are those :func:`harpx.cardiac.strain.aha_segments`
+gives with the scene's exact template (:meth:`LVScene.template`: anterior wall at +y,
+:data:`ANTERIOR`; :func:`aha_segment`), the border between infarct and healthy tissue is
+sharp (on cell faces of the truth mesh) and the infarct keeps the healthy passive material.
+With no active tension at all (``scar_activation=0``) the soft passive myocardium
+(C = 0.88 kPa) bulges under the 8 kPa cavity pressure (dyskinesis: peak Ecc about +0.2 in
+the infarct at small size); half the tension leaves it hypokinetic (peak Ecc −0.03 to
+−0.06 against −0.11 to −0.14 elsewhere).
+
 The activation level :math:`a` (active tension :math:`a\,t_{max}`, cavity pressure
 :math:`a\,p_{es}`) is continued from 0 to 1 by Newton's method on the fine mesh; the frame
 levels are then chosen so that the ejected volume follows a smooth ejection curve
@@ -75,19 +87,23 @@ References
 .. [5] Maas SA, Erdemir A, Halloran JP, Weiss JA. A general framework for application of
    prestrain to computational models of biological materials. J Mech Behav Biomed Mater
    61:499--510, 2016.
+.. [6] Cerqueira MD et al. Standardized myocardial segmentation and nomenclature for
+   tomographic imaging of the heart. Circulation 105:539--542, 2002.
 """
 
 from __future__ import annotations
 
 import time as _time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 import xarray as xr
 
-from harpx._typing import FloatArray
+from harpx._typing import FloatArray, IntArray
 from harpx.anatomy.ventricle import VentricleGeometry, ventricle
+from harpx.anatomy.ventricle_fit import VentricleTemplate
 from harpx.imaging.stacks import resample_stacks, tagged_dataset
 from harpx.imaging.synth import AcquisitionOptions, synthesize_tagged
 from harpx.mechanics.body import Body
@@ -100,10 +116,12 @@ from harpx.physiology.growth import GrowthField, fiber_prestretch, prestretch_gr
 from harpx.scenes._lv_truth import FEMotion, Systole, simulate_systole
 
 __all__ = [
+    "ANTERIOR",
     "FEMotion",
     "LVScene",
     "SIZES",
     "Systole",
+    "aha_segment",
     "fiber_shortening",
     "lv",
     "myocardium",
@@ -116,6 +134,9 @@ Size = Literal["small", "paper"]
 #: the ventricle of both sizes (mm): cavity 50 mm wide, wall 8--10 mm, base 10 mm above
 #: the equator
 GEOMETRY = VentricleGeometry(inner=(25.0, 70.0), outer=(35.0, 78.0), truncation=10.0)
+#: direction of the anterior wall, degrees about +z from +x (the scene has no right
+#: ventricle; +y puts the 60° sector borders on node lines of both meshes)
+ANTERIOR = 90.0
 
 
 def myocardium(kappa: float = 350.0) -> Guccione:
@@ -186,6 +207,67 @@ def base_conditions(geometry: VentricleGeometry = GEOMETRY) -> list[Any]:
         np.array([[r, 0.0, zb], [0.0, r, zb], [-r, 0.0, zb], [0.0, -r, zb]]), (1, 0, 1, 0)
     )
     return [Fixed("base", (2,)), pins]
+
+
+def aha_segment(points: FloatArray, template: VentricleTemplate) -> IntArray:
+    """AHA segment (1--17) of points, by the rule of :mod:`harpx.cardiac.strain`.
+
+    :func:`harpx.cardiac.strain.aha_segments` with the template's ``anterior`` angle, which
+    the scene layer cannot import: the cavity from the endocardial apex
+    :math:`z = -c_{endo}` to the base plane (template coordinates) is cut into thirds;
+    segments 1, 7 and 13 are centred on ``anterior`` and the numbers run clockwise about
+    the template's +z (counter-clockwise seen from the apex), six 60° sectors in the basal
+    and mid thirds, four 90° sectors in the apical third, 17 below the cavity
+    (Cerqueira et al. 2002). ``tests/scenes/test_infarct.py`` checks that both agree.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        Image points (x, y, z), mm.
+    template : VentricleTemplate
+        The ventricle (frame and thirds) with its ``anterior`` angle in degrees (None: 0).
+
+    Returns
+    -------
+    ndarray of int, shape (n,)
+        Segment numbers 1..17 (points above the base plane count as basal).
+
+    Examples
+    --------
+    >>> from harpx.anatomy.ventricle_fit import VentricleTemplate
+    >>> from harpx.scenes.lv import GEOMETRY, aha_segment
+    >>> t = VentricleTemplate(GEOMETRY, anterior=90.0)  # anterior wall +y, septum +x
+    >>> aha_segment(np.array([[1.0, 30.0, 0.0], [30.0, -1.0, -40.0], [0.0, 0.0, -74.0]]), t)
+    array([ 1,  9, 17])
+    """
+    q = template.to_local(points)
+    g = template.geometry
+    bottom = -g.inner[1]
+    third = (g.truncation - bottom) / 3.0
+    # clockwise angle about +z from the anterior direction
+    turn = np.deg2rad(template.anterior or 0.0) - np.arctan2(q[:, 1], q[:, 0])
+    six = np.floor(np.mod(turn + np.pi / 6.0, 2.0 * np.pi) / (np.pi / 3.0)).astype(np.int64)
+    four = np.floor(np.mod(turn + np.pi / 4.0, 2.0 * np.pi) / (np.pi / 2.0)).astype(np.int64)
+    z = q[:, 2]
+    return np.select(
+        [z < bottom, z < bottom + third, z < bottom + 2.0 * third],
+        [17, 13 + four % 4, 7 + six % 6],
+        default=1 + six % 6,
+    ).astype(np.int64)
+
+
+def _infarct_tension(
+    centres: FloatArray, infarct: Sequence[int], scar_activation: float
+) -> FloatArray | None:
+    """Per-cell active tension factor: ``scar_activation`` in the infarct, 1 elsewhere."""
+    if not infarct:
+        return None
+    inside = np.isin(aha_segment(centres, _template(GEOMETRY)), np.asarray(infarct))
+    return np.where(inside, float(scar_activation), 1.0)
+
+
+def _template(geometry: VentricleGeometry) -> VentricleTemplate:
+    return VentricleTemplate(geometry, anterior=ANTERIOR)
 
 
 # ------------------------------------------------------------------------------ images
@@ -332,11 +414,17 @@ class LVScene:
     reference : {"stress-free", "prestretched"}
         Default reference of :meth:`body`.
     truth : FEMotion
-        The fine-mesh forward simulation (``truth.body``, ``truth.U``).
+        The fine-mesh forward simulation (``truth.body``, ``truth.U``; with an infarct,
+        ``truth.body.t_max`` holds the reduced tension of its cells).
     geometry : VentricleGeometry
         The analytic ventricle.
     info : dict
         Settings and timings.
+    infarct : tuple of int
+        AHA segments (1--17) whose active tension is scaled by ``scar_activation``;
+        empty for the healthy ventricle.
+    scar_activation : float
+        Factor of the active tension in the infarct (dimensionless, in [0, 1]).
     """
 
     tagged: xr.Dataset
@@ -346,7 +434,34 @@ class LVScene:
     truth: FEMotion
     geometry: VentricleGeometry = GEOMETRY
     info: dict = field(default_factory=dict)
+    infarct: tuple[int, ...] = ()
+    scar_activation: float = 1.0
     _growth: GrowthField | None = None
+
+    def template(self) -> VentricleTemplate:
+        """The scene's exact ventricle as a template (image and template coordinates agree).
+
+        Returns
+        -------
+        VentricleTemplate
+            ``VentricleTemplate(self.geometry, anterior=ANTERIOR)``: centre at the origin,
+            long axis +z (apex to base), anterior wall at +y; its AHA segments are those the
+            infarct was placed by.
+        """
+        return _template(self.geometry)
+
+    def truth_result(self) -> xr.Dataset:
+        """The forward simulation as a ``tracked/1`` result on the fine truth mesh.
+
+        Returns
+        -------
+        xarray.Dataset
+            :meth:`FEMotion.as_tracked` on the images' grid: displacement (mm) and
+            Green--Lagrange strain of every truth cell and frame. The true segment strains
+            are ``harpx.cardiac.strain.cardiac_strain(scene.truth_result(), template)``
+            with the template the estimates are analysed with.
+        """
+        return self.truth.as_tracked(self.tagged)
 
     def dirichlet(self) -> list[Any]:
         """Tracking boundary conditions: base held in z and pinned in-plane (as the truth)."""
@@ -410,9 +525,11 @@ def lv(
     snr: float | None = 20.0,
     seed: int = 0,
     systole: Systole | None = None,
+    infarct: Sequence[int] = (),
+    scar_activation: float = 0.0,
     linear_solver: str = "auto",
 ) -> LVScene:
-    """Build the left-ventricle scene (paper §4.2).
+    """Build the left-ventricle scene (paper §4.2), optionally with a regional infarct.
 
     Parameters
     ----------
@@ -430,31 +547,62 @@ def lv(
     systole : Systole, optional
         Loading of the forward simulation (default ``Systole()``: active tension parameter
         60 kPa, end-systolic pressure 8 kPa).
+    infarct : sequence of int, default ()
+        AHA segments (1--17, :func:`aha_segment`) of an infarct: the truth cells whose
+        centre lies in them develop ``scar_activation`` times the active tension (module
+        docstring). Empty: the healthy ventricle.
+    scar_activation : float, default 0
+        Factor of the active tension in the infarct, in [0, 1] (0: no active tension,
+        the infarct is stretched passively by the cavity pressure; 1: no infarct).
     linear_solver : str, default "auto"
         Linear solver of the forward simulation.
 
     Returns
     -------
     LVScene
+
+    Raises
+    ------
+    ValueError
+        For an unknown size or reference, an infarct segment outside 1--17 or repeated,
+        or ``scar_activation`` outside [0, 1].
+    ConvergenceError
+        If the forward simulation stalls (lower ``Systole.pressure``).
     """
     if size not in SIZES:
         raise ValueError(f"size={size!r}; expected one of {sorted(SIZES)}")
     if reference not in ("stress-free", "prestretched"):
         raise ValueError(f"reference={reference!r}; expected 'stress-free' or 'prestretched'")
+    segments = tuple(int(k) for k in infarct)
+    if any(not 1 <= k <= 17 for k in segments) or len(set(segments)) != len(segments):
+        raise ValueError(f"infarct={infarct!r}; expected distinct AHA segments in 1..17")
+    if not 0.0 <= float(scar_activation) <= 1.0:
+        raise ValueError(f"scar_activation={scar_activation!r}; expected a factor in [0, 1]")
     g = SIZES[size]
     systole = Systole() if systole is None else systole
     material = myocardium()
     geometry = GEOMETRY
     fine = _ventricle_mesh(geometry, g.truth, segments=False)
     truth_body = Body(fine, material, active=ActiveContraction(t_max=0.0))
+    tension = _infarct_tension(
+        truth_body.nodes[truth_body.cells[:, :8]].mean(axis=1), segments, float(scar_activation)
+    )
     times = g.frame_interval * np.arange(g.frames, dtype=np.float64)
     U, forward = simulate_systole(
-        truth_body, g.frames, systole, base_conditions(geometry), linear_solver=linear_solver
+        truth_body,
+        g.frames,
+        systole,
+        base_conditions(geometry),
+        linear_solver=linear_solver,
+        tension=tension,
     )
     motion = FEMotion(truth_body, U, times)
     start = _time.perf_counter()
     tagged = _acquire(motion, g, geometry, times, snr, np.random.default_rng(seed))
     tagged.attrs["scene"] = f"lv/{size}"
+    if segments:
+        tagged.attrs["infarct_segments"] = list(segments)
+        tagged.attrs["scar_activation"] = float(scar_activation)
     imaging_time = _time.perf_counter() - start
     mesh = _ventricle_mesh(geometry, g.tracking)
     info = {
@@ -467,5 +615,16 @@ def lv(
         "imaging_time": imaging_time,
         "truth_cells": truth_body.ncell,
         "tracking_cells": int(mesh.mesh.nelements),
+        "infarct_cells": 0 if tension is None else int((tension < 1.0).sum()),
     }
-    return LVScene(tagged, mesh, material, reference, motion, geometry, info)
+    return LVScene(
+        tagged,
+        mesh,
+        material,
+        reference,
+        motion,
+        geometry,
+        info,
+        segments,
+        float(scar_activation) if segments else 1.0,
+    )
