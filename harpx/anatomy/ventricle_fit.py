@@ -98,6 +98,7 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from harpx._typing import FloatArray, IntArray
+from harpx.anatomy.aha import segments_local
 from harpx.anatomy.ventricle import VentricleGeometry, ventricle
 from harpx.errors import HarpxError, HarpxWarning
 from harpx.io.labels import read_labels
@@ -742,19 +743,7 @@ def _aha(template: VentricleTemplate, points: ArrayLike) -> IntArray:
     base plane; 60° (apical 90°) sectors, the first centred on ``anterior``, numbered
     counter-clockwise seen from the apex (clockwise about the template's z axis).
     """
-    q = template.to_local(points)
-    g = template.geometry
-    bottom, top = -g.inner[1], g.truncation
-    third = (top - bottom) / 3.0
-    turn = np.deg2rad(template.anterior or 0.0) - np.arctan2(q[:, 1], q[:, 0])
-    six = np.floor(np.mod(turn + np.pi / 6.0, 2.0 * np.pi) / (np.pi / 3.0)).astype(np.int64) % 6
-    four = np.floor(np.mod(turn + np.pi / 4.0, 2.0 * np.pi) / (np.pi / 2.0)).astype(np.int64) % 4
-    z = q[:, 2]
-    return np.select(
-        [z < bottom, z < bottom + third, z < bottom + 2.0 * third],
-        [17, 13 + four, 7 + six],
-        default=1 + six,
-    ).astype(np.int64)
+    return segments_local(template.to_local(points), template.geometry, template.anterior or 0.0)
 
 
 def _labels(values: Any, what: str, myocardium: Any, rv: Any) -> tuple[FloatArray, Any]:

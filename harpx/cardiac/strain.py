@@ -60,6 +60,7 @@ import xarray as xr
 from numpy.typing import ArrayLike
 
 from harpx._typing import BoolArray, FloatArray, IntArray
+from harpx.anatomy.aha import segments_local
 from harpx.cardiac.quality import (
     HEART_SIZE_MM,
     check_body,
@@ -102,22 +103,6 @@ _SIGNS = (
 )
 
 
-def _segments_local(q: FloatArray, geometry: Any, anterior: float) -> IntArray:
-    """AHA segment of template-coordinate points ``q`` (n, 3), see the module notes."""
-    bottom, top = -geometry.inner[1], geometry.truncation
-    third = (top - bottom) / 3.0
-    # angle from the anterior direction, counter-clockwise seen from the apex (-z rotation)
-    turn = np.deg2rad(anterior) - np.arctan2(q[:, 1], q[:, 0])
-    six = np.floor(np.mod(turn + np.pi / 6.0, 2.0 * np.pi) / (np.pi / 3.0)).astype(np.int64) % 6
-    four = np.floor(np.mod(turn + np.pi / 4.0, 2.0 * np.pi) / (np.pi / 2.0)).astype(np.int64) % 4
-    z = q[:, 2]
-    return np.select(
-        [z < bottom, z < bottom + third, z < bottom + 2.0 * third],
-        [17, 13 + four, 7 + six],
-        default=1 + six,
-    ).astype(np.int64)
-
-
 def aha_segments(points: ArrayLike, template: Any, *, anterior: float = 0.0) -> IntArray:
     """AHA segment (1–17) of wall points.
 
@@ -148,7 +133,7 @@ def aha_segments(points: ArrayLike, template: Any, *, anterior: float = 0.0) -> 
     [1, 9, 17]
     """
     q = template.to_local(points)
-    return _segments_local(q, template.geometry, float(anterior))
+    return segments_local(q, template.geometry, float(anterior))
 
 
 def _anterior(anterior: float | None, template: Any) -> tuple[float, str]:
@@ -327,7 +312,7 @@ def lv_measures(
     check_template(template, heart_size)
     anterior_deg, anterior_source = _anterior(anterior, template)
     q0 = template.to_local(p)
-    segment = _segments_local(q0, template.geometry, anterior_deg)
+    segment = segments_local(q0, template.geometry, anterior_deg)
     basis = template.local_basis(p)
     local = _local_strain(E, basis)  # (time, n, 3)
     engineering = np.sqrt(np.maximum(1.0 + 2.0 * local, 0.0)) - 1.0

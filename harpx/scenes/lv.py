@@ -102,6 +102,7 @@ import numpy as np
 import xarray as xr
 
 from harpx._typing import FloatArray, IntArray
+from harpx.anatomy.aha import segments_local
 from harpx.anatomy.ventricle import VentricleGeometry, ventricle
 from harpx.anatomy.ventricle_fit import VentricleTemplate
 from harpx.imaging.stacks import resample_stacks, tagged_dataset
@@ -210,7 +211,7 @@ def base_conditions(geometry: VentricleGeometry = GEOMETRY) -> list[Any]:
 
 
 def aha_segment(points: FloatArray, template: VentricleTemplate) -> IntArray:
-    """AHA segment (1--17) of points, by the rule of :mod:`harpx.cardiac.strain`.
+    """AHA segment (1--17) of points (:func:`harpx.anatomy.aha.segments_local`).
 
     :func:`harpx.cardiac.strain.aha_segments` with the template's ``anterior`` angle, which
     the scene layer cannot import: the cavity from the endocardial apex
@@ -240,20 +241,7 @@ def aha_segment(points: FloatArray, template: VentricleTemplate) -> IntArray:
     >>> aha_segment(np.array([[1.0, 30.0, 0.0], [30.0, -1.0, -40.0], [0.0, 0.0, -74.0]]), t)
     array([ 1,  9, 17])
     """
-    q = template.to_local(points)
-    g = template.geometry
-    bottom = -g.inner[1]
-    third = (g.truncation - bottom) / 3.0
-    # clockwise angle about +z from the anterior direction
-    turn = np.deg2rad(template.anterior or 0.0) - np.arctan2(q[:, 1], q[:, 0])
-    six = np.floor(np.mod(turn + np.pi / 6.0, 2.0 * np.pi) / (np.pi / 3.0)).astype(np.int64)
-    four = np.floor(np.mod(turn + np.pi / 4.0, 2.0 * np.pi) / (np.pi / 2.0)).astype(np.int64)
-    z = q[:, 2]
-    return np.select(
-        [z < bottom, z < bottom + third, z < bottom + 2.0 * third],
-        [17, 13 + four % 4, 7 + six % 6],
-        default=1 + six % 6,
-    ).astype(np.int64)
+    return segments_local(template.to_local(points), template.geometry, template.anterior or 0.0)
 
 
 def _infarct_tension(
