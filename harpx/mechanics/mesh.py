@@ -1,9 +1,9 @@
 """Mesh builders: boxes, cylinders, tubes, curved hexahedra, tetrahedra, all named.
 
 Every builder returns a :class:`~harpx.mechanics.meshspec.MeshSpec`: a scikit-fem
-:class:`skfem.MeshHex1` plus named cell regions, optional per-cell fibre directions and named boundary facets. The skfem mesh
-carries the same names (``mesh.boundaries`` / ``mesh.subdomains``) so that
-``skfem.io.meshio`` round trips keep them.
+:class:`skfem.MeshHex1` plus named cell regions, optional per-cell fibre directions and
+named boundary facets. The skfem mesh carries the same names (``mesh.boundaries`` /
+``mesh.subdomains``) so that ``skfem.io.meshio`` round trips keep them.
 
 Hexahedra are built in VTK/meshio vertex order (bottom quad counter-clockwise seen from +z,
 then the top quad) and converted to scikit-fem's local order, so every element has a
