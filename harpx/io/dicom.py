@@ -4,24 +4,11 @@
 (classic *MR Image Storage*) or one enhanced multi-frame file per series (*Enhanced MR Image
 Storage*, per-frame functional groups) -- and resamples every selected stack of parallel
 slices onto one Cartesian grid in patient coordinates. pydicom is an optional dependency
-(``pip install harpx[dicom]``); it is imported only when a function of this module runs.
+(``pip install harpx[dicom]``); it is imported only when a function of harpx.io.dicom runs.
 
-Geometry (DICOM PS3.3 C.7.6.2.1.1)
-----------------------------------
-Positions are patient coordinates (LPS: x to the patient's left, y posterior, z head), mm.
-``ImageOrientationPatient`` holds two direction cosines: the first triplet ``r`` is the
-direction of *increasing column index* (along a row), the second ``c`` the direction of
-*increasing row index* (down a column). ``PixelSpacing`` is ``[Δr, Δc]``: the spacing
-*between rows* (along ``c``) first, then the spacing *between columns* (along ``r``). The
-centre of the pixel in row ``i`` and column ``j`` of an image whose first transmitted pixel
-is at ``ImagePositionPatient`` ``P`` lies at
-
-.. math:: p_{ij} = P + j \\, Δc \\, r + i \\, Δr \\, c ,
-
-which :func:`voxel_positions` evaluates. A *stack* is every image of one series: all must
-share orientation, matrix size and pixel spacing, and their positions must differ only along
-the slice normal ``n = r × c`` (slices ordered by ``(P - P_0)·n``, not by file order or
-``InstanceNumber``).
+The DICOM geometry (:mod:`harpx.io.dicom_headers`) and the stacks
+(:mod:`harpx.io.dicom_stacks`) have modules of their own; their public names stay
+importable from here.
 
 Resampling and masks
 --------------------
@@ -49,619 +36,43 @@ from __future__ import annotations
 
 import math
 import numbers
-import os
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
-from datetime import datetime, timedelta
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import xarray as xr
-from numpy.typing import NDArray
 
 from harpx._typing import FloatArray, PathLike
 from harpx.errors import HarpxError, HarpxWarning
-from harpx.imaging.stacks import SliceStack, common_grid, resample_stack, tagged_dataset
-from harpx.io.netcdf import _available_memory
+from harpx.imaging.stacks import common_grid, resample_stack, tagged_dataset
+from harpx.io.dicom_headers import _discover, _float, _Image, voxel_positions
+from harpx.io.dicom_stacks import (
+    GAP_ERROR,
+    INPLANE_TOL,
+    ORIENTATION_TOL,
+    SLICE_TOL,
+    UNIT_TOL,
+    _build_stack,
+    _load_pixels,
+    _Stack,
+)
+from harpx.io.files import _available_memory
 from harpx.schema import AXES, SEQUENCES
 
-__all__ = ["read_tagged", "voxel_positions"]
+__all__ = [
+    "GAP_ERROR",
+    "INPLANE_TOL",
+    "LARGE_OUTPUT_BYTES",
+    "ORIENTATION_TOL",
+    "SLICE_TOL",
+    "UNIT_TOL",
+    "read_tagged",
+    "voxel_positions",
+]
 
-_INSTALL_HINT = "pip install harpx[dicom]"
-#: Largest difference of direction cosines for two images to count as parallel.
-ORIENTATION_TOL = 1e-3
-#: Slice positions closer than this (mm) along the normal are the same slice.
-SLICE_TOL = 1e-2
-#: In-plane offset between slices of a stack tolerated, as a fraction of a pixel.
-INPLANE_TOL = 1e-2
 #: Output images larger than this (bytes) trigger a :class:`~harpx.errors.HarpxWarning`.
 LARGE_OUTPUT_BYTES = 2**31
-_TIME_DUPLICATE = 1e-3  # ms: two frames of one slice closer than this are duplicates
-
-
-def _pydicom() -> Any:
-    try:
-        import pydicom
-    except ImportError as err:
-        raise ImportError(
-            f"reading DICOM needs the optional dependency pydicom; install it with "
-            f"`{_INSTALL_HINT}`"
-        ) from err
-    return pydicom
-
-
-# ---------------------------------------------------------------------------------------------
-# headers → per-image records
-
-
-@dataclass
-class _Image:
-    """Header fields of one 2D image (a classic file or one frame of a multi-frame file)."""
-
-    path: Path
-    frame: int | None  # None: single-frame file
-    series_uid: str
-    description: str
-    number: str
-    sequence_name: str
-    rows: int
-    columns: int
-    position: FloatArray | None
-    orientation: FloatArray | None
-    pixel_spacing: FloatArray | None
-    thickness: float | None
-    time: float | None
-    slope: float
-    intercept: float
-    time_name: str = "TriggerTime"
-    sop_uid: str = ""
-    #: raw header values that are present but not numbers (name -> value)
-    unreadable: dict[str, Any] = field(default_factory=dict)
-
-    def where(self) -> str:
-        return str(self.path) if self.frame is None else f"{self.path} (frame {self.frame + 1})"
-
-    def require(self, name: str) -> Any:
-        value = getattr(self, name)
-        keyword = {
-            "position": "ImagePositionPatient",
-            "orientation": "ImageOrientationPatient",
-            "pixel_spacing": "PixelSpacing",
-            "thickness": "SliceThickness",
-            "time": self.time_name,
-        }[name]
-        if value is None and name in self.unreadable:
-            raise HarpxError(
-                f"DICOM attribute {keyword!r} of {self.where()} is "
-                f"{self.unreadable[name]!r}, which is not a finite number (or not the right "
-                "count of them); fix the export or drop the file"
-            )
-        if value is None:
-            raise HarpxError(
-                f"DICOM attribute {keyword!r} is missing in {self.where()}; harpx needs it to "
-                "place the image in patient coordinates and time (fix the export or drop the "
-                "file)"
-            )
-        return value
-
-
-def _floats(value: Any, size: int) -> FloatArray | None:
-    if value is None:
-        return None
-    try:
-        out = np.asarray([float(v) for v in value], dtype=np.float64)
-    except (TypeError, ValueError):
-        return None
-    return out if out.shape == (size,) and np.all(np.isfinite(out)) else None
-
-
-def _float(value: Any) -> float | None:
-    if value is None or value == "":
-        return None
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        return None
-    return out if math.isfinite(out) else None
-
-
-def _group_value(header: Any, per_frame: Any, sequence: str, keyword: str) -> Any:
-    """Value of ``keyword`` from a functional group: per-frame, then shared, then top level."""
-    shared = header.get("SharedFunctionalGroupsSequence")
-    groups = [per_frame] + ([shared[0]] if shared else [])
-    for group in groups:
-        items = group.get(sequence) if group is not None else None
-        if items and keyword in items[0]:
-            return items[0].get(keyword)
-    return header.get(keyword)
-
-
-def _images_of(header: Any, path: Path) -> list[_Image]:
-    """Split a DICOM header into per-image records (one per frame of a multi-frame file)."""
-    common: dict[str, Any] = {
-        "path": path,
-        "series_uid": str(header.get("SeriesInstanceUID", "")),
-        "description": str(header.get("SeriesDescription", "")),
-        "number": str(header.get("SeriesNumber", "")),
-        "sequence_name": " ".join(
-            str(header.get(k, "")) for k in ("SequenceName", "PulseSequenceName", "ProtocolName")
-        ),
-        "rows": int(header.get("Rows", 0)),
-        "columns": int(header.get("Columns", 0)),
-    }
-    common["sop_uid"] = str(header.get("SOPInstanceUID", ""))
-    per_frame = header.get("PerFrameFunctionalGroupsSequence")
-    if not per_frame:
-        image = _Image(
-            frame=None,
-            position=_floats(header.get("ImagePositionPatient"), 3),
-            orientation=_floats(header.get("ImageOrientationPatient"), 6),
-            pixel_spacing=_floats(header.get("PixelSpacing"), 2),
-            thickness=_float(header.get("SliceThickness")),
-            time=_float(header.get("TriggerTime")),
-            slope=_float(header.get("RescaleSlope")) or 1.0,
-            intercept=_float(header.get("RescaleIntercept")) or 0.0,
-            **common,
-        )
-        for name, keyword in (
-            ("position", "ImagePositionPatient"),
-            ("orientation", "ImageOrientationPatient"),
-            ("pixel_spacing", "PixelSpacing"),
-            ("time", "TriggerTime"),
-        ):
-            raw = header.get(keyword)
-            if getattr(image, name) is None and raw is not None and raw != "":
-                image.unreadable[name] = str(raw)
-        return [image]
-    images = []
-    stamps: list[datetime | None] = []
-    for index, item in enumerate(per_frame):
-
-        def value(sequence: str, keyword: str, item: Any = item) -> Any:
-            return _group_value(header, item, sequence, keyword)
-
-        time = _float(value("CardiacSynchronizationSequence", "NominalCardiacTriggerDelayTime"))
-        stamp = value("FrameContentSequence", "FrameAcquisitionDateTime")
-        stamps.append(_datetime(stamp) if stamp else None)
-        images.append(
-            _Image(
-                frame=index,
-                position=_floats(value("PlanePositionSequence", "ImagePositionPatient"), 3),
-                orientation=_floats(
-                    value("PlaneOrientationSequence", "ImageOrientationPatient"), 6
-                ),
-                pixel_spacing=_floats(value("PixelMeasuresSequence", "PixelSpacing"), 2),
-                thickness=_float(value("PixelMeasuresSequence", "SliceThickness")),
-                time=time if time is not None else _float(header.get("TriggerTime")),
-                slope=_float(value("PixelValueTransformationSequence", "RescaleSlope")) or 1.0,
-                intercept=_float(value("PixelValueTransformationSequence", "RescaleIntercept"))
-                or 0.0,
-                time_name="NominalCardiacTriggerDelayTime (CardiacSynchronizationSequence)",
-                **common,
-            )
-        )
-    if any(im.time is None for im in images) and all(s is not None for s in stamps):
-        # No trigger delays: time since the first acquired frame of the file.
-        first = min(s for s in stamps if s is not None)
-        for im, s in zip(images, stamps, strict=True):
-            im.time = (s - first) / timedelta(milliseconds=1) if s is not None else None
-    return images
-
-
-def _datetime(value: Any) -> datetime | None:
-    try:
-        stamp: datetime = _pydicom().valuerep.DT(str(value))
-    except (ValueError, TypeError):
-        return None
-    return stamp.replace(tzinfo=None)  # offsets are per study; differences are what count
-
-
-# ---------------------------------------------------------------------------------------------
-# geometry
-
-
-def _pixel_positions(
-    position: FloatArray,
-    orientation: FloatArray,
-    pixel_spacing: FloatArray,
-    rows: int,
-    columns: int,
-) -> FloatArray:
-    """Pixel-centre positions (rows, columns, 3) in mm; see the module docstring."""
-    along_row, along_column = orientation[:3], orientation[3:]
-    row_spacing, column_spacing = pixel_spacing
-    i = np.arange(rows, dtype=np.float64)[:, None, None]
-    j = np.arange(columns, dtype=np.float64)[None, :, None]
-    return position + j * column_spacing * along_row + i * row_spacing * along_column
-
-
-def voxel_positions(images: Any) -> FloatArray:
-    """Patient (LPS) positions of the pixel centres of DICOM images, in mm.
-
-    Parameters
-    ----------
-    images : pydicom.Dataset or sequence of pydicom.Dataset
-        One image (classic single-frame or enhanced multi-frame) or a sequence of them, read
-        with :func:`pydicom.dcmread`. Each needs ``Rows``, ``Columns``,
-        ``ImagePositionPatient``, ``ImageOrientationPatient`` and ``PixelSpacing`` (top level
-        or in the functional groups of a multi-frame image).
-
-    Returns
-    -------
-    numpy.ndarray of float64
-        ``(Rows, Columns, 3)`` for one single-frame image; ``(frames, Rows, Columns, 3)`` for
-        a multi-frame image; a sequence stacks its images' frames along a leading axis
-        ``(n, Rows, Columns, 3)``. The last axis is (x, y, z) in mm; element ``[..., i, j, :]``
-        is the centre of the pixel in row ``i`` and column ``j``.
-
-    Raises
-    ------
-    HarpxError
-        If a geometry attribute is missing (the message names it and the file), the images
-        of a sequence differ in matrix size, or there are no images.
-    TypeError
-        If an image is not a pydicom dataset (e.g. a file name: read it first).
-    ImportError
-        If pydicom is not installed.
-
-    Notes
-    -----
-    .. math:: p_{ij} = P + j \\, Δc \\, r + i \\, Δr \\, c
-
-    with ``P = ImagePositionPatient``, ``(r, c) = ImageOrientationPatient`` (first triplet:
-    direction of increasing column index) and ``(Δr, Δc) = PixelSpacing`` (row spacing
-    first), as DICOM PS3.3 C.7.6.2.1.1 defines them.
-
-    Examples
-    --------
-    >>> from pydicom import Dataset
-    >>> im = Dataset()
-    >>> im.Rows, im.Columns = 2, 3
-    >>> im.ImagePositionPatient = [10, 20, 30]
-    >>> im.ImageOrientationPatient = [1, 0, 0, 0, 1, 0]
-    >>> im.PixelSpacing = [2.0, 0.5]  # 2 mm between rows, 0.5 mm between columns
-    >>> voxel_positions(im)[1, 2]  # row 1, column 2
-    array([11., 22., 30.])
-    """
-    pydicom = _pydicom()
-    single = not isinstance(images, Sequence) or isinstance(images, str | bytes)
-    headers = [images] if single else list(images)
-    if not headers:
-        raise HarpxError("voxel_positions got no images; pass a pydicom.Dataset or a list")
-    for header in headers:
-        if not isinstance(header, pydicom.Dataset):
-            raise TypeError(
-                f"voxel_positions needs pydicom datasets (pydicom.dcmread(path)), got "
-                f"{type(header).__name__!r}"
-                + (": read the file first" if isinstance(header, str | os.PathLike) else "")
-            )
-    records: list[_Image] = []
-    for header in headers:
-        records.extend(_images_of(header, Path(str(getattr(header, "filename", "<dataset>")))))
-    out = [
-        _pixel_positions(
-            im.require("position"),
-            im.require("orientation"),
-            im.require("pixel_spacing"),
-            im.rows,
-            im.columns,
-        )
-        for im in records
-    ]
-    if len({p.shape for p in out}) > 1:
-        raise HarpxError(
-            "images differ in matrix size "
-            f"{sorted({p.shape[:2] for p in out})}; pass images of one series"
-        )
-    if single and records[0].frame is None:
-        return out[0]
-    return np.stack(out)
-
-
-@dataclass
-class _Stack:
-    """One series: parallel slices, sorted along the normal, with matching frames."""
-
-    uid: str
-    description: str
-    origin: FloatArray  # position of pixel (0, 0) of the first slice, mm
-    along_row: FloatArray  # r: direction of increasing column index
-    along_column: FloatArray  # c: direction of increasing row index
-    normal: FloatArray  # unit r × c
-    pixel_spacing: FloatArray  # (Δr between rows, Δc between columns), mm
-    rows: int
-    columns: int
-    offsets: FloatArray  # (S,) slice positions along the normal from origin, increasing, mm
-    slab: tuple[float, float]  # through-plane extent along the normal from origin, mm
-    times: FloatArray  # (T,) frame times, ms
-    images: list[list[_Image]]  # [slice][frame]
-
-    @property
-    def geometry(self) -> SliceStack:
-        """The stack's slice geometry (patient coordinates, mm)."""
-        return SliceStack(
-            origin=self.origin,
-            along_row=self.along_row,
-            along_column=self.along_column,
-            pixel_spacing=(float(self.pixel_spacing[0]), float(self.pixel_spacing[1])),
-            rows=self.rows,
-            columns=self.columns,
-            offsets=self.offsets,
-            slab=self.slab,
-        )
-
-    def name(self) -> str:
-        return f"series {self.description!r} ({self.uid})"
-
-
-def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
-    first = images[0]
-    label = f"series {first.description!r} ({first.series_uid})"
-    orientation = first.require("orientation")
-    spacing = first.require("pixel_spacing")
-    for im in images:
-        im.require("position")
-        im.require("time")
-        im_orientation = im.require("orientation")
-        if np.max(np.abs(im_orientation - orientation)) > ORIENTATION_TOL:
-            raise HarpxError(
-                f"slices of {label} are not parallel: {im.where()} has ImageOrientationPatient "
-                f"{np.round(im_orientation, 4).tolist()} but {first.where()} has "
-                f"{np.round(orientation, 4).tolist()}; a series must be one stack of parallel "
-                "slices (split it, e.g. by passing the files of each orientation separately)"
-            )
-        im_spacing = im.require("pixel_spacing")
-        if (im.rows, im.columns) != (first.rows, first.columns) or np.max(
-            np.abs(im_spacing - spacing)
-        ) > 1e-6 * max(spacing):
-            raise HarpxError(
-                f"images of {label} differ in matrix size or PixelSpacing: {im.where()} has "
-                f"{im.rows}x{im.columns} at {im_spacing.tolist()} mm, {first.where()} "
-                f"{first.rows}x{first.columns} at {spacing.tolist()} mm"
-            )
-    _check_geometry(first, orientation, spacing, label)
-    along_row, along_column = orientation[:3], orientation[3:]
-    normal = np.cross(along_row, along_column)
-    normal /= np.linalg.norm(normal)
-    affine = np.column_stack([along_row * spacing[1], along_column * spacing[0], normal])
-    positions = np.array([im.position for im in images])
-    local = np.linalg.solve(affine, (positions - positions[0]).T).T  # (col, row, offset)
-    order = np.argsort(local[:, 2], kind="stable")
-    cuts = np.flatnonzero(np.diff(local[order, 2]) > SLICE_TOL) + 1
-    slices = np.split(order, cuts)
-    base = slices[0][0]
-    shift = (local[:, :2] - local[base, :2]) @ affine[:, :2].T  # in-plane offsets, mm
-    worst = int(np.argmax(np.linalg.norm(shift, axis=1)))
-    if np.linalg.norm(shift[worst]) > INPLANE_TOL * spacing.min():
-        raise HarpxError(
-            f"slices of {label} are shifted in plane by {np.linalg.norm(shift[worst]):.4g} mm "
-            f"(offset {np.round(shift[worst], 4).tolist()} in x, y, z; {images[worst].where()} "
-            f"against {images[base].where()}); a stack needs its slice positions to differ "
-            "only along the slice normal"
-        )
-    frames: list[list[_Image]] = []
-    for members in slices:
-        ims = sorted((images[k] for k in members), key=lambda im: im.time)
-        gaps = np.diff([im.time for im in ims])
-        if gaps.size and gaps.min() < _TIME_DUPLICATE:
-            k = int(np.argmin(gaps))
-            a, b = ims[k], ims[k + 1]
-            if a.sop_uid and a.sop_uid == b.sop_uid and a.frame == b.frame:
-                raise HarpxError(
-                    f"{a.where()} and {b.where()} are the same image twice (SOPInstanceUID "
-                    f"{a.sop_uid!r}): one is a copy of the other; remove the copy"
-                )
-            raise HarpxError(
-                f"{label} has two images at the same slice position and TriggerTime "
-                f"{ims[k].time} ms: {ims[k].where()} and {ims[k + 1].where()}; put repeated "
-                "acquisitions (e.g. CSPAMM A and B) in separate series or select the files"
-            )
-        frames.append(ims)
-    counts = [len(f) for f in frames]
-    if len(set(counts)) > 1:
-        raise HarpxError(
-            f"slices of {label} have different numbers of frames {counts}; every slice of a "
-            "cine stack needs the same frames (drop incomplete slices)"
-        )
-    times = np.array([[im.time for im in f] for f in frames], dtype=np.float64)
-    spread = times.max(axis=0) - times.min(axis=0)
-    if spread.max() > time_tolerance:
-        raise HarpxError(
-            f"TriggerTime of the slices of {label} differ by up to {spread.max():.3g} ms at "
-            f"frame {int(np.argmax(spread))} (> time_tolerance={time_tolerance:g} ms); raise "
-            "time_tolerance if the frames really correspond"
-        )
-    offsets = local[[s[0] for s in slices], 2] - local[base, 2]
-    _check_gaps(offsets, [images[s[0]] for s in slices], label)
-    origin = positions[base]
-    thickness = first.thickness if first.thickness is not None and first.thickness > 0 else None
-    if thickness is not None:
-        below = above = 0.5 * thickness
-    elif offsets.size > 1:
-        below, above = 0.5 * (offsets[1] - offsets[0]), 0.5 * (offsets[-1] - offsets[-2])
-    else:
-        raise HarpxError(
-            f"DICOM attribute 'SliceThickness' is missing or not positive in {first.where()}; "
-            f"{label} has a single slice, so harpx needs it to know how far the slice's data "
-            "extends through plane"
-        )
-    return _Stack(
-        uid=first.series_uid,
-        description=first.description,
-        origin=origin,
-        along_row=along_row,
-        along_column=along_column,
-        normal=normal,
-        pixel_spacing=spacing,
-        rows=first.rows,
-        columns=first.columns,
-        offsets=offsets,
-        slab=(float(offsets[0] - below), float(offsets[-1] + above)),
-        times=times.mean(axis=0),
-        images=frames,
-    )
-
-
-#: Largest deviation of an ImageOrientationPatient triplet from unit length, and of the
-#: two triplets from orthogonality (|r . c|).
-UNIT_TOL = 1e-3
-#: A gap between neighbouring slices larger than this many regular gaps is an error (a slice
-#: far off the stack); a smaller but irregular gap (missing slices) warns.
-GAP_ERROR = 4.0
-_GAP_WARN = 1.5
-
-
-def _check_geometry(
-    first: _Image, orientation: FloatArray, spacing: FloatArray, label: str
-) -> None:
-    """Unit, orthogonal direction cosines and positive pixel spacing, else HarpxError."""
-    r, c = orientation[:3], orientation[3:]
-    norms = [float(np.linalg.norm(r)), float(np.linalg.norm(c))]
-    if max(abs(n - 1.0) for n in norms) > UNIT_TOL or abs(float(r @ c)) > UNIT_TOL:
-        raise HarpxError(
-            f"ImageOrientationPatient of {first.where()} ({label}) is "
-            f"{np.round(orientation, 6).tolist()}: the two direction cosines must be unit "
-            f"vectors at right angles (norms {np.round(norms, 6).tolist()}, dot product "
-            f"{float(r @ c):.3g}); fix the export (harpx would scale or shear the geometry)"
-        )
-    if not np.all(spacing > 0):
-        raise HarpxError(
-            f"PixelSpacing of {first.where()} ({label}) is {spacing.tolist()} mm; both "
-            "values must be positive (fix the export)"
-        )
-
-
-def _check_gaps(offsets: FloatArray, firsts: list[_Image], label: str) -> None:
-    """A slice far off the stack is an error; missing slices (an irregular gap) warn."""
-    if offsets.size < 3:
-        return
-    gaps = np.diff(offsets)
-    regular = float(np.median(gaps))
-    worst = int(np.argmax(gaps))
-    if gaps[worst] > GAP_ERROR * regular:
-        raise HarpxError(
-            f"slice {firsts[worst + 1].where()} of {label} is {gaps[worst]:.4g} mm from its "
-            f"neighbour {firsts[worst].where()}, {gaps[worst] / regular:.3g} times the "
-            f"stack's {regular:.4g} mm slice gap; it does not belong to this stack (drop it "
-            "or give it its own series)"
-        )
-    irregular = np.flatnonzero(gaps > _GAP_WARN * regular)
-    if irregular.size:
-        k = int(irregular[0])
-        warnings.warn(
-            f"{label} has a gap of {gaps[k]:.4g} mm between {firsts[k].where()} and "
-            f"{firsts[k + 1].where()} ({gaps[k] / regular:.3g} times its {regular:.4g} mm "
-            "slice gap): slices seem to be missing; the images are interpolated across the "
-            "gap (its mask marks it as having data)",
-            HarpxWarning,
-            stacklevel=4,
-        )
-
-
-# ---------------------------------------------------------------------------------------------
-# file discovery and pixel data
-
-
-def _discover(paths_or_folder: PathLike | Sequence[PathLike]) -> list[_Image]:
-    pydicom = _pydicom()
-    if isinstance(paths_or_folder, str | os.PathLike):
-        entries = [Path(paths_or_folder)]
-    elif isinstance(paths_or_folder, Sequence) and all(
-        isinstance(p, str | os.PathLike) for p in paths_or_folder
-    ):
-        entries = [Path(p) for p in paths_or_folder]
-    else:
-        raise TypeError(
-            f"paths_or_folder must be a folder, a DICOM file or a list of them (str or "
-            f"os.PathLike), got {paths_or_folder!r}"
-        )
-    if not entries:
-        raise HarpxError("paths_or_folder is an empty list; pass a folder or DICOM files")
-    images: list[_Image] = []
-    no_series: list[Path] = []
-    seen: set[Path] = set()
-    for entry in entries:
-        if entry.is_dir():
-            files = sorted(p for p in entry.rglob("*") if p.is_file())
-            explicit = False
-        elif entry.is_file():
-            files, explicit = [entry], True
-        else:
-            raise HarpxError(f"DICOM path {str(entry)!r} does not exist")
-        for path in files:
-            if path.resolve() in seen:
-                continue  # given twice (a folder and a file inside it)
-            seen.add(path.resolve())
-            try:
-                header = pydicom.dcmread(path, stop_before_pixels=True)
-            except pydicom.errors.InvalidDicomError as err:
-                if explicit:
-                    raise HarpxError(f"cannot read {str(path)!r} as DICOM: {err}") from err
-                continue  # a folder may hold other files (notes, thumbnails)
-            except Exception as err:  # truncated or corrupt DICOM
-                raise HarpxError(
-                    f"cannot read DICOM file {str(path)!r} ({type(err).__name__}: {err}); the "
-                    "file is truncated or corrupt: re-export it or remove it"
-                ) from err
-            if "Rows" not in header:
-                continue  # DICOMDIR, presentation states, reports: not images
-            if "SeriesInstanceUID" not in header:
-                no_series.append(path)
-                continue
-            images.extend(_images_of(header, path))
-    if no_series:
-        message = (
-            f"{len(no_series)} DICOM images have no SeriesInstanceUID, e.g. "
-            f"{str(no_series[0])!r}; harpx groups images into stacks by it (add it, e.g. "
-            "with pydicom: ds.SeriesInstanceUID = pydicom.uid.generate_uid())"
-        )
-        if not images:
-            raise HarpxError(message)
-        warnings.warn(message + "; those images are skipped", HarpxWarning, stacklevel=3)
-    if not images:
-        where = ", ".join(repr(str(e)) for e in entries)
-        raise HarpxError(
-            f"no DICOM images found in {where}; pass a folder holding the tagged series or "
-            "a list of .dcm files"
-        )
-    return images
-
-
-def _load_pixels(stacks: list[_Stack]) -> list[NDArray[np.float64]]:
-    """Rescaled pixel values of each stack, (time, slice, row, column) float64."""
-    pydicom = _pydicom()
-    cache: dict[Path, NDArray[Any]] = {}
-    volumes = []
-    for stack in stacks:
-        volume = np.empty(
-            (stack.times.size, len(stack.images), stack.rows, stack.columns), dtype=np.float64
-        )
-        for k, frames in enumerate(stack.images):
-            for t, im in enumerate(frames):
-                if im.path not in cache:
-                    try:
-                        cache[im.path] = np.asarray(pydicom.dcmread(im.path).pixel_array)
-                    except Exception as err:
-                        raise HarpxError(
-                            f"cannot decode the pixel data of {str(im.path)!r} "
-                            f"({type(err).__name__}: {err}); the file is truncated, corrupt "
-                            "or compressed with a codec pydicom cannot decode (install "
-                            "pylibjpeg or gdcm)"
-                        ) from err
-                pixels = cache[im.path]
-                if im.frame is not None and pixels.ndim == 3:
-                    pixels = pixels[im.frame]
-                if pixels.shape != (stack.rows, stack.columns):
-                    raise HarpxError(
-                        f"pixel data of {im.where()} has shape {pixels.shape}; expected "
-                        f"(Rows, Columns) = {(stack.rows, stack.columns)} (colour or "
-                        "malformed image)"
-                    )
-                volume[t, k] = pixels * im.slope + im.intercept
-        volumes.append(volume)
-    return volumes
 
 
 # ---------------------------------------------------------------------------------------------
@@ -811,10 +222,6 @@ def _frequencies(tag_period: float | Mapping[str, float] | None, labels: list[st
 
 
 # ---------------------------------------------------------------------------------------------
-# resampling
-
-
-# ---------------------------------------------------------------------------------------------
 # public entry point
 
 
@@ -887,8 +294,9 @@ def read_tagged(
 
     Notes
     -----
-    Geometry, interpolation and mask conventions are in the module docstring
-    (:mod:`harpx.io.dicom`). Pixel positions follow DICOM PS3.3 C.7.6.2.1.1,
+    Geometry, interpolation and mask conventions are in the module docstrings
+    (:mod:`harpx.io.dicom_headers`, :mod:`harpx.io.dicom`). Pixel positions follow DICOM
+    PS3.3 C.7.6.2.1.1,
 
     .. math:: p_{ij} = P + j \\, Δc \\, r + i \\, Δr \\, c .
 

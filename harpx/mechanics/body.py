@@ -27,8 +27,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import os
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, TypeVar, cast
 
@@ -40,20 +38,20 @@ from scipy import sparse
 from skfem.io.meshio import HEX_MAPPING
 
 from harpx._typing import FloatArray, IntArray
-from harpx.errors import CoincidentNodesWarning
 from harpx.mechanics import kinematics
+from harpx.mechanics.body_inputs import (
+    check_fibers_given,
+    check_vertices,
+    named_sets,
+    quadrature_fibers,
+    resolve_mesh,
+)
 from harpx.mechanics.cells import (
-    _HEX20_MESHES,
-    _VOLUMETRIC,
-    ELEMENTS,
+    ELEMENTS,  # noqa: F401  (older code imports it from here)
     ElementName,
     Volumetric,
-    _check_cells,
-    _orient_tets,
     _skfem_mesh,
-    default_element,
 )
-from harpx.mechanics.meshspec import MeshSpec, check_nodes, check_unused_nodes, coincident_nodes
 
 __all__ = ["Body"]
 
@@ -187,55 +185,15 @@ class Body:
         boundaries: Mapping[str, ArrayLike] | None = None,
         volumetric: Volumetric | None = None,
     ) -> None:
-        spec_regions: Mapping[str, ArrayLike] = {}
-        spec_boundaries: Mapping[str, ArrayLike] = {}
-        if isinstance(mesh, MeshSpec):
-            spec_regions, spec_boundaries = mesh.regions, mesh.boundaries
-            if fibers is None:
-                fibers = mesh.fibers
-            mesh = mesh.mesh
-        elif isinstance(mesh, str | os.PathLike):
-            raise TypeError(
-                f"mesh is a file path ({os.fspath(mesh)!r}); read it with "
-                "harpx.io.mesh.read_body(path, material, ...), which returns the Body"
-            )
-        elif isinstance(mesh, meshio.Mesh):
-            raise TypeError("mesh is a meshio.Mesh; build the body with Body.from_meshio(mesh)")
-        if isinstance(mesh, skfem.MeshTet1):
-            mesh = _orient_tets(mesh)
-        if not isinstance(mesh, (skfem.MeshHex1, skfem.MeshTet1)) or (
-            isinstance(mesh, skfem.MeshHex1) and type(mesh) not in _HEX20_MESHES
-        ):
-            raise TypeError(
-                f"mesh must be a skfem.MeshHex1, MeshHex2, MeshTet1 or MeshTet2 or a MeshSpec, got "
-                f"{type(mesh).__name__!r}; build one with harpx.mechanics.mesh.box/cylinder "
-                "(and tetrahedralize for tetrahedra), or read a mesh file with "
-                "harpx.io.mesh.read_body"
-            )
-        if element is None:
-            element = default_element(mesh)
-        if element not in ELEMENTS:
-            raise ValueError(f"element={element!r} is not one of {sorted(ELEMENTS)!r}")
-        kind = ELEMENTS[element]
-        if not isinstance(mesh, kind.meshes) or (
-            isinstance(mesh, skfem.MeshHex2) and element != "hex20"
-        ):
-            raise ValueError(
-                f"element={element!r} needs a {' or '.join(m.__name__ for m in kind.meshes)} "
-                f"mesh, got {type(mesh).__name__!r}; pick the element that matches the cells "
-                f"(or omit element= to use {default_element(mesh)!r})"
-            )
-        if volumetric is None:
-            volumetric = kind.volumetric[0]
-        if volumetric not in _VOLUMETRIC:
-            raise ValueError(f"volumetric={volumetric!r} must be one of {list(_VOLUMETRIC)!r}")
-        if volumetric not in kind.volumetric:
-            raise ValueError(
-                f"volumetric={volumetric!r} is not available for element={element!r}; "
-                f"choose one of {list(kind.volumetric)!r} (Q1/P1 and P1/P0 are not inf-sup "
-                "stable and lock, tet10 P2/P1-disc too; linear dilatation needs hex20, nodal "
-                "dilatation tetrahedra)"
-            )
+        (
+            mesh,
+            fibers,
+            element,
+            kind,
+            volumetric,
+            spec_regions,
+            spec_boundaries,
+        ) = resolve_mesh(mesh, fibers, element, volumetric)
         mesh = cast(Any, mesh)  # skfem meshes are untyped
         self._caches: dict[str, Any] = {}
         self.mesh_quality: MeshQuality | None = None
@@ -247,22 +205,7 @@ class Body:
         self.ncell = int(mesh.nelements)
 
         # the cells' vertices (a MeshTet2 / MeshHex2 also holds its geometry nodes in mesh.p)
-        curved = isinstance(mesh, (skfem.MeshTet2, skfem.MeshHex2))
-        nvert = int(mesh.nvertices) if curved else mesh.p.shape[1]
-        vertices = np.asarray(mesh.p)[:, :nvert]
-        check_nodes(vertices.T, np.asarray(mesh.t).T, nvertex=int(mesh.t.shape[0]))
-        pairs = coincident_nodes(vertices.T)
-        if pairs.size:
-            warnings.warn(
-                f"mesh has {pairs.shape[0]} pairs of coincident nodes, e.g. nodes "
-                f"{pairs[0].tolist()} at {vertices[:, pairs[0, 0]].tolist()} mm: the "
-                "cells on either side are not connected and move independently; if that is "
-                "not a deliberate cut, merge them (mesh = mesh.remove_duplicate_nodes())",
-                CoincidentNodesWarning,
-                stacklevel=2,
-            )
-        _check_cells(mesh)
-        check_unused_nodes(vertices.shape[1], np.asarray(mesh.t).T)
+        vertices = check_vertices(mesh)
         factory, intorder, nqp = kind.factory, kind.intorder, kind.nqp
         self.kind = kind
         self._scalar_element = factory()
@@ -300,59 +243,15 @@ class Body:
         )
 
         # regions and boundaries
-        if regions is None:
-            regions = spec_regions or (mesh.subdomains or {})
-        self.regions: dict[str, IntArray] = {
-            k: np.asarray(v, dtype=np.int64) for k, v in regions.items()
-        } or {"body": np.arange(self.ncell)}
-        for name, ids in self.regions.items():
-            if ids.size and (ids.min() < 0 or ids.max() >= self.ncell):
-                raise ValueError(
-                    f"region {name!r} has cell ids outside [0, {self.ncell}); check the mesh"
-                )
-        if boundaries is None:
-            boundaries = spec_boundaries or (mesh.boundaries or {})
-        self.boundaries: dict[str, IntArray] = {
-            k: np.asarray(v, dtype=np.int64) for k, v in boundaries.items()
-        }
+        self.regions, self.boundaries = named_sets(
+            mesh, self.ncell, regions, boundaries, spec_regions, spec_boundaries
+        )
 
         # fibres
-        self.fibers: FloatArray | None = None
-        self.fibers_qp: FloatArray | None = None
-        if callable(fibers):
-            X = self.quadrature_points
-            fibers = np.asarray(fibers(X.reshape(-1, 3)), dtype=np.float64)
-            if fibers.shape != (self.ncell * nqp, 3):
-                raise ValueError(
-                    f"the fibers function returned shape {fibers.shape!r} for "
-                    f"{self.ncell * nqp} points; expected ({self.ncell * nqp}, 3), one "
-                    "direction per reference point"
-                )
-            fibers = fibers.reshape(self.ncell, nqp, 3)
-        if fibers is not None:
-            f = kinematics.unit_fibers(fibers)
-            if f.shape == (self.ncell, 3):
-                fq = np.broadcast_to(f[:, None, :], (self.ncell, nqp, 3))
-            elif f.shape == (self.ncell, nqp, 3):
-                fq = f
-            else:
-                raise ValueError(
-                    f"fibers has shape {f.shape!r}; expected ({self.ncell}, 3) per cell or "
-                    f"({self.ncell}, {nqp}, 3) per quadrature point"
-                )
-            self.fibers = f
-            self.fibers_qp = np.ascontiguousarray(fq)
-        needs = bool(getattr(material, "needs_fibers", False))
-        for what, needed in (
-            (f"material {type(material).__name__}", needs),
-            ("active contraction", active is not None),
-            ("fibre growth", growth is not None),
-        ):
-            if needed and self.fibers_qp is None:
-                raise ValueError(
-                    f"{what} needs 'fibers' but none were given; pass fibers=(ncell, 3) "
-                    "unit vectors (or use a mesh builder that provides them)"
-                )
+        self.fibers, self.fibers_qp = quadrature_fibers(
+            fibers, self.ncell, nqp, lambda: self.quadrature_points
+        )
+        check_fibers_given(material, active, growth, self.fibers_qp)
 
         # active stress level per cell
         self.t_max: FloatArray | None = None

@@ -12,11 +12,11 @@ import re
 import numpy as np
 import pytest
 
+from harpx.anatomy.mask_fit import _aha
 from harpx.anatomy.segmentation import mesh_from_labels
 from harpx.anatomy.ventricle_fit import (
     VentricleFitWarning,
     VentricleTemplate,
-    _aha,
     fit_ventricle_to_mask,
 )
 from harpx.cardiac.strain import aha_segments

@@ -1,0 +1,269 @@
+"""DICOM images grouped into stacks of parallel slices, checked, and their pixels loaded.
+
+A *stack* is every image of one series (:func:`~harpx.io.dicom.read_tagged` picks the
+series): all must share orientation, matrix size and pixel spacing, and their positions
+must differ only along the slice normal ``n = r × c`` (slices ordered by ``(P - P_0)·n``,
+not by file order or ``InstanceNumber``). Its frames are the images of each slice sorted
+by trigger time; every slice needs the same frames. Positions and directions are those of
+:mod:`harpx.io.dicom_headers`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from harpx._typing import FloatArray
+from harpx.errors import HarpxError, HarpxWarning
+from harpx.imaging.stacks import SliceStack
+from harpx.io.dicom_headers import _Image, _pydicom
+
+__all__ = ["GAP_ERROR", "INPLANE_TOL", "ORIENTATION_TOL", "SLICE_TOL", "UNIT_TOL"]
+
+#: Largest difference of direction cosines for two images to count as parallel.
+ORIENTATION_TOL = 1e-3
+#: Slice positions closer than this (mm) along the normal are the same slice.
+SLICE_TOL = 1e-2
+#: In-plane offset between slices of a stack tolerated, as a fraction of a pixel.
+INPLANE_TOL = 1e-2
+_TIME_DUPLICATE = 1e-3  # ms: two frames of one slice closer than this are duplicates
+
+
+@dataclass
+class _Stack:
+    """One series: parallel slices, sorted along the normal, with matching frames."""
+
+    uid: str
+    description: str
+    origin: FloatArray  # position of pixel (0, 0) of the first slice, mm
+    along_row: FloatArray  # r: direction of increasing column index
+    along_column: FloatArray  # c: direction of increasing row index
+    normal: FloatArray  # unit r × c
+    pixel_spacing: FloatArray  # (Δr between rows, Δc between columns), mm
+    rows: int
+    columns: int
+    offsets: FloatArray  # (S,) slice positions along the normal from origin, increasing, mm
+    slab: tuple[float, float]  # through-plane extent along the normal from origin, mm
+    times: FloatArray  # (T,) frame times, ms
+    images: list[list[_Image]]  # [slice][frame]
+
+    @property
+    def geometry(self) -> SliceStack:
+        """The stack's slice geometry (patient coordinates, mm)."""
+        return SliceStack(
+            origin=self.origin,
+            along_row=self.along_row,
+            along_column=self.along_column,
+            pixel_spacing=(float(self.pixel_spacing[0]), float(self.pixel_spacing[1])),
+            rows=self.rows,
+            columns=self.columns,
+            offsets=self.offsets,
+            slab=self.slab,
+        )
+
+    def name(self) -> str:
+        return f"series {self.description!r} ({self.uid})"
+
+
+def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
+    first = images[0]
+    label = f"series {first.description!r} ({first.series_uid})"
+    orientation = first.require("orientation")
+    spacing = first.require("pixel_spacing")
+    for im in images:
+        im.require("position")
+        im.require("time")
+        im_orientation = im.require("orientation")
+        if np.max(np.abs(im_orientation - orientation)) > ORIENTATION_TOL:
+            raise HarpxError(
+                f"slices of {label} are not parallel: {im.where()} has ImageOrientationPatient "
+                f"{np.round(im_orientation, 4).tolist()} but {first.where()} has "
+                f"{np.round(orientation, 4).tolist()}; a series must be one stack of parallel "
+                "slices (split it, e.g. by passing the files of each orientation separately)"
+            )
+        im_spacing = im.require("pixel_spacing")
+        if (im.rows, im.columns) != (first.rows, first.columns) or np.max(
+            np.abs(im_spacing - spacing)
+        ) > 1e-6 * max(spacing):
+            raise HarpxError(
+                f"images of {label} differ in matrix size or PixelSpacing: {im.where()} has "
+                f"{im.rows}x{im.columns} at {im_spacing.tolist()} mm, {first.where()} "
+                f"{first.rows}x{first.columns} at {spacing.tolist()} mm"
+            )
+    _check_geometry(first, orientation, spacing, label)
+    along_row, along_column = orientation[:3], orientation[3:]
+    normal = np.cross(along_row, along_column)
+    normal /= np.linalg.norm(normal)
+    affine = np.column_stack([along_row * spacing[1], along_column * spacing[0], normal])
+    positions = np.array([im.position for im in images])
+    local = np.linalg.solve(affine, (positions - positions[0]).T).T  # (col, row, offset)
+    order = np.argsort(local[:, 2], kind="stable")
+    cuts = np.flatnonzero(np.diff(local[order, 2]) > SLICE_TOL) + 1
+    slices = np.split(order, cuts)
+    base = slices[0][0]
+    shift = (local[:, :2] - local[base, :2]) @ affine[:, :2].T  # in-plane offsets, mm
+    worst = int(np.argmax(np.linalg.norm(shift, axis=1)))
+    if np.linalg.norm(shift[worst]) > INPLANE_TOL * spacing.min():
+        raise HarpxError(
+            f"slices of {label} are shifted in plane by {np.linalg.norm(shift[worst]):.4g} mm "
+            f"(offset {np.round(shift[worst], 4).tolist()} in x, y, z; {images[worst].where()} "
+            f"against {images[base].where()}); a stack needs its slice positions to differ "
+            "only along the slice normal"
+        )
+    frames: list[list[_Image]] = []
+    for members in slices:
+        ims = sorted((images[k] for k in members), key=lambda im: im.time)
+        gaps = np.diff([im.time for im in ims])
+        if gaps.size and gaps.min() < _TIME_DUPLICATE:
+            k = int(np.argmin(gaps))
+            a, b = ims[k], ims[k + 1]
+            if a.sop_uid and a.sop_uid == b.sop_uid and a.frame == b.frame:
+                raise HarpxError(
+                    f"{a.where()} and {b.where()} are the same image twice (SOPInstanceUID "
+                    f"{a.sop_uid!r}): one is a copy of the other; remove the copy"
+                )
+            raise HarpxError(
+                f"{label} has two images at the same slice position and TriggerTime "
+                f"{ims[k].time} ms: {ims[k].where()} and {ims[k + 1].where()}; put repeated "
+                "acquisitions (e.g. CSPAMM A and B) in separate series or select the files"
+            )
+        frames.append(ims)
+    counts = [len(f) for f in frames]
+    if len(set(counts)) > 1:
+        raise HarpxError(
+            f"slices of {label} have different numbers of frames {counts}; every slice of a "
+            "cine stack needs the same frames (drop incomplete slices)"
+        )
+    times = np.array([[im.time for im in f] for f in frames], dtype=np.float64)
+    spread = times.max(axis=0) - times.min(axis=0)
+    if spread.max() > time_tolerance:
+        raise HarpxError(
+            f"TriggerTime of the slices of {label} differ by up to {spread.max():.3g} ms at "
+            f"frame {int(np.argmax(spread))} (> time_tolerance={time_tolerance:g} ms); raise "
+            "time_tolerance if the frames really correspond"
+        )
+    offsets = local[[s[0] for s in slices], 2] - local[base, 2]
+    _check_gaps(offsets, [images[s[0]] for s in slices], label)
+    origin = positions[base]
+    thickness = first.thickness if first.thickness is not None and first.thickness > 0 else None
+    if thickness is not None:
+        below = above = 0.5 * thickness
+    elif offsets.size > 1:
+        below, above = 0.5 * (offsets[1] - offsets[0]), 0.5 * (offsets[-1] - offsets[-2])
+    else:
+        raise HarpxError(
+            f"DICOM attribute 'SliceThickness' is missing or not positive in {first.where()}; "
+            f"{label} has a single slice, so harpx needs it to know how far the slice's data "
+            "extends through plane"
+        )
+    return _Stack(
+        uid=first.series_uid,
+        description=first.description,
+        origin=origin,
+        along_row=along_row,
+        along_column=along_column,
+        normal=normal,
+        pixel_spacing=spacing,
+        rows=first.rows,
+        columns=first.columns,
+        offsets=offsets,
+        slab=(float(offsets[0] - below), float(offsets[-1] + above)),
+        times=times.mean(axis=0),
+        images=frames,
+    )
+
+
+#: Largest deviation of an ImageOrientationPatient triplet from unit length, and of the
+#: two triplets from orthogonality (``|r . c|``).
+UNIT_TOL = 1e-3
+#: A gap between neighbouring slices larger than this many regular gaps is an error (a slice
+#: far off the stack); a smaller but irregular gap (missing slices) warns.
+GAP_ERROR = 4.0
+_GAP_WARN = 1.5
+
+
+def _check_geometry(
+    first: _Image, orientation: FloatArray, spacing: FloatArray, label: str
+) -> None:
+    """Unit, orthogonal direction cosines and positive pixel spacing, else HarpxError."""
+    r, c = orientation[:3], orientation[3:]
+    norms = [float(np.linalg.norm(r)), float(np.linalg.norm(c))]
+    if max(abs(n - 1.0) for n in norms) > UNIT_TOL or abs(float(r @ c)) > UNIT_TOL:
+        raise HarpxError(
+            f"ImageOrientationPatient of {first.where()} ({label}) is "
+            f"{np.round(orientation, 6).tolist()}: the two direction cosines must be unit "
+            f"vectors at right angles (norms {np.round(norms, 6).tolist()}, dot product "
+            f"{float(r @ c):.3g}); fix the export (harpx would scale or shear the geometry)"
+        )
+    if not np.all(spacing > 0):
+        raise HarpxError(
+            f"PixelSpacing of {first.where()} ({label}) is {spacing.tolist()} mm; both "
+            "values must be positive (fix the export)"
+        )
+
+
+def _check_gaps(offsets: FloatArray, firsts: list[_Image], label: str) -> None:
+    """A slice far off the stack is an error; missing slices (an irregular gap) warn."""
+    if offsets.size < 3:
+        return
+    gaps = np.diff(offsets)
+    regular = float(np.median(gaps))
+    worst = int(np.argmax(gaps))
+    if gaps[worst] > GAP_ERROR * regular:
+        raise HarpxError(
+            f"slice {firsts[worst + 1].where()} of {label} is {gaps[worst]:.4g} mm from its "
+            f"neighbour {firsts[worst].where()}, {gaps[worst] / regular:.3g} times the "
+            f"stack's {regular:.4g} mm slice gap; it does not belong to this stack (drop it "
+            "or give it its own series)"
+        )
+    irregular = np.flatnonzero(gaps > _GAP_WARN * regular)
+    if irregular.size:
+        k = int(irregular[0])
+        warnings.warn(
+            f"{label} has a gap of {gaps[k]:.4g} mm between {firsts[k].where()} and "
+            f"{firsts[k + 1].where()} ({gaps[k] / regular:.3g} times its {regular:.4g} mm "
+            "slice gap): slices seem to be missing; the images are interpolated across the "
+            "gap (its mask marks it as having data)",
+            HarpxWarning,
+            stacklevel=4,
+        )
+
+
+def _load_pixels(stacks: list[_Stack]) -> list[NDArray[np.float64]]:
+    """Rescaled pixel values of each stack, (time, slice, row, column) float64."""
+    pydicom = _pydicom()
+    cache: dict[Path, NDArray[Any]] = {}
+    volumes = []
+    for stack in stacks:
+        volume = np.empty(
+            (stack.times.size, len(stack.images), stack.rows, stack.columns), dtype=np.float64
+        )
+        for k, frames in enumerate(stack.images):
+            for t, im in enumerate(frames):
+                if im.path not in cache:
+                    try:
+                        cache[im.path] = np.asarray(pydicom.dcmread(im.path).pixel_array)
+                    except Exception as err:
+                        raise HarpxError(
+                            f"cannot decode the pixel data of {str(im.path)!r} "
+                            f"({type(err).__name__}: {err}); the file is truncated, corrupt "
+                            "or compressed with a codec pydicom cannot decode (install "
+                            "pylibjpeg or gdcm)"
+                        ) from err
+                pixels = cache[im.path]
+                if im.frame is not None and pixels.ndim == 3:
+                    pixels = pixels[im.frame]
+                if pixels.shape != (stack.rows, stack.columns):
+                    raise HarpxError(
+                        f"pixel data of {im.where()} has shape {pixels.shape}; expected "
+                        f"(Rows, Columns) = {(stack.rows, stack.columns)} (colour or "
+                        "malformed image)"
+                    )
+                volume[t, k] = pixels * im.slope + im.intercept
+        volumes.append(volume)
+    return volumes

@@ -1,0 +1,293 @@
+"""The inputs of a :class:`~harpx.mechanics.body.Body` checked and put in its terms.
+
+:class:`~harpx.mechanics.body.Body` builds on what these helpers return: the scikit-fem
+mesh, element and volumetric treatment of its arguments (a :class:`MeshSpec` brings its
+regions, boundaries and fibres), the checked vertices of the cells, the named cell and facet
+sets, and the unit fibres at the quadrature points. Each refuses what the body cannot be
+built from with a ``TypeError`` or ``ValueError`` naming the argument and what to pass.
+Units: mm.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import meshio
+import numpy as np
+import skfem
+from numpy.typing import ArrayLike
+
+from harpx._typing import FloatArray, IntArray
+from harpx.errors import CoincidentNodesWarning
+from harpx.mechanics import kinematics
+from harpx.mechanics.cells import (
+    _HEX20_MESHES,
+    _VOLUMETRIC,
+    ELEMENTS,
+    ElementKind,
+    ElementName,
+    Volumetric,
+    _check_cells,
+    _orient_tets,
+    default_element,
+)
+from harpx.mechanics.meshspec import MeshSpec, check_nodes, check_unused_nodes, coincident_nodes
+
+__all__ = [
+    "check_fibers_given",
+    "check_vertices",
+    "named_sets",
+    "quadrature_fibers",
+    "resolve_mesh",
+]
+
+
+def resolve_mesh(
+    mesh: Any, fibers: Any, element: ElementName | None, volumetric: Volumetric | None
+) -> tuple[
+    Any, Any, ElementName, ElementKind, Volumetric, Mapping[str, ArrayLike], Mapping[str, ArrayLike]
+]:
+    """The scikit-fem mesh, element and volumetric treatment of the arguments of a Body.
+
+    Parameters
+    ----------
+    mesh, fibers, element, volumetric
+        As given to :class:`~harpx.mechanics.body.Body`.
+
+    Returns
+    -------
+    mesh : skfem.Mesh
+        The hexahedral or tetrahedral mesh (a MeshSpec's mesh; tetrahedra oriented).
+    fibers : object
+        ``fibers``, or the MeshSpec's fibres when ``fibers`` is None.
+    element : str
+        The element (default: what the mesh implies).
+    kind : ElementKind
+        Its description (``ELEMENTS[element]``).
+    volumetric : str
+        The volumetric treatment (default: the element's first).
+    spec_regions, spec_boundaries : mapping of str to array of int
+        A MeshSpec's named cells and facets ({} for a plain mesh).
+
+    Raises
+    ------
+    TypeError
+        If ``mesh`` is a path, a meshio.Mesh or not a hexahedral or tetrahedral skfem mesh.
+    ValueError
+        If ``element`` or ``volumetric`` is unknown or does not fit the mesh or element.
+    """
+    spec_regions: Mapping[str, ArrayLike] = {}
+    spec_boundaries: Mapping[str, ArrayLike] = {}
+    if isinstance(mesh, MeshSpec):
+        spec_regions, spec_boundaries = mesh.regions, mesh.boundaries
+        if fibers is None:
+            fibers = mesh.fibers
+        mesh = mesh.mesh
+    elif isinstance(mesh, str | os.PathLike):
+        raise TypeError(
+            f"mesh is a file path ({os.fspath(mesh)!r}); read it with "
+            "harpx.io.mesh.read_body(path, material, ...), which returns the Body"
+        )
+    elif isinstance(mesh, meshio.Mesh):
+        raise TypeError("mesh is a meshio.Mesh; build the body with Body.from_meshio(mesh)")
+    if isinstance(mesh, skfem.MeshTet1):
+        mesh = _orient_tets(mesh)
+    if not isinstance(mesh, (skfem.MeshHex1, skfem.MeshTet1)) or (
+        isinstance(mesh, skfem.MeshHex1) and type(mesh) not in _HEX20_MESHES
+    ):
+        raise TypeError(
+            f"mesh must be a skfem.MeshHex1, MeshHex2, MeshTet1 or MeshTet2 or a MeshSpec, got "
+            f"{type(mesh).__name__!r}; build one with harpx.mechanics.mesh.box/cylinder "
+            "(and tetrahedralize for tetrahedra), or read a mesh file with "
+            "harpx.io.mesh.read_body"
+        )
+    if element is None:
+        element = default_element(mesh)
+    if element not in ELEMENTS:
+        raise ValueError(f"element={element!r} is not one of {sorted(ELEMENTS)!r}")
+    kind = ELEMENTS[element]
+    if not isinstance(mesh, kind.meshes) or (
+        isinstance(mesh, skfem.MeshHex2) and element != "hex20"
+    ):
+        raise ValueError(
+            f"element={element!r} needs a {' or '.join(m.__name__ for m in kind.meshes)} "
+            f"mesh, got {type(mesh).__name__!r}; pick the element that matches the cells "
+            f"(or omit element= to use {default_element(mesh)!r})"
+        )
+    if volumetric is None:
+        volumetric = kind.volumetric[0]
+    if volumetric not in _VOLUMETRIC:
+        raise ValueError(f"volumetric={volumetric!r} must be one of {list(_VOLUMETRIC)!r}")
+    if volumetric not in kind.volumetric:
+        raise ValueError(
+            f"volumetric={volumetric!r} is not available for element={element!r}; "
+            f"choose one of {list(kind.volumetric)!r} (Q1/P1 and P1/P0 are not inf-sup "
+            "stable and lock, tet10 P2/P1-disc too; linear dilatation needs hex20, nodal "
+            "dilatation tetrahedra)"
+        )
+    return mesh, fibers, element, kind, volumetric, spec_regions, spec_boundaries
+
+
+def check_vertices(mesh: Any) -> FloatArray:
+    """The vertices of the cells, checked (finite, used, valid cells; coincident ones warn).
+
+    Parameters
+    ----------
+    mesh : skfem.Mesh
+        A MeshTet2 / MeshHex2 also holds its geometry nodes in ``mesh.p``.
+
+    Returns
+    -------
+    ndarray, shape (3, nvertex)
+        The cells' vertices, mm.
+
+    Raises
+    ------
+    ValueError
+        From :func:`~harpx.mechanics.meshspec.check_nodes`, the cell checks and
+        :func:`~harpx.mechanics.meshspec.check_unused_nodes`.
+
+    Warns
+    -----
+    CoincidentNodesWarning
+        If vertices coincide (the cells on either side are not connected).
+    """
+    curved = isinstance(mesh, (skfem.MeshTet2, skfem.MeshHex2))
+    nvert = int(mesh.nvertices) if curved else mesh.p.shape[1]
+    vertices = np.asarray(mesh.p)[:, :nvert]
+    check_nodes(vertices.T, np.asarray(mesh.t).T, nvertex=int(mesh.t.shape[0]))
+    pairs = coincident_nodes(vertices.T)
+    if pairs.size:
+        warnings.warn(
+            f"mesh has {pairs.shape[0]} pairs of coincident nodes, e.g. nodes "
+            f"{pairs[0].tolist()} at {vertices[:, pairs[0, 0]].tolist()} mm: the "
+            "cells on either side are not connected and move independently; if that is "
+            "not a deliberate cut, merge them (mesh = mesh.remove_duplicate_nodes())",
+            CoincidentNodesWarning,
+            stacklevel=3,
+        )
+    _check_cells(mesh)
+    check_unused_nodes(vertices.shape[1], np.asarray(mesh.t).T)
+    return vertices
+
+
+def named_sets(
+    mesh: Any,
+    ncell: int,
+    regions: Mapping[str, ArrayLike] | None,
+    boundaries: Mapping[str, ArrayLike] | None,
+    spec_regions: Mapping[str, ArrayLike],
+    spec_boundaries: Mapping[str, ArrayLike],
+) -> tuple[dict[str, IntArray], dict[str, IntArray]]:
+    """Named cell sets (``{"body": all}`` by default) and facet sets of a body.
+
+    Parameters
+    ----------
+    mesh : skfem.Mesh
+        Its ``subdomains`` and ``boundaries`` are the last defaults.
+    ncell : int
+        Number of cells.
+    regions, boundaries : mapping of str to array_like of int, optional
+        As given to :class:`~harpx.mechanics.body.Body`.
+    spec_regions, spec_boundaries : mapping of str to array_like of int
+        Those of a MeshSpec, the defaults before the mesh's own.
+
+    Returns
+    -------
+    regions, boundaries : dict of str to ndarray of int
+
+    Raises
+    ------
+    ValueError
+        If a region holds cell ids outside ``[0, ncell)``.
+    """
+    if regions is None:
+        regions = spec_regions or (mesh.subdomains or {})
+    named_regions: dict[str, IntArray] = {
+        k: np.asarray(v, dtype=np.int64) for k, v in regions.items()
+    } or {"body": np.arange(ncell)}
+    for name, ids in named_regions.items():
+        if ids.size and (ids.min() < 0 or ids.max() >= ncell):
+            raise ValueError(f"region {name!r} has cell ids outside [0, {ncell}); check the mesh")
+    if boundaries is None:
+        boundaries = spec_boundaries or (mesh.boundaries or {})
+    named_boundaries: dict[str, IntArray] = {
+        k: np.asarray(v, dtype=np.int64) for k, v in boundaries.items()
+    }
+    return named_regions, named_boundaries
+
+
+def quadrature_fibers(
+    fibers: Any, ncell: int, nqp: int, quadrature_points: Callable[[], FloatArray]
+) -> tuple[FloatArray | None, FloatArray | None]:
+    """Unit fibres as given (per cell or point) and at every quadrature point.
+
+    Parameters
+    ----------
+    fibers : array_like of shape (ncell, 3) or (ncell, nqp, 3), callable or None
+        As given to :class:`~harpx.mechanics.body.Body`; a callable is evaluated at the
+        reference quadrature points.
+    ncell, nqp : int
+        Number of cells and of quadrature points per cell.
+    quadrature_points : callable
+        ``quadrature_points() -> (ncell, nqp, 3)`` reference positions, mm.
+
+    Returns
+    -------
+    fibers : ndarray, shape (ncell, 3) or (ncell, nqp, 3), or None
+        Normalised fibres.
+    fibers_qp : ndarray, shape (ncell, nqp, 3), or None
+        The fibres at every quadrature point.
+
+    Raises
+    ------
+    ValueError
+        If the fibres (or the callable's result) have the wrong shape.
+    """
+    if callable(fibers):
+        X = quadrature_points()
+        fibers = np.asarray(fibers(X.reshape(-1, 3)), dtype=np.float64)
+        if fibers.shape != (ncell * nqp, 3):
+            raise ValueError(
+                f"the fibers function returned shape {fibers.shape!r} for "
+                f"{ncell * nqp} points; expected ({ncell * nqp}, 3), one "
+                "direction per reference point"
+            )
+        fibers = fibers.reshape(ncell, nqp, 3)
+    if fibers is not None:
+        f = kinematics.unit_fibers(fibers)
+        if f.shape == (ncell, 3):
+            fq = np.broadcast_to(f[:, None, :], (ncell, nqp, 3))
+        elif f.shape == (ncell, nqp, 3):
+            fq = f
+        else:
+            raise ValueError(
+                f"fibers has shape {f.shape!r}; expected ({ncell}, 3) per cell or "
+                f"({ncell}, {nqp}, 3) per quadrature point"
+            )
+        return f, np.ascontiguousarray(fq)
+    return None, None
+
+
+def check_fibers_given(material: Any, active: Any, growth: Any, fibers_qp: Any) -> None:
+    """Refuse a fibre material, active contraction or fibre growth without fibres.
+
+    Raises
+    ------
+    ValueError
+        Naming what needs the fibres.
+    """
+    needs = bool(getattr(material, "needs_fibers", False))
+    for what, needed in (
+        (f"material {type(material).__name__}", needs),
+        ("active contraction", active is not None),
+        ("fibre growth", growth is not None),
+    ):
+        if needed and fibers_qp is None:
+            raise ValueError(
+                f"{what} needs 'fibers' but none were given; pass fibers=(ncell, 3) "
+                "unit vectors (or use a mesh builder that provides them)"
+            )
