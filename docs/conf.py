@@ -16,13 +16,14 @@ extensions = [
     "myst_nb",
 ]
 
-# The tutorials are jupytext percent-format scripts (docs/tutorials links to ../tutorials);
-# myst-nb reads them as notebooks. They are rendered without running them: the scenes take
-# minutes on a small machine, and the tests run every tutorial anyway.
-nb_custom_formats = {".py": ["jupytext.reads", {"fmt": "py:percent"}]}
+# The tutorials are jupytext percent-format scripts in tutorials/. The guide shows their
+# executed copies, docs/tutorials/*.ipynb, with outputs and figures as stored: nothing runs
+# here. tests/test_tutorials.py writes those copies from the one run the CI makes of each
+# tutorial, and tests/test_docs.py fails when a copy's cells differ from its tutorial.
 nb_execution_mode = "off"
+nb_merge_streams = True
 myst_enable_extensions = ["dollarmath"]
-source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".py": "myst-nb"}
+source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
 exclude_patterns = ["_build", "conf.py"]
 
 autodoc_default_options = {"members": True, "member-order": "bysource"}
@@ -31,8 +32,14 @@ numpydoc_show_class_members = False
 numpydoc_class_members_toctree = False
 
 html_theme = "alabaster"
-html_theme_options = {"description": "tagged MRI motion estimation", "fixed_sidebar": True}
-html_static_path: list[str] = []
+html_theme_options = {
+    "description": "tagged MRI motion estimation",
+    "fixed_sidebar": True,
+    "page_width": "1200px",  # a 100-character code line fits beside the sidebar
+}
+# only the style sheet: the gallery's images (docs/_static/gallery) are copied as images
+html_static_path = ["_static/harpx.css"]
+html_css_files = ["harpx.css"]
 
 # numpydoc renames the citations of each "References" section; docstrings that list
 # references without citing them in the text would otherwise warn.

@@ -1,7 +1,8 @@
 """The user guide stays true to the code; the package has one version and stands alone.
 
 The guide itself is built with warnings as errors by ``make docs`` (run by .ci/run); these
-checks are the fast part.
+checks are the fast part, including that the executed tutorials and the gallery figures the
+guide shows are current (tests/test_tutorials.py writes them).
 """
 
 from __future__ import annotations
@@ -11,7 +12,20 @@ import re
 import tomllib
 from pathlib import Path
 
+import nbformat
+
 import harpx
+from tests._notebooks import (
+    GALLERY_IMAGES,
+    GALLERY_PAGE,
+    STORED,
+    TUTORIALS,
+    cells,
+    gallery_entries,
+    gallery_image_source,
+    read_tutorial,
+    stored_notebook,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCE = "\n".join(p.read_text() for p in sorted((ROOT / "harpx").rglob("*.py")))
@@ -43,3 +57,44 @@ def test_every_guide_page_and_tutorial_is_in_the_table_of_contents():
     pages |= {f"tutorials/{p.stem}" for p in (ROOT / "tutorials").glob("*.py")}
     listed = set(re.findall(r"^([\w/]+)$", index, flags=re.M))
     assert pages - listed == set()
+
+
+# functions of harpx.plotting that draw nothing, so have no figure in the gallery
+NOT_DRAWINGS = {"segment_wedges"}
+STALE = "stale: `pytest tests/test_tutorials.py -k {}` rewrites it; commit the result"
+
+
+def test_the_guide_shows_each_tutorial_as_it_is_now():
+    """The guide renders docs/tutorials/*.ipynb as stored: one executed copy per tutorial,
+    whose cells are the tutorial's current ones, every code cell run, no error, figures."""
+    assert sorted(p.name for p in STORED.iterdir()) == [f"{t.stem}.ipynb" for t in TUTORIALS]
+    for tutorial in TUTORIALS:
+        path = stored_notebook(tutorial)
+        nb = nbformat.read(path, as_version=4)
+        assert cells(nb) == cells(read_tutorial(tutorial)), STALE.format(tutorial.stem)
+        code = [cell for cell in nb.cells if cell.cell_type == "code" and cell.source.strip()]
+        assert all(cell.execution_count for cell in code), STALE.format(tutorial.stem)
+        outputs = [output for cell in code for output in cell.outputs]
+        assert [o for o in outputs if o.output_type == "error"] == []
+        assert any("image/png" in o.get("data", {}) for o in outputs)
+        # figures at 80 dpi (tests/test_tutorials.py): the largest copy is about 220 kB
+        assert path.stat().st_size < 400_000, f"{path.name}: {path.stat().st_size} bytes"
+
+
+def test_the_gallery_shows_every_plotting_function_drawn_by_its_code():
+    """docs/gallery.md: one figure per drawing function of harpx.plotting, each image drawn
+    by the code above it (tests/test_tutorials.py records that code in the PNG)."""
+    import harpx.plotting
+
+    entries = gallery_entries()
+    names = [entry.name for entry in entries]
+    assert len(names) == len(set(names))
+    assert set(harpx.plotting.__all__) - NOT_DRAWINGS - set(names) == set()
+    assert len(re.findall(r"!\[", GALLERY_PAGE.read_text())) == len(entries)  # each parsed
+    assert {entry.tutorial for entry in entries} <= {t.name for t in TUTORIALS}
+    assert sorted(p.stem for p in GALLERY_IMAGES.glob("*.png")) == sorted(names)
+    for entry in entries:
+        assert entry.image.exists(), STALE.format(entry.tutorial.removesuffix(".py"))
+        stale = STALE.format(entry.tutorial.removesuffix(".py"))
+        assert gallery_image_source(entry.image) == entry.code, f"{entry.name}: {stale}"
+        assert entry.image.stat().st_size < 100_000
