@@ -17,6 +17,12 @@ Three kinds of :class:`xarray.Dataset` flow through harpx. Each carries its kind
     optional ``harmonic_noise`` (tag): the noise standard deviation of each tag's complex
     harmonic image, in the units of ``magnitude`` (:mod:`harpx.imaging.noise`), from which
     the tracker derives the noise floor of its residual.
+    Optional slice geometry (either kind of image dataset): ``slice_thickness`` (tag), the
+    thickness of each tag's slices along its ``slice_axis`` in mm (boxcar profile; NaN:
+    unknown), and ``slice_position`` (tag, slice), their centres along it in mm,
+    increasing, NaN-padded. :func:`harpx.imaging.harp.extract_phase` carries them into
+    ``phase/1`` (:func:`harpx.imaging.harp.slice_geometry`); the blur correction models the
+    slice profile with them and keeps its in-plane model without them.
 ``tracked/1``
     ``points`` (node, axis), ``cells`` (cell, vertex) and ``displacement`` (time, node, axis),
     plus optional strain and per-frame diagnostics.
@@ -144,6 +150,8 @@ UNITS: dict[str, str] = {
     "tag_direction": "1",
     "tag_frequency": "1/mm",
     "slice_axis": "1",
+    "slice_thickness": "mm",
+    "slice_position": "mm",
     "image": "1",
     "mask": "1",
     "body": "1",
@@ -177,6 +185,8 @@ LONG_NAMES: dict[str, str] = {
     "tag_direction": "unit tag wave direction",
     "tag_frequency": "tag spatial frequency (cycles per mm)",
     "slice_axis": "axis normal to the acquisition slices",
+    "slice_thickness": "slice thickness along the slice axis",
+    "slice_position": "slice centre along the slice axis",
     "image": "tagged image intensity",
     "mask": "acquisition has data",
     "body": "tissue density fraction",
@@ -324,6 +334,8 @@ _COMMON_IMAGE_COORDS: dict[str, VarSpec] = {
     "mask": VarSpec(("tag", *GRID_DIMS), required=False),
     "displacement_true": VarSpec(("time", "axis", *GRID_DIMS), required=False),
     "body": VarSpec(GRID_DIMS, required=False),
+    "slice_thickness": VarSpec(("tag",), required=False),
+    "slice_position": VarSpec(("tag", "slice"), required=False),
 }
 
 #: Variable layout of each schema.
@@ -474,6 +486,8 @@ def validate(ds: xr.Dataset, kind: str | None = None) -> None:
             checks.append(("phase values", lambda: _check_phase_values(ds, problems)))
         if "body" in ds.variables:
             checks.append(("body", lambda: _check_range(ds, "body", 0.0, 1.0, problems)))
+        if "slice_thickness" in ds.variables or "slice_position" in ds.variables:
+            checks.append(("slice geometry", lambda: _check_slice_geometry(ds, problems)))
     else:
         checks.append(("tracked", lambda: _check_tracked(ds, problems)))
     for what, check in checks:
@@ -696,6 +710,36 @@ def _spacing(ds: xr.Dataset, dim: str) -> float | None:
         return None
     values = np.asarray(ds[dim].values, dtype=np.float64)
     return float((values[-1] - values[0]) / (values.size - 1))
+
+
+def _check_slice_geometry(ds: xr.Dataset, problems: list[str]) -> None:
+    """``slice_thickness`` and ``slice_position`` together; thickness positive or NaN;
+    positions increasing, NaN only after the last slice of a tag."""
+    if ("slice_thickness" in ds.variables) != ("slice_position" in ds.variables):
+        problems.append(
+            "'slice_thickness' and 'slice_position' come together (either alone cannot "
+            "place the slabs); add the other or drop both"
+        )
+        return
+    thickness = np.asarray(ds["slice_thickness"].values, dtype=np.float64)
+    bad = np.isfinite(thickness) & ~(thickness > 0) | np.isinf(thickness)
+    if bad.any():
+        problems.append(
+            f"'slice_thickness' has values {thickness[bad].tolist()}; expected positive mm "
+            "(NaN where unknown)"
+        )
+    positions = np.asarray(ds["slice_position"].transpose("tag", ...).values, np.float64)
+    known = np.isfinite(positions)
+    count = known.sum(axis=1)
+    padded = known == (np.arange(positions.shape[1])[None, :] < count[:, None])
+    steps = np.diff(positions, axis=1)  # NaN where padding starts: not a decrease
+    decreasing = np.zeros(steps.shape, dtype=bool)
+    np.less_equal(steps, 0.0, out=decreasing, where=known[:, 1:])
+    if not padded.all() or decreasing.any():
+        problems.append(
+            "'slice_position' must hold each tag's slice centres increasing (mm), NaN-padded "
+            "after the last"
+        )
 
 
 def _check_tags(ds: xr.Dataset, problems: list[str]) -> None:

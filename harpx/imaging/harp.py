@@ -25,7 +25,7 @@ from harpx.imaging.fft import default_threads
 from harpx.imaging.noise import harmonic_noise
 from harpx.schema import AXES, GRID_DIMS, standard_attrs, validate
 
-__all__ = ["extract_phase", "refinement_factors"]
+__all__ = ["extract_phase", "refinement_factors", "slice_geometry"]
 
 
 def _check_upsample(upsample: int) -> None:
@@ -225,6 +225,105 @@ def _refine_linear(var: xr.Variable, factors: tuple[int, int, int], threads: int
     )
 
 
+#: Suffixes of the ad-hoc per-stack attributes the synthetic scenes write (``sa_``, ``la_``
+#: prefixes): slice centres along the stack's normal and slice thickness, mm.
+_STACK_ATTRS = ("_slice_positions_mm", "_slice_thickness_mm")
+
+
+def slice_geometry(ds: xr.Dataset) -> dict[str, xr.Variable]:
+    """Each tag's slice thickness and slice centres, as far as ``ds`` tells them.
+
+    Sources, first that applies per tag:
+
+    1. the standard coordinates ``slice_thickness`` (tag) and ``slice_position`` (tag,
+       slice) (:mod:`harpx.schema`), taken as they are;
+    2. a pair of stack attributes ``<p>_slice_positions_mm`` and ``<p>_slice_thickness_mm``
+       (what the synthetic scenes write) whose slab, from half a thickness below the first
+       centre to half above the last, is the tag's ``mask`` along its ``slice_axis`` (within
+       a voxel at each end); a stack that matches no tag, or a tag matched by two stacks, is
+       not used;
+    3. ``attrs["slice_thickness"]`` when the grid along every tag's ``slice_axis`` is the
+       slice lattice (:meth:`harpx.imaging.stacks.SliceStack.axis_aligned`'s convention):
+       the centres are the grid coordinates along it.
+
+    A tag none of them describes gets NaN: nothing is guessed, and the blur correction keeps
+    its in-plane model for it (:func:`harpx.tracking.blur.blur_models`).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        ``tagged/1`` or ``phase/1`` dataset.
+
+    Returns
+    -------
+    dict of str to xarray.Variable
+        ``slice_thickness`` (tag) and ``slice_position`` (tag, slice), mm, NaN-padded; empty
+        when no tag is described.
+
+    Examples
+    --------
+    >>> from harpx.imaging.synth import synthesize_tagged
+    >>> tagged = synthesize_tagged(
+    ...     lambda X, t: 0 * X, shape=(2, 16, 16), spacing=(6.0, 1.5, 1.5), times=[0.0],
+    ...     tags=("x",), snr=None, oversample=1, slice_thickness=6.0)
+    >>> geometry = slice_geometry(tagged)
+    >>> geometry["slice_thickness"].values.tolist(), geometry["slice_position"].values.tolist()
+    ([6.0], [[-3.0, 3.0]])
+    """
+    if "slice_thickness" in ds.variables and "slice_position" in ds.variables:
+        return {name: ds[name].variable for name in ("slice_thickness", "slice_position")}
+    axes = [str(s) for s in np.asarray(ds["slice_axis"].values).ravel()]
+    ntag = len(axes)
+    found: list[list[tuple[float, NDArray[np.float64]]]] = [[] for _ in range(ntag)]
+    prefixes = [k[: -len(_STACK_ATTRS[0])] for k in ds.attrs if str(k).endswith(_STACK_ATTRS[0])]
+    mask = (  # read (computed, if lazy) only when a stack's attributes are to be matched
+        np.asarray(ds["mask"].transpose("tag", *GRID_DIMS).values, dtype=bool)
+        if "mask" in ds.variables and prefixes
+        else None
+    )
+    for prefix in prefixes:
+        if mask is None or prefix + _STACK_ATTRS[1] not in ds.attrs:
+            continue
+        centres = np.atleast_1d(np.asarray(ds.attrs[prefix + _STACK_ATTRS[0]], np.float64))
+        thickness = float(ds.attrs[prefix + _STACK_ATTRS[1]])
+        if not (centres.size and np.all(np.diff(centres) > 0) and thickness > 0):
+            continue
+        for t, axis in enumerate(axes):
+            a = GRID_DIMS.index(axis)
+            grid = np.asarray(ds[axis].values, dtype=np.float64)
+            step = _spacing(ds, axis) or thickness
+            held = mask[t].any(axis=tuple(b for b in range(3) if b != a))
+            if not held.any():
+                continue
+            low, high = grid[held].min(), grid[held].max()
+            slab = (centres[0] - 0.5 * thickness, centres[-1] + 0.5 * thickness)
+            if abs(low - slab[0]) <= step + 1e-6 and abs(high - slab[1]) <= step + 1e-6:
+                found[t].append((thickness, centres))
+    thick = np.full(ntag, np.nan)
+    positions: list[NDArray[np.float64]] = [np.empty(0)] * ntag
+    for t in range(ntag):
+        if len(found[t]) == 1:
+            thick[t], positions[t] = found[t][0]
+    lattice = float(ds.attrs.get("slice_thickness", np.nan))
+    lattice_ok = lattice > 0 and all(
+        (_spacing(ds, axis) or np.inf) >= lattice * (1 - 1e-6) for axis in axes
+    )  # a grid finer than the slices is a resampled one, not the lattice
+    if lattice_ok and not np.isfinite(thick).any():
+        for t, axis in enumerate(axes):
+            thick[t] = lattice
+            positions[t] = np.asarray(ds[axis].values, dtype=np.float64)
+    if not np.isfinite(thick).any():
+        return {}
+    count = max(p.size for p in positions)
+    table = np.full((ntag, count), np.nan)
+    for t, p in enumerate(positions):  # per tag (≤ 3)
+        table[t, : p.size] = p
+    return {
+        "slice_thickness": xr.Variable(("tag",), thick, standard_attrs("slice_thickness")),
+        "slice_position": xr.Variable(("tag", "slice"), table, standard_attrs("slice_position")),
+    }
+
+
 def extract_phase(
     ds: xr.Dataset,
     *,
@@ -275,7 +374,8 @@ def extract_phase(
         dims (tag, time, z, y, x) on the refined grid; the tag coords and ``time``; ``mask``
         (nearest native voxel), ``body`` and ``displacement_true`` (linear interpolation, NaN where
         a neighbour is NaN) when present; ``harmonic_noise`` (tag), the noise standard deviation of
-        each harmonic image (:mod:`harpx.imaging.noise`). Attributes:
+        each harmonic image (:mod:`harpx.imaging.noise`); ``slice_thickness`` (tag) and
+        ``slice_position`` (tag, slice) when :func:`slice_geometry` finds them. Attributes:
         ``harpx_schema="phase/1"``, ``sequence``, ``upsample``, ``radius``, ``bandpass="disk"``
         (the filter the tracker's blur correction models) and ``upsample_factors`` (z, y, x).
 
@@ -363,6 +463,7 @@ def extract_phase(
     }
     for dim in GRID_DIMS:
         coords[dim] = _refined_coord(ds, dim, factor_of[dim])
+    coords.update(slice_geometry(ds))  # for the blur correction's slice profile
     data_vars: dict[Hashable, xr.Variable] = {
         "phase": xr.Variable(dims, phase.transpose(*dims).data, standard_attrs("phase")),
         "magnitude": xr.Variable(

@@ -29,11 +29,45 @@ then compares the model with images that are consistent with it, not with a blur
 version of them. One pass is the default (what it buys on each scene:
 ``benchmarks/results/tracking_defaults.md``).
 
+Slice profile
+-------------
+A slice of thickness :math:`h` centred at :math:`c_s` along the tag's slice axis
+:math:`\zeta` measures the tissue's signal integrated over its slab (a boxcar profile),
+and the images on the common grid interpolate those slices linearly in the slice
+position (:func:`harpx.imaging.stacks.resample_stack`; the nearest slice between the
+outermost centre and the slab face, nothing outside the slabs). With the tag's component
+:math:`k_\zeta` along the slice axis carried along, the demodulated image of a grid plane
+:math:`\zeta_j` is
+
+.. math::
+
+    M(\zeta_j) = \sum_s L_{js}\, \frac{1}{h} \int_{c_s - h/2}^{c_s + h/2}
+        S(\zeta)\, e^{i k_\zeta (\zeta - \zeta_j)}\, d\zeta
+      \approx \sum_i T_{ji}\, S(\zeta_i), \qquad
+    T = E^{*} L W E,
+
+with :math:`W_{si}` the overlap of plane :math:`i`'s cell with slab :math:`s` divided by
+:math:`h`, :math:`L_{js}` the linear-interpolation weights between slice centres and
+:math:`E = \mathrm{diag}(e^{i k_\zeta \zeta_i})`. :math:`T` acts along the slice axis
+and commutes with the in-plane filter, so the ``"slice-profile"`` model predicts
+
+.. math:: c(x) = \arg\big((K * T S)(x)\, \overline{S(x)}\big),
+
+the phase of the measured image minus that of the ideal (unblurred) tag pattern at the
+voxel. It needs each tag's slice thickness and slice centres, the ``slice_thickness``
+(tag) and ``slice_position`` (tag, slice) coordinates of ``phase/1``
+(:func:`harpx.imaging.harp.slice_geometry`); a tag without them, or whose grid does not
+resolve its slab (spacing along the slice axis above half the thickness), keeps the
+``"in-plane"`` model (:func:`blur_models` says which each tag gets).
+
 Assumptions: the tagged signal near the body comes from the body alone (``body`` density
-of the images where given, else uniform inside the mesh), the tag fading is uniform, and
-the slice profile along the slice axis is left out (each slice is treated as a plane of
-the refined grid). Where other tagged tissue borders the body, the correction at that
-border is too small.
+of the images where given, else uniform inside the mesh), the tag fading is uniform, the
+slice profile is a boxcar of the nominal thickness (a real excitation profile is smoother
+and wider at its feet), the two interpolations of the data (slices to the common grid, that
+grid to the refined phase grid) are modelled as one, and the splatted signal is piecewise
+constant over a grid cell along the slice axis. The ``"in-plane"`` model treats each slice
+as a plane of the refined grid. Where other tagged tissue borders the body, the correction
+at that border is too small.
 """
 
 from __future__ import annotations
@@ -53,6 +87,10 @@ from harpx.tracking.results import grid_points
 
 #: Splatted signal below this fraction of its largest modulus counts as outside the tissue.
 SIGNAL_FLOOR = 1e-3
+
+#: Forward models of the blur (module notes): the in-plane band-pass alone, or with each
+#: tag's slice profile where the phase carries its slice geometry.
+BLUR_MODELS = ("in-plane", "slice-profile")
 
 
 def splat_operator(
@@ -154,17 +192,129 @@ def _disk(phase: xr.Dataset, tag: Any, shape: tuple[int, ...], spacing: FloatArr
     return disk, GRID_DIMS.index(normal)
 
 
-def _filtered_phase(S: np.ndarray, disk: np.ndarray, normal: int, out: np.ndarray) -> None:
-    """Write ``arg((K * S) conj S)`` into ``out`` where ``S`` carries signal (module notes).
+def blur_models(phase: xr.Dataset, model: str = "slice-profile") -> list[str]:
+    """The blur model each tag of ``phase`` gets when ``model`` is asked for (module notes).
 
-    ``S`` is low-passed slice by slice (planes normal to grid axis ``normal``) with ``disk``
-    in single precision (the correction is a fraction of a radian; float32 keeps it to
-    ~1e-6 rad); the inverse transform is left unnormalised, which the angle ignores.
+    Parameters
+    ----------
+    phase : xarray.Dataset
+        ``phase/1`` images.
+    model : {"slice-profile", "in-plane"}, default "slice-profile"
+        ``"slice-profile"`` models the slice profile of every tag whose slice geometry the
+        phase carries (and its grid resolves); the others, and every tag with
+        ``"in-plane"``, get the in-plane band-pass alone.
+
+    Returns
+    -------
+    list of str
+        ``"slice-profile"`` or ``"in-plane"`` per tag, in the order of ``phase.tag``.
+
+    Raises
+    ------
+    ValueError
+        If ``model`` is not one of :data:`BLUR_MODELS`.
+    """
+    if model not in BLUR_MODELS:
+        raise ValueError(f"blur model {model!r}; expected one of {list(BLUR_MODELS)!r}")
+    spacing = _grid_spacing(phase)
+    return [
+        "slice-profile"
+        if model == "slice-profile" and _slab(phase, t, spacing) is not None
+        else "in-plane"
+        for t in range(phase.sizes["tag"])
+    ]
+
+
+def _grid_spacing(phase: xr.Dataset) -> FloatArray:
+    """Voxel spacing (z, y, x) of the phase grid, mm (1 along a single-voxel axis)."""
+    coords = [np.asarray(phase[d].values, dtype=np.float64) for d in GRID_DIMS]
+    return np.array([c[1] - c[0] if c.size > 1 else 1.0 for c in coords])
+
+
+def _slab(phase: xr.Dataset, t: int, spacing: FloatArray) -> tuple[float, FloatArray] | None:
+    """Slice thickness (mm) and increasing slice centres (mm) of tag ``t``, or None when the
+    phase does not carry them or its grid does not resolve the slab (module notes)."""
+    if "slice_thickness" not in phase.variables or "slice_position" not in phase.variables:
+        return None
+    thickness = float(np.asarray(phase["slice_thickness"].values, dtype=np.float64)[t])
+    centres = np.asarray(phase["slice_position"].transpose("tag", ...).values, np.float64)[t]
+    centres = centres[np.isfinite(centres)]
+    normal = GRID_DIMS.index(str(np.asarray(phase["slice_axis"].values)[t]))
+    if not (np.isfinite(thickness) and thickness > 0 and centres.size):
+        return None
+    if spacing[normal] > 0.5 * thickness or np.any(np.diff(centres) <= 0):
+        return None
+    return thickness, centres
+
+
+def slice_operator(
+    planes: FloatArray, thickness: float, centres: FloatArray, wavenumber: float = 0.0
+) -> np.ndarray:
+    r"""The slice profile and interpolation between slices along a slice axis, :math:`T`.
+
+    Parameters
+    ----------
+    planes : ndarray, shape (n,)
+        Evenly spaced positions of the grid planes along the slice axis, mm.
+    thickness : float
+        Slice thickness (boxcar profile), mm.
+    centres : ndarray, shape (s,)
+        Increasing slice centres, mm.
+    wavenumber : float, default 0
+        The tag's wave-vector component along the slice axis, :math:`k_\zeta`, rad/mm.
+
+    Returns
+    -------
+    ndarray of complex, shape (n, n)
+        :math:`T = E^* L W E` (module notes): ``T @ S`` along the slice axis is the
+        demodulated signal the slices measure, interpolated back to the planes; rows of
+        planes outside every slab are 0.
+
+    Examples
+    --------
+    >>> T = slice_operator(np.arange(6.0), 3.0, np.array([1.0, 4.0]))
+    >>> T.real.round(3)[1].tolist()  # plane 1 is slice 0's centre: its slab's mean
+    [0.333, 0.333, 0.333, 0.0, 0.0, 0.0]
+    """
+    z = np.asarray(planes, dtype=np.float64)
+    c = np.asarray(centres, dtype=np.float64)
+    step = float(z[1] - z[0]) if z.size > 1 else float(thickness)
+    half = 0.5 * float(thickness)
+    # W (slice, plane): overlap of plane i's cell with slab s, over the thickness
+    overlap = np.minimum(z[None, :] + 0.5 * step, c[:, None] + half) - np.maximum(
+        z[None, :] - 0.5 * step, c[:, None] - half
+    )
+    W = np.clip(overlap, 0.0, None) / float(thickness)
+    # L (plane, slice): linear in the slice position, nearest beyond the outer centres
+    eye = np.eye(c.size)
+    L = np.stack([np.interp(z, c, eye[s]) for s in range(c.size)], axis=1)
+    eps = 1e-6 * step
+    L[(z < c[0] - half - eps) | (z > c[-1] + half + eps)] = 0.0
+    carrier = np.exp(1j * wavenumber * z)
+    return np.asarray(np.conj(carrier)[:, None] * (L @ W) * carrier[None, :])
+
+
+def _filtered_phase(
+    S: np.ndarray,
+    disk: np.ndarray,
+    normal: int,
+    out: np.ndarray,
+    profile: np.ndarray | None = None,
+) -> None:
+    """Write ``arg((K * T S) conj S)`` into ``out`` where ``S`` carries signal (module notes).
+
+    ``T S`` (``profile`` applied along grid axis ``normal``; ``S`` itself when None) is
+    low-passed slice by slice (planes normal to ``normal``) with ``disk`` in single precision
+    (the correction is a fraction of a radian; float32 keeps it to ~1e-6 rad); the inverse
+    transform is left unnormalised, which the angle ignores.
     """
     stack = np.moveaxis(S, normal, 0)  # (slices, plane 1, plane 2): the plane axes keep order
     forward = get_plan(stack.shape, np.complex64, (-2, -1), direction="forward")
     backward = get_plan(stack.shape, np.complex64, (-2, -1), direction="backward")
-    np.copyto(forward.input_array, stack)
+    if profile is None:
+        np.copyto(forward.input_array, stack)
+    else:
+        np.copyto(forward.input_array, np.tensordot(profile.astype(np.complex64), stack, 1))
     forward.execute()
     np.multiply(forward.output_array, disk, out=backward.input_array)
     backward.execute()
@@ -175,18 +325,23 @@ def _filtered_phase(S: np.ndarray, disk: np.ndarray, normal: int, out: np.ndarra
     np.copyto(np.moveaxis(out, normal, 0), angle, where=has)
 
 
-def blur_correction(phase: xr.Dataset, body: Any, U: FloatArray) -> np.ndarray:
+def blur_correction(
+    phase: xr.Dataset, body: Any, U: FloatArray, model: str = "slice-profile"
+) -> np.ndarray:
     """Phase the band-pass adds to each tag's image under the motion ``U`` (module notes).
 
     Parameters
     ----------
     phase : xarray.Dataset
         ``phase/1`` images (their grid, tags and band-pass ``radius``); ``body`` (z, y, x)
-        density if present.
+        density, ``slice_thickness`` and ``slice_position`` if present.
     body : Body
         The tracked body (reference configuration), mm.
     U : ndarray, shape (ntime, ndof)
         Tracked displacement per frame, mm.
+    model : {"slice-profile", "in-plane"}, default "slice-profile"
+        Forward model (module notes); ``"slice-profile"`` falls back to ``"in-plane"`` for
+        tags whose slice geometry the phase does not carry (:func:`blur_models`).
 
     Returns
     -------
@@ -198,7 +353,8 @@ def blur_correction(phase: xr.Dataset, body: Any, U: FloatArray) -> np.ndarray:
     shape = (nz, ny, nx)
     coords = [np.asarray(phase[d].values, dtype=np.float64) for d in GRID_DIMS]
     origin = np.array([c[0] for c in coords])
-    spacing = np.array([c[1] - c[0] if c.size > 1 else 1.0 for c in coords])
+    spacing = _grid_spacing(phase)
+    models = blur_models(phase, model)
     points = grid_points(phase)  # (n, 3) x, y, z of the voxel centres
     lo = body.dof_points.min(axis=0) - 1e-9
     hi = body.dof_points.max(axis=0) + 1e-9
@@ -222,6 +378,15 @@ def blur_correction(phase: xr.Dataset, body: Any, U: FloatArray) -> np.ndarray:
     )  # (tag, 3) rad/mm
     tags = list(phase["tag"].values)
     disks = [_disk(phase, tag, shape, spacing) for tag in tags]
+    profiles: list[np.ndarray | None] = []
+    for t, (_, normal) in enumerate(disks):
+        slab = _slab(phase, t, spacing) if models[t] == "slice-profile" else None
+        # k_ζ in the grid's (z, y, x) order: wavevector is (x, y, z)
+        profiles.append(
+            None
+            if slab is None
+            else slice_operator(coords[normal], *slab, float(wavevector[t, 2 - normal]))
+        )
     # a tag's images hold only the tissue inside its acquisition (slab, field of view)
     acquired = (
         np.asarray(phase["mask"].transpose("tag", *GRID_DIMS).values, dtype=bool)
@@ -251,7 +416,7 @@ def blur_correction(phase: xr.Dataset, body: Any, U: FloatArray) -> np.ndarray:
             S.imag = spread[:, len(tags) + t].reshape(shape)
             if outside[t] is not None:
                 np.copyto(S, 0.0, where=outside[t])
-            _filtered_phase(S, disk, normal, out[t, n])
+            _filtered_phase(S, disk, normal, out[t, n], profiles[t])
     return out
 
 

@@ -103,12 +103,13 @@ def test_fe_tracking_finds_the_infarct_and_its_ecc(truth, fe):
     assert error.mean() < 1.2 * 0.0050, error.round(4)
     assert error.max() < 0.02, error.round(4)
     # radial strain is under-reported (band-pass blur and 10 mm slices, issue 23 item 5):
-    # measured mean |error| 25 % of the mean true peak Err; bound at measured x 1.2, so a
+    # measured mean |error| 17.6 % of the mean true peak Err with the blur correction's
+    # slice profile (25.4 % with its in-plane model only); bound at measured x 1.2, so a
     # further loss of thickening fails here
     err = fe.peak_strain.sel(component="radial").values[SHORT_AXIS]
     true_err = truth.peak_strain.sel(component="radial").values[SHORT_AXIS]
     ratio = np.abs(err - true_err).mean() / np.abs(true_err).mean()
-    assert ratio < 1.2 * 0.25, ratio
+    assert ratio < 1.2 * 0.176, ratio
 
 
 @pytest.mark.parametrize(
