@@ -1,6 +1,7 @@
 """Dependencies point one way, for every subpackage and top-level module of harpx.
 
-    _typing, _blas, errors, schema, _moved  foundation (no harpx imports above it)
+    _typing, _blas, errors, conventions,    foundation (no harpx imports above it)
+    schema, _moved
     imaging        mechanics                independent of each other (mechanics: the FE engine)
     physiology                              experiments on the engine (activation, growth, cuts)
     tracking                                joins images and engine (images pull the mechanics)
@@ -24,7 +25,7 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "harpx"
 
-FOUNDATION = {"_typing", "_blas", "errors", "schema", "_progress", "_moved"}
+FOUNDATION = {"_typing", "_blas", "errors", "conventions", "schema", "_progress", "_moved"}
 # unit -> the harpx units it may import
 ALLOWED: dict[str, set[str]] = {
     "_typing": set(),
@@ -32,7 +33,8 @@ ALLOWED: dict[str, set[str]] = {
     "_progress": set(),
     "_moved": set(),
     "errors": set(),
-    "schema": {"_typing", "errors"},
+    "conventions": {"_typing", "errors"},
+    "schema": {"_typing", "errors", "conventions"},
     "imaging": FOUNDATION,
     "mechanics": FOUNDATION,
     "physiology": FOUNDATION | {"mechanics"},
