@@ -79,6 +79,19 @@ EXPECTATIONS = {
         "quality": lambda q: q.inverted == 0 and q.min_scaled_jacobian >= 0.2,
         "tracking_error": lambda err: float(err.mean_all) < 0.8,
         "ecc_error": lambda e: float(e.mean()) < 0.04,
+        # four mid short-axis slices alone: refused without the base, then (told the base)
+        # the stack normal as the axis, the template within 1.5 mm of the scene's true radii
+        # and lengths (measured at most 1.0 mm: the long semi-axes, from the extrapolated
+        # apex), and the same peak Ecc per segment as the full fit's template (below 0.01);
+        # a filled mask refused naming the fix
+        "refused_stack": lambda e: "cannot tell the base from the apex" in e,
+        "refused_filled": lambda e: "pass the myocardium alone" in e,
+        "template_sa": lambda t: abs(float(t.axis[2])) > 0.9995,
+        "g_sa": lambda g: (
+            max(abs(a - b) for a, b in zip((*g.inner, *g.outer), (25, 70, 35, 78), strict=True))
+            < 1.5
+        ),
+        "same": lambda d: float(abs(d).max()) < 0.01,
     },
     "03_tongue.py": {
         # every muscle within 12 % after the equilibrium correction and the one-pass
