@@ -51,6 +51,7 @@ import tempfile
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 from xml.sax.saxutils import quoteattr
@@ -190,15 +191,12 @@ def to_meshio(
     cells = np.asarray(tracked["cells"].values, dtype=np.int64)
     static, region_names = _static_cell_data(tracked)
     times = np.asarray(tracked["time"].values, dtype=np.float64)
+    export = _Export(tracked, points, (cell_type, cells), static, region_names, times)
     with _staging(directory, target.name) as tmp:
         if series == "xdmf":
-            names = _write_xdmf(
-                tmp / target.name, tracked, points, (cell_type, cells), static, region_names, times
-            )
+            names = _write_xdmf(tmp / target.name, export)
         else:
-            names = _write_vtu(
-                tmp, target, tracked, points, (cell_type, cells), static, region_names, times
-            )
+            names = _write_vtu(tmp, target, export)
         for name in names:
             _fsync(tmp / name)
         for name in names:  # never replace a link, device node or read-only file
@@ -275,27 +273,36 @@ def _frame_data(tracked: xr.Dataset, n: int) -> tuple[dict[str, np.ndarray], dic
     return point, cell
 
 
-def _write_vtu(
-    tmp: Path,
-    target: Path,
-    tracked: xr.Dataset,
-    points: FloatArray,
-    block: tuple[str, IntArray],
-    static: Mapping[str, np.ndarray],
-    region_names: Mapping[str, int],
-    times: FloatArray,
-) -> list[str]:
-    field = {f"{_REGION_FIELD}{k}": np.array([v], dtype=np.int64) for k, v in region_names.items()}
+@dataclass(frozen=True)
+class _Export:
+    """What either series writer exports: the frames of ``tracked`` on one mesh."""
+
+    tracked: xr.Dataset
+    points: FloatArray
+    block: tuple[str, IntArray]
+    static: Mapping[str, np.ndarray]
+    region_names: Mapping[str, int]
+    times: FloatArray
+
+    def frames(self) -> Iterator[tuple[int, dict[str, np.ndarray], dict[str, list[np.ndarray]]]]:
+        """Frame index, point data and meshio cell data (with the static fields), per frame."""
+        for n in range(self.times.size):  # loop over frames
+            point, cell = _frame_data(self.tracked, n)
+            yield n, point, {name: [value] for name, value in {**cell, **self.static}.items()}
+
+
+def _write_vtu(tmp: Path, target: Path, export: _Export) -> list[str]:
+    field = {
+        f"{_REGION_FIELD}{k}": np.array([v], dtype=np.int64) for k, v in export.region_names.items()
+    }
     frames = []
-    for n in range(times.size):  # loop over frames
-        point, cell = _frame_data(tracked, n)
-        cell_data = {name: [value] for name, value in {**cell, **static}.items()}
-        mesh = meshio.Mesh(points, [block], point_data=point, cell_data=cell_data)
+    for n, point, cell_data in export.frames():
+        mesh = meshio.Mesh(export.points, [export.block], point_data=point, cell_data=cell_data)
         name = f"{target.stem}_{n:04d}.vtu"
         meshio.write(tmp / name, mesh, file_format="vtu", binary=True)
         _add_field_data(tmp / name, field)
         frames.append(name)
-    _write_pvd(tmp / target.name, frames, times)
+    _write_pvd(tmp / target.name, frames, export.times)
     return [target.name, *frames]
 
 
@@ -345,26 +352,15 @@ def _xdmf_format() -> str:
     return "HDF"
 
 
-def _write_xdmf(
-    path: Path,
-    tracked: xr.Dataset,
-    points: FloatArray,
-    block: tuple[str, IntArray],
-    static: Mapping[str, np.ndarray],
-    region_names: Mapping[str, int],
-    times: FloatArray,
-) -> list[str]:
+def _write_xdmf(path: Path, export: _Export) -> list[str]:
     data_format = _xdmf_format()
     with _TimeSeriesWriter(path, data_format=data_format) as writer:
-        writer.write_points_cells(points, [block])
-        if region_names:
-            ET.SubElement(
-                writer.domain, "Information", Name=_XDMF_INFO, Value=json.dumps(dict(region_names))
-            )
-        for n, t in enumerate(times):  # loop over frames
-            point, cell = _frame_data(tracked, n)
-            cell_data = {name: [value] for name, value in {**cell, **static}.items()}
-            writer.write_data(float(t), point_data=point, cell_data=cell_data)
+        writer.write_points_cells(export.points, [export.block])
+        if export.region_names:
+            value = json.dumps(dict(export.region_names))
+            ET.SubElement(writer.domain, "Information", Name=_XDMF_INFO, Value=value)
+        for n, point, cell_data in export.frames():
+            writer.write_data(float(export.times[n]), point_data=point, cell_data=cell_data)
     names = [path.name]
     if data_format == "HDF":
         names.append(path.with_suffix(".h5").name)

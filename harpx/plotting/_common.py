@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
 
 import matplotlib.pyplot as plt
 import xarray as xr
@@ -18,6 +18,38 @@ _KIND_HINTS: dict[tuple[str, str], str] = {
     ("tracked/1", "phase/1"): "track it first with ds.harp.track(body)",
     ("tagged/1", "phase/1"): "plot a phase dataset with ds.harp.plot.phase()",
 }
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+# the end of each map's docstring: the ``ax`` parameter, Returns and Raises
+_MAP_DOC_TAIL = """
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw in.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+
+    Raises
+    ------
+    SchemaError
+        If the dataset is not ``{kind}/1`` (the message names the kind it is) or has no
+        {names}.
+    """
+
+
+def _map_doc(kind: str, *variables: str) -> Callable[[_F], _F]:
+    """Append the shared ``ax``, Returns and Raises sections to a plot's docstring; the
+    Raises entry names the dataset ``kind`` and the ``variables`` the plot needs."""
+    quoted = [f"``{v}``" for v in variables]
+    names = quoted[-1] if len(quoted) == 1 else ", ".join(quoted[:-1]) + " or " + quoted[-1]
+
+    def decorate(func: _F) -> _F:
+        assert func.__doc__ is not None
+        func.__doc__ = func.__doc__.rstrip() + _MAP_DOC_TAIL.format(kind=kind, names=names)
+        return func
+
+    return decorate
 
 
 def _require(ds: xr.Dataset, kind: str, variables: Sequence[str], plot: str) -> None:

@@ -8,9 +8,18 @@ import numpy as np
 import xarray as xr
 
 from harpx.errors import SchemaError
-from harpx.plotting._common import _axes, _magnitude, _require, _slice, _slice_map, _where
+from harpx.plotting._common import (
+    _axes,
+    _magnitude,
+    _map_doc,
+    _require,
+    _slice,
+    _slice_map,
+    _where,
+)
 
 
+@_map_doc("tagged", "image")
 def tag_image(
     ds: xr.Dataset,
     *,
@@ -29,24 +38,13 @@ def tag_image(
         Tag label.
     time, z : float, optional
         Frame time (ms) and slice position (mm), nearest.
-    ax : matplotlib.axes.Axes, optional
-        Axes to draw in.
-
-    Returns
-    -------
-    matplotlib.axes.Axes
-
-    Raises
-    ------
-    SchemaError
-        If the dataset is not ``tagged/1`` (the message names the kind it is) or has no
-        ``image``.
     """
     _require(ds, "tagged", ["image"], "tag_image (ds.harp.plot.tag_image)")
     da = _slice(ds["image"].sel(tag=ds.tag.values[0] if tag is None else tag), time, z)
     return _slice_map(da, _where(da), ax, cmap="gray", label="intensity")
 
 
+@_map_doc("phase", "phase")
 def phase_map(
     ds: xr.Dataset,
     *,
@@ -65,18 +63,6 @@ def phase_map(
         Tag label (default: the first).
     time, z : float, optional
         Frame time (ms) and slice position (mm), nearest.
-    ax : matplotlib.axes.Axes, optional
-        Axes to draw in.
-
-    Returns
-    -------
-    matplotlib.axes.Axes
-
-    Raises
-    ------
-    SchemaError
-        If the dataset is not ``phase/1`` (the message names the kind it is) or has no
-        ``phase``.
     """
     _require(ds, "phase", ["phase"], "phase_map (ds.harp.plot.phase)")
     da = _slice(ds["phase"].sel(tag=ds.tag.values[0] if tag is None else tag), time, z)
@@ -85,6 +71,7 @@ def phase_map(
     )
 
 
+@_map_doc("tracked", "displacement_grid")
 def displacement_map(
     ds: xr.Dataset,
     *,
@@ -103,18 +90,6 @@ def displacement_map(
         Component to show; default the magnitude.
     time, z : float, optional
         Frame time (ms) and slice position (mm), nearest.
-    ax : matplotlib.axes.Axes, optional
-        Axes to draw in.
-
-    Returns
-    -------
-    matplotlib.axes.Axes
-
-    Raises
-    ------
-    SchemaError
-        If the dataset is not ``tracked/1`` (the message names the kind it is) or has no
-        ``displacement_grid``.
     """
     _require(ds, "tracked", ["displacement_grid"], "displacement_map (ds.harp.plot.displacement)")
     da = _slice(ds["displacement_grid"], time, z)
@@ -129,6 +104,7 @@ def displacement_map(
     )
 
 
+@_map_doc("tracked", "green_strain", "points", "cells")
 def strain_map(
     ds: xr.Dataset,
     *,
@@ -149,18 +125,6 @@ def strain_map(
     time, z : float, optional
         Frame time (ms) and slice position (mm); cells whose centre lies within half the
         typical cell height of ``z`` are shown.
-    ax : matplotlib.axes.Axes, optional
-        Axes to draw in.
-
-    Returns
-    -------
-    matplotlib.axes.Axes
-
-    Raises
-    ------
-    SchemaError
-        If the dataset is not ``tracked/1`` (the message names the kind it is) or has no
-        ``green_strain``, ``points`` or ``cells``.
     """
     _require(ds, "tracked", ["green_strain", "points", "cells"], "strain_map (ds.harp.plot.strain)")
     centres = ds["points"].values[ds["cells"].values[:, :8]].mean(axis=1)
@@ -178,6 +142,7 @@ def strain_map(
     return ax
 
 
+@_map_doc("tracked", "fiber_stretch")
 def fiber_stretch_by_region(ds: xr.Dataset, *, time: float | None = None, ax: Any = None) -> Any:
     """Box plot of fibre stretch per region at one frame.
 
@@ -187,18 +152,6 @@ def fiber_stretch_by_region(ds: xr.Dataset, *, time: float | None = None, ax: An
         ``tracked/1`` dataset with ``fiber_stretch`` and ``region`` (``flag_meanings``).
     time : float, optional
         Frame time, ms (default: the last).
-    ax : matplotlib.axes.Axes, optional
-        Axes to draw in.
-
-    Returns
-    -------
-    matplotlib.axes.Axes
-
-    Raises
-    ------
-    SchemaError
-        If the dataset is not ``tracked/1`` (the message names the kind it is) or has no
-        ``fiber_stretch``.
     """
     _require(ds, "tracked", [], "fiber_stretch_by_region (ds.harp.plot.fiber_stretch)")
     if "fiber_stretch" not in ds:

@@ -105,7 +105,7 @@ from harpx._typing import FloatArray, IntArray
 from harpx.anatomy.aha import segments_local
 from harpx.anatomy.ventricle import VentricleGeometry, ventricle
 from harpx.anatomy.ventricle_fit import VentricleTemplate
-from harpx.imaging.stacks import resample_stacks, tagged_dataset
+from harpx.imaging.stacks import resample_stacks
 from harpx.imaging.synth import AcquisitionOptions, synthesize_tagged
 from harpx.mechanics.body import Body
 from harpx.mechanics.fiber_laws import ActiveContraction
@@ -114,6 +114,7 @@ from harpx.mechanics.materials import Guccione
 from harpx.mechanics.mesh import MeshSpec
 from harpx.physiology.cut import NodeFixed
 from harpx.physiology.growth import GrowthField, fiber_prestretch, prestretch_growth
+from harpx.scenes._common import cspamm_dataset
 from harpx.scenes._lv_truth import FEMotion, Systole, simulate_systole
 
 __all__ = [
@@ -331,22 +332,18 @@ def _acquire(
         "sa_slice_thickness_mm": h_sa,
         "la_slice_thickness_mm": h_la,
     }
-    if snr is not None:
-        attrs["snr"] = float(snr)
-    return tagged_dataset(
+    return cspamm_dataset(
         image,
+        mask,
+        truth,
+        attrs,
+        snr,
         tag=["x", "y", "z"],
-        tag_frequency=1.0 / size.tag_period,
+        tag_period=size.tag_period,
         slice_axis=["z", "z", "y"],
-        time=times,
-        z=z,
-        y=xy,
-        x=xy,
-        sequence="CSPAMM",
-        mask=mask,
+        times=times,
+        grid=(z, xy, xy),
         body=np.isfinite(truth[0, 0]).astype(np.float64),
-        displacement_true=truth,
-        attrs=attrs,
     )
 
 

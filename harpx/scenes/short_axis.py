@@ -52,12 +52,13 @@ import numpy as np
 import xarray as xr
 
 from harpx._typing import FloatArray
-from harpx.imaging.stacks import SliceStack, common_grid, resample_stacks, tagged_dataset
+from harpx.imaging.stacks import SliceStack, common_grid, resample_stacks
 from harpx.imaging.synth import synthesize_tagged, voxel_density
 from harpx.mechanics.body import Body
 from harpx.mechanics.loads import Fixed
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import MeshSpec, tube
+from harpx.scenes._common import cspamm_dataset
 from harpx.scenes._motion import smooth_step
 from harpx.tracking.results import tracking_error
 
@@ -357,22 +358,18 @@ def short_axis(size: Size = "paper", *, snr: float | None = 20.0, seed: int = 0)
         "sa_slice_positions_mm": z_sa,
         "sa_slice_thickness_mm": float(g.slice_thickness),
     }
-    if snr is not None:
-        attrs["snr"] = float(snr)
-    tagged = tagged_dataset(
+    tagged = cspamm_dataset(
         image,
+        mask,
+        truth,
+        attrs,
+        snr,
         tag=["x", "y"],
-        tag_frequency=1.0 / g.tag_period,
+        tag_period=g.tag_period,
         slice_axis=["z", "z"],
-        time=times,
-        z=z,
-        y=y,
-        x=x,
-        sequence="CSPAMM",
-        mask=mask,
+        times=times,
+        grid=(z, y, x),
         body=body,
-        displacement_true=truth,
-        attrs=attrs,
     )
     mesh = tube(
         g.inner_radius,

@@ -38,7 +38,7 @@ from harpx._typing import FloatArray
 from harpx.anatomy.tongue_mesh import MUSCLES, tongue_inside
 from harpx.anatomy.tongue_mesh import tongue as tongue_mesh
 from harpx.imaging.harp import extract_phase
-from harpx.imaging.stacks import resample_stacks, tagged_dataset
+from harpx.imaging.stacks import resample_stacks
 from harpx.imaging.synth import AcquisitionOptions, synthesize_tagged, voxel_density
 from harpx.mechanics.body import Body, ElementName
 from harpx.mechanics.fiber_laws import ActiveContraction
@@ -46,6 +46,7 @@ from harpx.mechanics.loads import Fixed
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import MeshSpec
 from harpx.physiology.active import simulate_activation
+from harpx.scenes._common import cspamm_dataset
 from harpx.schema import standard_attrs
 from harpx.tracking.resample import interpolate_displacement
 from harpx.tracking.track import track
@@ -451,22 +452,18 @@ def _acquire(
         "coronal_slice_spacing": float(dx_cor),
         "sagittal_slice_spacing": float(dy_sag),
     }
-    if snr is not None:
-        attrs["snr"] = float(snr)
-    return tagged_dataset(
+    return cspamm_dataset(
         image,
+        mask,
+        truth,
+        attrs,
+        snr,
         tag=["x", "y", "z"],
-        tag_frequency=1.0 / g.tag_period,
+        tag_period=g.tag_period,
         slice_axis=["y", "x", "x"],
-        time=times,
-        z=z,
-        y=y,
-        x=x,
-        sequence="CSPAMM",
-        mask=mask,
+        times=times,
+        grid=(z, y, x),
         body=rho,
-        displacement_true=truth,
-        attrs=attrs,
     )
 
 
