@@ -73,11 +73,14 @@ def realise(seed: int, samples: int) -> dict:
         "epsilon_floor": tracked["epsilon_floor"].values.copy(),
         "noise_residual": unc["noise_residual"].values.copy(),
         "equilibrium_step": unc["equilibrium_step"].values.copy(),
+        "penalty_sensitivity": unc["penalty_sensitivity"].values.copy(),
         "dof": tracked["dof_displacement"].values.copy(),
         "dof_std": unc["displacement_std"].values.reshape(tracked.sizes["time"], -1).copy(),
         "noise_model": unc.attrs["noise_model"],
         "flags": unc.attrs["flags"],
-        "warnings": sorted({str(w.message)[:90] for w in caught}),
+        "warnings": sorted(
+            {str(w.message)[:90] for w in caught if str(w.message)[:48] not in unc.attrs["flags"]}
+        ),  # fmt: skip
         "wall": time.perf_counter() - start,
         "wall_uncertainty": t_unc,
     }
@@ -94,6 +97,8 @@ def compare(values: np.ndarray, sigma: np.ndarray) -> dict:
     predicted = np.sqrt(np.mean(sigma**2, axis=0))
     ok = np.isfinite(empirical) & (predicted > 0)
     ratio = empirical[ok] / predicted[ok]
+    if not ratio.size:  # fewer than two realisations: no spread to compare
+        ratio = np.full(1, np.nan)
     deviation = values - values.mean(axis=0)
     inside = np.abs(deviation) <= 2.0 * sigma
     valid = np.isfinite(deviation) & (sigma > 0)
@@ -101,7 +106,9 @@ def compare(values: np.ndarray, sigma: np.ndarray) -> dict:
         "ratio_median": float(np.median(ratio)),
         "ratio_p10": float(np.percentile(ratio, 10)),
         "ratio_p90": float(np.percentile(ratio, 90)),
-        "ratio_pooled": float(np.sqrt(np.mean(empirical[ok] ** 2) / np.mean(predicted[ok] ** 2))),
+        "ratio_pooled": float(np.sqrt(np.mean(empirical[ok] ** 2) / np.mean(predicted[ok] ** 2)))
+        if ok.any()
+        else float("nan"),
         "coverage": float(inside[valid].mean()),
         "cells": int(ok.sum()),
         "K": K,
@@ -155,13 +162,14 @@ def frame_table(runs: list[dict], samples: int) -> list[str]:
     """Frame by frame, over the realisations whose penalty in that frame is the most common
     one (frames are linearised one by one; the penalty's choice is not)."""
     penalty = np.stack([r["penalty"] for r in runs])
+    sensitivity = np.stack([r["penalty_sensitivity"] for r in runs])
     lines = [
         "### Frame by frame, realisations with that frame's most common final penalty",
         "",
         "| frame | penalty (relative) | K | expected coverage | segment_strain sd ratio, "
         "pooled | median (p10–p90) | ±2σ coverage | displacement sd ratio, pooled "
-        "| ±2σ coverage |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| ±2σ coverage | penalty_sensitivity, all K: median (range) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for n in range(1, penalty.shape[1]):
         values, counts = np.unique(penalty[:, n], return_counts=True)
@@ -175,7 +183,8 @@ def frame_table(runs: list[dict], samples: int) -> list[str]:
             f"| {n} | {mode:g} | {len(same)} | {100 * expected_coverage(len(same), samples):.1f} %"
             f" | {seg['ratio_pooled']:.3f} | {seg['ratio_median']:.3f} ({seg['ratio_p10']:.2f}–"
             f"{seg['ratio_p90']:.2f}) | {100 * seg['coverage']:.1f} % | {dof['ratio_pooled']:.3f}"
-            f" | {100 * dof['coverage']:.1f} % |"
+            f" | {100 * dof['coverage']:.1f} % | {np.median(sensitivity[:, n]):.2f} "
+            f"({sensitivity[:, n].min():.2f}–{sensitivity[:, n].max():.2f}) |"
         )
     return [*lines, ""]
 
@@ -242,8 +251,16 @@ def main() -> None:
         f"{np.round(stack['equilibrium_step'].max(axis=0), 3).tolist()}",
         "* final penalty patterns (relative, per frame): "
         + "; ".join(f"{list(p)} × {c}" for p, c in patterns.most_common()),
-        "* flags raised: "
-        + (", ".join(sorted({r["flags"] for r in runs if r["flags"]})) or "none"),
+        "* flags raised (realisations): "
+        + (
+            "; ".join(
+                f"{text}… ({n})"
+                for text, n in Counter(
+                    flag[:48] for r in runs for flag in r["flags"].split(" | ") if flag
+                ).items()
+            )
+            or "none"
+        ),  # fmt: skip
         "* other warnings: "
         + ("; ".join(sorted({w for r in runs for w in r["warnings"]})) or "none"),
         "",

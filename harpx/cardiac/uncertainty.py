@@ -50,7 +50,7 @@ MEASURES = (
     "engineering_strain_lv",
 )
 #: Variables of the displacement uncertainty carried into the result.
-_CARRIED = ("displacement_std", "noise_residual", "equilibrium_step")
+_CARRIED = ("displacement_std", "noise_residual", "equilibrium_step", "penalty_sensitivity")
 #: Variables of a tracked result that cardiac_strain reads besides the motion.
 _OBSERVATION = ("observed_fraction", "observed_directions")
 
@@ -99,10 +99,10 @@ def segment_uncertainty(
         ``<measure>_std`` for every measure of :data:`MEASURES`, on the dims and
         coordinates :func:`~harpx.cardiac.strain.cardiac_strain` gives the measure (so
         ``xr.merge([cardiac_strain(...), result])`` lines them up), in its units;
-        ``displacement_std``, ``noise_residual`` and ``equilibrium_step`` of
-        ``uncertainty``; ``strain_source`` of the tracked result's measures (where it says
-        "inferred" the σ is the noise the model passes on, module notes); the attributes
-        of ``uncertainty``.
+        ``displacement_std``, ``noise_residual``, ``equilibrium_step`` and
+        ``penalty_sensitivity`` of ``uncertainty``; ``strain_source`` of the tracked
+        result's measures (where it says "inferred" the σ is the noise the model passes
+        on, module notes); the attributes of ``uncertainty``.
 
     Raises
     ------

@@ -33,9 +33,9 @@ from harpx.tracking.uncertainty import image_noise, tracking_uncertainty
 RADIUS, HEIGHT = 10.0, 7.5
 SNR = 10.0
 SIGMA = 2.0 / SNR  # CSPAMM: the peak signal 2 sin²(90°) over the SNR
-# ε = 1 rad is met at the first stage of a one-stage ramp: every realisation ends at the
-# same penalty, the linearisation's fixed λ (the adaptive raise is left out, module notes)
-FIXED_PENALTY = {"epsilon": 1.0, "ramp": 1, "penalty": 20.0}
+# a fixed penalty (one stage, no raise; ε = 1 rad is met at once): every realisation ends
+# at the same λ, the linearisation's (the tracker's choice of λ is left out, module notes)
+FIXED_PENALTY = {"epsilon": 1.0, "ramp": 1, "penalty": 20.0, "penalty_limit": 20.0}
 
 
 def _inside(X: np.ndarray) -> np.ndarray:
