@@ -13,8 +13,10 @@ Sweeps (small scenes so the whole report takes about 7 min on two shared cores):
 * ``stiffness``: κ/C1 = 10 … 10⁵, hex8 and hex20, on the small phantom (lagged rotation).
 * ``motion``: per-frame edge displacement 0.25 … 1.0 tag period. A uniform translation
   along the x tag (nothing moves less) from rest or after a two-frame ramp, with the motion
-  predictor as shipped (``"linear"``: α ∈ {0, ½, 1} chosen by phase residual), off
-  (``"none"``) and forced to α = 1; a rigid rotation about the axis of a 24 mm cylinder
+  predictor as shipped (``"linear"``: α ∈ {0, ½, 1}, α = 1 unless a smaller α lowers the
+  phase residual by more than 5 %; :class:`~harpx.tracking.settings.SolverTuning`), off
+  (``"none"``) and forced to α = 1;
+  a rigid rotation about the axis of a 24 mm cylinder
   (its centre moves less) in one frame, where no predictor exists; a rigid rotation of a
   12 mm cylinder to 180° in 15° frames with the band-pass radius 0.5 (default) and 1.0,
   with the phase error of the images themselves. Conventional HARP beside each.
@@ -29,12 +31,16 @@ Sweeps (small scenes so the whole report takes about 7 min on two shared cores):
 * ``degenerate``: empty, tiny and one-tag masks, an all-zero frame, NaNs in one slice, a field
   of view that cuts off part of the mesh, a single frame.
 
-Writes ``benchmarks/results/stability.{csv,md}`` and ``stability_<group>.png``.
+Writes ``benchmarks/results/stability.{csv,md}`` and ``stability_<group>.png``; with
+``--previous`` an earlier ``stability.csv`` is compared and the rows that changed carry its
+status and errors beside the new ones (``--compare-only`` compares an existing run).
 
 Usage::
 
     python benchmarks/stability.py                  # everything
     python benchmarks/stability.py --groups motion degenerate --timeout 120
+    python benchmarks/stability.py --out /tmp/stab --previous benchmarks/results/stability.csv
+    python benchmarks/stability.py --out /tmp/stab --previous old.csv --compare-only
 """
 
 from __future__ import annotations
@@ -291,23 +297,26 @@ def motion_cases() -> Iterable[Case]:
                 phase = extract_phase(scene.tagged)
                 rows = []
                 for predictor in ("linear", "none", "linear α=1"):
-                    factors = (1.0,) if predictor == "linear α=1" else (0.0, 0.5, 1.0)
-                    row, _ = run_fe(
-                        scene.tagged,
-                        phase,
-                        scene.body(),
-                        predictor="none" if predictor == "none" else "linear",
-                        tuning=SolverTuning(predictor_factors=factors),
+                    case = f"translation {shape}, predictor {predictor}"
+                    factors = (
+                        (1.0,) if predictor == "linear α=1" else SolverTuning().predictor_factors
                     )
-                    rows.append(
-                        _row(
-                            "motion",
-                            f"translation {shape}, predictor {predictor}",
-                            "step/period",
-                            step,
-                            **row,
+
+                    def fe(
+                        predictor: str = predictor, factors: tuple = factors, case: str = case
+                    ) -> list[Row]:
+                        row, _ = run_fe(
+                            scene.tagged,
+                            phase,
+                            scene.body(),
+                            predictor="none" if predictor == "none" else "linear",
+                            tuning=SolverTuning(predictor_factors=factors),
                         )
-                    )
+                        return [_row("motion", case, "step/period", step, **row)]
+
+                    # each predictor on its own: one that raises (the body left behind where
+                    # the images have no signal) is a row of its own, not the whole case's
+                    rows += _guard(fe, "motion", case, "step/period", step)()
                 row, _ = run_harp(scene.tagged, phase)
                 rows.append(_row("motion", f"translation {shape}", "step/period", step, **row))
                 return rows
@@ -710,6 +719,9 @@ COLUMNS = [
     "line_search",
     "cells",
     "case_seconds",
+    "previous_status",
+    "previous_mean",
+    "previous_p95",
 ]
 
 
@@ -745,7 +757,7 @@ def check_monotone_epsilon(rows: list[Row]) -> str:
         )
         if len(pinned) < 2:
             continue
-        eps = np.array([[float(e) for e in r["epsilon_frames"].split()] for r in pinned])
+        eps = np.array([[float(e) for e in str(r["epsilon_frames"]).split()] for r in pinned])
         lam = [float(r["value"]) for r in pinned]
         rises = np.diff(eps, axis=0)
         # monotone up to which λ? (the first rise above 1e-3 rad, the Gauss–Newton tolerance)
@@ -782,11 +794,88 @@ def headline(rows: list[Row]) -> list[str]:
     return out
 
 
-def write_markdown(rows: list[Row], path: Path, seconds: float) -> None:
+def _number(value: Any) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def _key(row: Row) -> tuple[str, str, str, str]:
+    value = _number(row.get("value"))
+    shown = f"{value:g}" if np.isfinite(value) else str(row.get("value", ""))
+    return (str(row.get("group", "")), str(row.get("case", "")), shown, str(row.get("method", "")))
+
+
+def mark_changes(
+    rows: list[Row], previous: list[Row], *, relative: float = 0.1, absolute: float = 0.005
+) -> int:
+    """Put an earlier record's status and errors beside each row that changed; return how many.
+
+    Rows match by group, case, value and method. A row changed if its status differs, or
+    its mean error moved by more than ``relative`` of the larger of the two and more than
+    ``absolute`` mm (or is now finite and was not, or the reverse).
+    """
+    before = {_key(r): r for r in previous}
+    changed = 0
+    for row in rows:
+        for column in ("previous_status", "previous_mean", "previous_p95"):
+            row.pop(column, None)
+        old = before.get(_key(row))
+        if old is None:
+            continue
+        now, then = _number(row.get("mean")), _number(old.get("mean"))
+        moved = bool(np.isfinite(now)) != bool(np.isfinite(then)) or (
+            bool(np.isfinite(now) and np.isfinite(then))
+            and abs(now - then) > max(absolute, relative * max(abs(now), abs(then)))
+        )
+        if moved or row.get("status") != old.get("status"):
+            row["previous_status"] = old.get("status", "")
+            row["previous_mean"] = old.get("mean", "")
+            row["previous_p95"] = old.get("p95", "")
+            changed += 1
+    return changed
+
+
+def _changes(rows: list[Row], previous: str) -> list[str]:
+    """Markdown section: the rows that changed against ``previous``, before and after."""
+    changed = [r for r in rows if r.get("previous_status") not in (None, "")]
+    lines = [
+        "## Changed against the previous record",
+        "",
+        f"{len(changed)} of {len(rows)} rows changed against `{previous}` (status, or mean "
+        "error by more than 10 % and 0.005 mm); the CSV carries the previous numbers in "
+        "`previous_status`, `previous_mean`, `previous_p95`.",
+        "",
+        "| group | case | value | method | before: status | mean | p95 | now: status | mean | "
+        "p95 |",
+        "|" + "---|" * 10,
+    ]
+    for r in changed:
+        cells = [
+            r.get("group", ""),
+            r.get("case", ""),
+            _fmt(r.get("value", "")),
+            r.get("method", ""),
+            r.get("previous_status", ""),
+            _fmt(_number(r.get("previous_mean"))),
+            _fmt(_number(r.get("previous_p95"))),
+            r.get("status", ""),
+            _fmt(_number(r.get("mean"))),
+            _fmt(_number(r.get("p95"))),
+        ]
+        lines.append("| " + " | ".join(str(c).replace("|", "/") for c in cells) + " |")
+    return [*lines, ""]
+
+
+def write_markdown(
+    rows: list[Row], path: Path, generated: str, previous: str | None = None
+) -> None:
+    """Write the report; ``generated`` says when, by which command and how long it took."""
     lines = [
         "# Stability report (issue 7)",
         "",
-        f"Generated by `python benchmarks/stability.py` in {seconds / 60:.1f} min. Errors are "
+        f"{generated} Errors are "
         "|u − u_true| in mm over the body voxels and all frames after the reference "
         "(per frame for the rotation to 180°); ε is the largest per-frame tracking residual "
         "(rad); halvings are Gauss–Newton steps that would have inverted an element "
@@ -796,6 +885,8 @@ def write_markdown(rows: list[Row], path: Path, seconds: float) -> None:
     verdict = check_monotone_epsilon(rows)
     if verdict:
         lines += [v + "  " for v in verdict.splitlines()] + [""]
+    if previous is not None:
+        lines += _changes(rows, previous)
     lines += ["## Headline: mean error (mm) against each swept parameter", ""]
     lines += headline(rows) + ["", "## All cases", ""]
     header = (
@@ -903,11 +994,39 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--replot", action="store_true", help="redraw the PNGs from an existing stability.csv"
     )
+    parser.add_argument(
+        "--previous",
+        type=Path,
+        help="an earlier stability.csv: rows that changed get its numbers beside the new ones",
+    )
+    parser.add_argument(
+        "--compare-only",
+        action="store_true",
+        help="with --previous: compare the stability.csv in --out instead of running",
+    )
     args = parser.parse_args(argv)
+    command = "python benchmarks/stability.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    today = time.strftime("%Y-%m-%d")
     args.out.mkdir(parents=True, exist_ok=True)
     if args.replot:
         for path in plot(read_csv(args.out / "stability.csv"), args.out):
             print("wrote", path)
+        return
+    previous = None if args.previous is None else read_csv(args.previous)
+    if args.compare_only:
+        if previous is None:
+            parser.error("--compare-only needs --previous")
+        rows = read_csv(args.out / "stability.csv")
+        print(mark_changes(rows, previous), "rows changed")
+        report = args.out / "stability.md"
+        first = next(
+            (ln for ln in report.read_text().splitlines() if ln.startswith("Generated")), ""
+        )
+        generated = first.split(" Errors are ")[0] + (
+            f" Compared on {today} with the previous record by `{command.strip()}`."
+        )
+        write_csv(rows, args.out / "stability.csv")
+        write_markdown(rows, report, generated, str(args.previous))
         return
     start = time.perf_counter()
     rows: list[Row] = []
@@ -929,8 +1048,13 @@ def main(argv: list[str] | None = None) -> None:
                 )
             rows += new
     seconds = time.perf_counter() - start
+    compared = None
+    if previous is not None:
+        print(mark_changes(rows, previous), "rows changed")
+        compared = str(args.previous)
+    generated = f"Generated on {today} by `{command.strip()}` in {seconds / 60:.1f} min."
     write_csv(rows, args.out / "stability.csv")
-    write_markdown(rows, args.out / "stability.md", seconds)
+    write_markdown(rows, args.out / "stability.md", generated, compared)
     for path in plot(rows, args.out):
         print("wrote", path)
     print(check_monotone_epsilon(rows))

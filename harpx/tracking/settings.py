@@ -84,8 +84,22 @@ class SolverTuning:
         the geometric series ρ s / (1 − ρ), so that a solve may stop once that bound is
         below the tolerance, in (0, 1).
     predictor_factors : tuple of float, default (0.0, 0.5, 1.0)
-        Extrapolation factors α of the linear predictor u(n−1) + α (u(n−1) − u(n−2)); the
-        one with the smallest phase residual starts the frame (each ≥ 0, at least one).
+        Extrapolation factors α of the linear predictor u(n−1) + α (u(n−1) − u(n−2)) (each
+        ≥ 0, at least one). The largest that does not fold the mesh (α = 1: the last
+        frame's velocity kept) starts the frame unless a smaller one lowers the phase
+        residual ε by more than ``predictor_margin``.
+    predictor_margin : float, default 0.05
+        Relative decrease of ε (dimensionless, in [0, 1)) by which a factor that carries
+        less of the last velocity must beat the one chosen so far. Wrapped phase repeats
+        every tag period, so a start a quarter period short of the motion and one a
+        quarter period beyond it have the same ε: such a tie (measured within 1 % on a
+        uniform translation) carries no information, and the steady motion decides.
+    raise_move : float, default 0.5
+        Largest move of a constraint point, in tag periods of phase along a tag that sees
+        it, that one doubling of the penalty may make (> 0). A doubling refines a converged
+        fit; one that moves a point half a period or more has dragged it into another tag
+        basin, so the raise stops at the fit before it and the frame is a miss
+        (:mod:`harpx.tracking.penalty`).
 
     Raises
     ------
@@ -110,6 +124,8 @@ class SolverTuning:
     contraction: float = 0.8
     fast: float = 0.5
     predictor_factors: tuple[float, ...] = (0.0, 0.5, 1.0)
+    predictor_margin: float = 0.05
+    raise_move: float = 0.5
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -119,6 +135,13 @@ class SolverTuning:
             if value >= 1.0:
                 raise ValueError(f"{name}={value!r} must lie in (0, 1)")
             set_(self, name, value)
+        margin = self.predictor_margin
+        if not _is_number(margin):
+            raise _not_a_number("predictor_margin", margin, "a number")
+        if not (math.isfinite(margin) and 0.0 <= margin < 1.0):
+            raise ValueError(f"predictor_margin={margin!r} must lie in [0, 1)")
+        set_(self, "predictor_margin", float(margin))
+        set_(self, "raise_move", _positive("raise_move", self.raise_move))
         for name in ("ramp_iterations", "damp_after", "damp_small_after"):
             set_(self, name, _count(name, getattr(self, name), minimum=1))
         factors = tuple(float(a) for a in self.predictor_factors)

@@ -139,16 +139,23 @@ def test_points_outside_a_tags_mask_carry_none_of_its_force(rng):
 
 
 class _Scripted(FrameProblem):
-    """A frame problem whose solves return a scripted ε per call (strategy logic only)."""
+    """A frame problem whose solves return a scripted ε per call (strategy logic only).
 
-    def __init__(self, epsilons, settings):
+    ``moves``: the x displacement (tag periods of the stub's one x tag) each solve ends at;
+    default: where it started.
+    """
+
+    def __init__(self, epsilons, settings, moves=None):
         self.epsilons = list(epsilons)
+        self.moves = None if moves is None else list(moves)
         self.settings = settings
         self.penalties = []
         self.constraint = _StubConstraint(self)
 
     def solve(self, u, max_iterations, start=None):
         self.penalties.append(self.constraint.penalty)
+        if self.moves is not None:
+            u = np.full_like(u, self.moves.pop(0) * _StubConstraint.PERIOD)
         return EquilibriumResult(u, _StubState(self.epsilons.pop(0)), 2, [0.0], True)
 
 
@@ -163,10 +170,17 @@ class _StubState:
 
 
 class _StubConstraint:
+    PERIOD = 8.0  # mm, of its one tag along x; its one point moves with u[0]
+
     def __init__(self, problem):
         self.penalty = 0.0
         self.multipliers = np.zeros((1, 1))
         self.problem = problem
+        self.wavevectors = np.array([[2.0 * np.pi / self.PERIOD, 0.0, 0.0]])
+        self.reference_valid = np.ones((1, 1), dtype=bool)
+
+    def current_points(self, u):
+        return np.asarray(u, dtype=float)[:3].reshape(1, 3)
 
     def penalty_scale(self):
         return 1.0
@@ -213,6 +227,32 @@ def test_penalty_stops_at_its_limit():
     out = track_frame_penalty(problem, np.zeros(3), target=0.1, penalty=1.0)
     assert problem.penalties == [1.0, 2.0, 4.0]
     assert not out.reached and not out.stalled and out.penalty == 4.0
+
+
+@pytest.mark.parametrize(
+    ("moves", "relocated"),
+    [
+        # the doubling to λ = 4 moves the point 0.6 tag period (measured 0.7 on the small
+        # phantom with 4 mm tags): it is stopped, the fit at λ = 2 kept, the frame a miss
+        pytest.param([0.30, 0.32, 0.92, 0.93], True, id="across-a-wrap"),
+        # 0.4 period (the small left ventricle's largest doubling moved 0.43): refinement
+        pytest.param([0.30, 0.32, 0.72, 0.73], False, id="refinement"),
+    ],
+)
+def test_a_doubling_that_drags_the_body_across_a_wrap_ends_the_frame_as_a_miss(moves, relocated):
+    from harpx.tracking.penalty import track_frame_penalty
+
+    settings = TrackingSettings(ramp=1, penalty_limit=100.0)
+    problem = _Scripted([0.5, 0.3, 0.2, 0.09], settings, moves=moves)
+    out = track_frame_penalty(problem, np.zeros(3), target=0.1, penalty=1.0)
+    if relocated:
+        assert problem.penalties == [1.0, 2.0, 4.0]  # no doubling after the relocation
+        assert not out.reached and not out.plateau and out.penalty == 2.0
+        assert out.epsilon == 0.3 and out.u[0] == pytest.approx(0.32 * 8.0)  # the fit kept
+        assert out.stages == 3 and out.iterations == 6  # the work done still counts
+    else:
+        assert problem.penalties == [1.0, 2.0, 4.0, 8.0]
+        assert out.reached and out.epsilon == 0.09
 
 
 def test_augmented_lagrangian_updates_multipliers_then_raises_the_penalty():
@@ -273,6 +313,70 @@ def test_multiplier_update_is_lambda_times_the_residual(ideal, rng):
 def test_settings_name_what_is_wrong(kwargs, match):
     with pytest.raises(ValueError, match=match):
         TrackingSettings(**kwargs)
+
+
+class _Candidates:
+    """A constraint whose ε at u(n−1) + α·step is scripted per α (predictor logic only).
+
+    The last step is a uniform x translation of ``cycles`` tag periods of 8 mm.
+    """
+
+    def __init__(self, body, eps_by_alpha, cycles):
+        self.eps_by_alpha = eps_by_alpha
+        self.last = np.zeros(body.ndof)
+        self.before = np.zeros(body.ndof)
+        self.before[0::3] = -cycles * 8.0
+        self.sampled = []
+
+    def epsilon_at(self, u):
+        alpha = round(float(np.mean((u - self.last)[0::3])) / float(-self.before[0]), 6)
+        self.sampled.append(alpha)
+        return self.eps_by_alpha[alpha]
+
+
+@pytest.mark.parametrize(
+    ("eps", "tuning", "chosen"),
+    [
+        # a tie between a quarter period short of the motion and a quarter beyond it (ramped
+        # translation, 1 % apart): no information, the steady motion (α = 1) starts the frame
+        pytest.param({0.0: 0.704, 0.5: 1.047, 1.0: 0.711}, SolverTuning(), 1.0, id="tie"),
+        # the motion stopped: α = 0 lowers ε far beyond the margin
+        pytest.param({0.0: 0.076, 0.5: 0.225, 1.0: 0.386}, SolverTuning(), 0.0, id="stop"),
+        # it slowed: α = ½ beats α = 1 by more than 5 %, α = 0 does not beat α = ½
+        pytest.param({0.0: 0.50, 0.5: 0.40, 1.0: 0.45}, SolverTuning(), 0.5, id="slowed"),
+        # without a margin the smallest ε wins, a tie's 1 % included
+        pytest.param(
+            {0.0: 0.704, 0.5: 1.047, 1.0: 0.711},
+            SolverTuning(predictor_margin=0.0),
+            0.0,
+            id="no-margin",
+        ),
+    ],
+)
+def test_predictor_keeps_the_steady_motion_unless_another_start_is_clearly_better(
+    ideal, eps, tuning, chosen
+):
+    from harpx.tracking.track import _predict
+
+    body, _ = ideal
+    constraint = _Candidates(body, eps, cycles=1 / 3)
+    start = _predict(body, constraint, constraint.last, constraint.before, tuning)
+    step = constraint.last - constraint.before
+    np.testing.assert_allclose(start, constraint.last + chosen * step)
+    assert constraint.sampled == [1.0, 0.5, 0.0]  # the steady motion is the reference
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        pytest.param({"predictor_margin": 1.0}, r"predictor_margin=1.0 must lie in \[0, 1\)"),
+        pytest.param({"predictor_margin": -0.1}, r"predictor_margin=-0.1 must lie"),
+        pytest.param({"raise_move": -1.0}, "raise_move=-1.0 must be a positive"),
+    ],
+)
+def test_predictor_tuning_names_what_is_wrong(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        SolverTuning(**kwargs)
 
 
 def test_settings_attributes_are_netcdf_safe():
