@@ -201,7 +201,10 @@ class TrackingSettings:
         Multiplier updates per penalty level (augmented Lagrangian, ≥ 1).
     predictor : {"none", "linear"}, default "linear"
         Start each frame from the previous displacement, or from the linear extrapolation
-        u(n−1) + α (u(n−1) − u(n−2)) whose phase residual is smallest among α ∈ {0, ½, 1}.
+        u(n−1) + α (u(n−1) − u(n−2)): α = 1 (the last velocity kept) unless a smaller
+        factor of ``tuning.predictor_factors`` lowers the phase residual by more than
+        ``tuning.predictor_margin`` (wrapped phase repeats every tag period, so near-ties
+        carry no information and the steady motion decides).
     robust_scale : float or None, default 0.5
         Residual scale :math:`r_0` (rad) of the Cauchy loss on each constraint point's
         phase mismatch :math:`r` (:class:`harpx.tracking.constraint.PhaseConstraint`): a
