@@ -51,6 +51,7 @@ from scipy import sparse
 
 from harpx._blas import matmul_one_thread
 from harpx._typing import FloatArray, IntArray
+from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.imaging.sample import PhaseSampler, wrap
 from harpx.mechanics.assembly import sparsity
 from harpx.tracking.noise import epsilon_floor, noise_floor, reference_residual
@@ -262,7 +263,7 @@ class PhaseConstraint:
         self.robust_scale = None if robust_scale is None else float(robust_scale)
         self.phase = phase
         # the acquired voxel: grid spacing times the upsampling factor of the phase images
-        upsample = float(phase.attrs.get("upsample", 1))
+        upsample = PhaseParameters.from_dataset(phase).upsample
         spacing = upsample * float(
             min(
                 abs(float(phase[d][1] - phase[d][0])) for d in ("z", "y", "x") if phase.sizes[d] > 1

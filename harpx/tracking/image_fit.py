@@ -18,6 +18,7 @@ import xarray as xr
 from numpy.typing import ArrayLike
 
 from harpx.errors import HarpxWarning, SchemaError
+from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.mechanics.body import Body
 from harpx.mechanics.cells import _VTK_TET_EDGES
 from harpx.schema import AXES, GRID_DIMS
@@ -117,7 +118,7 @@ def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> 
             step.append(abs(d))
     lo, hi = np.array(low), np.array(high)
     fov = float((hi - lo).max())
-    voxel = float(grid.attrs.get("upsample", 1)) * min(step) if step else fov
+    voxel = PhaseParameters.from_dataset(grid).upsample * min(step) if step else fov
     nodes = np.asarray(body.nodes)
     size = float(np.ptp(nodes, axis=0).max())
     if not fov > 0:
