@@ -1,0 +1,113 @@
+r"""Sampled image noise through the phase extraction to the tracker's points.
+
+For :mod:`harpx.tracking.uncertainty`: each sample draws image noise :math:`\nu` for every
+frame (:meth:`~harpx.tracking.uncertainty_noise.ImageNoise.sample`), passes it through
+:func:`~harpx.imaging.harp.extract_phase` with the phase's ``upsample`` and ``radius`` (the
+same band-pass and interpolation as the data), adds the complex harmonic noise :math:`h`
+to the harmonic image :math:`H`, and samples :math:`\arg(H + h)` at the tracker's points
+with the tracker's sampler: :math:`\delta\phi = W(\arg(H + h) - \arg H)`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from harpx._typing import FloatArray
+from harpx.imaging.harp import extract_phase
+from harpx.imaging.phase_parameters import PhaseParameters
+from harpx.imaging.sample import PhaseSampler, wrap
+from harpx.imaging.stacks import tagged_dataset
+from harpx.schema import GRID_DIMS
+from harpx.tracking.uncertainty_noise import ImageNoise
+
+__all__ = ["frame_harmonic", "harmonic_fields", "perturbed_phases"]
+
+
+def harmonic_fields(
+    noise: ImageNoise, phase: xr.Dataset, rng: np.random.Generator, count: int
+) -> np.ndarray:
+    """Complex harmonic noise (tag, count, z, y, x) on the phase grid: image noise through
+    the phase extraction the data went through."""
+    params = PhaseParameters.from_dataset(phase)
+    direction = np.asarray(phase["tag_direction"].transpose("tag", "axis").values, dtype=float)
+    ds = tagged_dataset(
+        noise.sample(rng, count),
+        tag=[str(t) for t in phase["tag"].values],
+        tag_frequency=np.asarray(phase["tag_frequency"].values, dtype=np.float64),
+        tag_direction=direction,
+        slice_axis=[GRID_DIMS[int(a)] for a in noise.slice_axis],
+        time=np.arange(count, dtype=np.float64),
+        z=noise.z, y=noise.y, x=noise.x,
+        sequence=params.sequence,
+        mask=noise.mask,
+        check=False,
+    )  # fmt: skip
+    harmonic = extract_phase(
+        ds,
+        upsample=params.upsample,
+        radius=params.radius,
+        dtype="float32",  # noise: single precision is ample and halves the memory traffic
+    )
+    for d in GRID_DIMS:
+        mine, theirs = harmonic[d].values, phase[d].values
+        if mine.shape != theirs.shape or not np.allclose(mine, theirs, atol=1e-6):
+            raise ValueError(
+                f"the images' grid along {d!r}, extracted with upsample="
+                f"{params.upsample}, is not the phase's grid; pass the tagged "
+                "images the phase was extracted from"
+            )
+    dims = ("tag", "time", *GRID_DIMS)
+    return _complex(harmonic["magnitude"].transpose(*dims).values,
+                    harmonic["phase"].transpose(*dims).values)  # fmt: skip
+
+
+def _complex(magnitude: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """``magnitude · exp(i angle)`` in single precision."""
+    out = np.empty(magnitude.shape, dtype=np.complex64)
+    out.real = np.cos(angle, dtype=np.float32)
+    out.imag = np.sin(angle, dtype=np.float32)
+    out *= magnitude.astype(np.float32, copy=False)
+    return out
+
+
+def frame_harmonic(phase: xr.Dataset, n: int) -> np.ndarray:
+    """The complex harmonic image of frame ``n`` (tag, z, y, x)."""
+    frame = phase.isel(time=n)
+    dims = ("tag", *GRID_DIMS)
+    return _complex(frame["magnitude"].transpose(*dims).values,
+                    frame["phase"].transpose(*dims).values)  # fmt: skip
+
+
+def perturbed_phases(
+    phase: xr.Dataset, harmonic: np.ndarray, fields: np.ndarray, points: FloatArray,
+    baseline: FloatArray, order: int,
+) -> FloatArray:  # fmt: skip
+    """Phase change W(arg(H + h) − arg H) at ``points`` for each noise field, (sample, n,
+    ntag), sampled as the tracker samples (0 where the perturbed image is not valid).
+
+    The samples are stacked as further tags of one image, so that one sampler locates the
+    points once for all of them.
+    """
+    ntag, count = fields.shape[:2]
+    H = (harmonic[:, None] + fields).swapaxes(0, 1).reshape(count * ntag, 1, *fields.shape[2:])
+    dims = ("tag", "time", *GRID_DIMS)
+    labels = [f"{t}/{m}" for m in range(count) for t in phase["tag"].values]
+    direction = np.tile(phase["tag_direction"].transpose("tag", "axis").values, (count, 1))
+    coords: dict[str, Any] = {
+        "tag": labels, "axis": phase["axis"].values, "time": [0.0],
+        "tag_direction": (("tag", "axis"), direction),
+        "tag_frequency": ("tag", np.tile(phase["tag_frequency"].values, count)),
+        **{d: phase[d].values for d in GRID_DIMS},
+    }  # fmt: skip
+    variables: dict[str, Any] = {"phase": (dims, np.angle(H)), "magnitude": (dims, np.abs(H))}
+    if "mask" in phase.variables:
+        mask = phase["mask"].transpose("tag", *GRID_DIMS).values
+        variables["mask"] = (("tag", *GRID_DIMS), np.tile(mask, (count, 1, 1, 1)))
+    sampler = PhaseSampler(xr.Dataset(variables, coords=coords), 0, order=order)
+    phi, ok = sampler.phase(points, per_tag=True)
+    phi = phi.reshape(-1, count, ntag).swapaxes(0, 1)
+    ok = ok.reshape(-1, count, ntag).swapaxes(0, 1)
+    return np.where(ok, wrap(phi - baseline), 0.0)
