@@ -48,16 +48,24 @@ from harpx._typing import FloatArray
 from harpx.schema import AXES, GRID_DIMS, standard_attrs, validate
 
 __all__ = [
+    "ALIGNMENT_TOL",
     "SliceStack",
     "common_grid",
     "image_coords",
     "resample_stack",
     "resample_stacks",
+    "slice_coords",
+    "stacks_slice_geometry",
     "tagged_dataset",
 ]
 
 _INDEX_EPS = 1e-6  # index units: rounding slack of the in-plane mask test
 _SLAB_EPS = 1e-6  # mm: rounding slack of the through-plane mask test
+
+#: Largest component of a stack's unit normal off its grid axis for the stack's slices to
+#: count as planes of the grid (:meth:`SliceStack.centres_along`): 0.2 mm of tilt across a
+#: 200 mm field of view.
+ALIGNMENT_TOL = 1e-3
 
 #: in-plane (row direction r, column direction c) of an axis-aligned stack normal to an axis,
 #: chosen so that r x c is the axis itself (offsets increase with the coordinate)
@@ -100,6 +108,36 @@ class SliceStack:
         """Unit slice normal ``r × c``."""
         n = np.cross(self.along_row, self.along_column)
         return np.asarray(n / np.linalg.norm(n), dtype=np.float64)
+
+    def centres_along(self, axis: str) -> FloatArray | None:
+        """Slice centres as coordinates along a grid axis, when the slices are its planes.
+
+        Parameters
+        ----------
+        axis : {"x", "y", "z"}
+            The grid axis (a tag's ``slice_axis``).
+
+        Returns
+        -------
+        ndarray, shape (S,), or None
+            The ``axis`` coordinate of each slice centre in mm, increasing; None when the
+            normal is tilted off ``axis`` by more than :data:`ALIGNMENT_TOL` (an oblique
+            stack's slices are no planes of the grid, so their centres have no single
+            coordinate along it).
+
+        Raises
+        ------
+        ValueError
+            If ``axis`` is not an axis name.
+        """
+        if axis not in AXES:
+            raise ValueError(f"axis={axis!r}; expected one of {list(AXES)!r}")
+        a = AXES.index(axis)
+        normal = self.normal
+        if np.max(np.abs(np.delete(normal, a))) > ALIGNMENT_TOL:
+            return None
+        centres = self.origin[a] + self.offsets * np.sign(normal[a])
+        return np.asarray(np.sort(centres), dtype=np.float64)
 
     @property
     def affine(self) -> FloatArray:
@@ -329,6 +367,93 @@ def resample_stacks(
     return np.concatenate(images, axis=0), np.concatenate(masks, axis=0)
 
 
+def stacks_slice_geometry(stacks: Sequence[xr.Dataset]) -> tuple[FloatArray, list[FloatArray]]:
+    """Slice thickness and slice centres of every tag of the stacks :func:`resample_stacks` takes.
+
+    Parameters
+    ----------
+    stacks : sequence of xarray.Dataset
+        As for :func:`resample_stacks`: axis-aligned ``tagged/1`` stacks on their own slice
+        lattices (``attrs["slice_thickness"]`` or evenly spaced slices).
+
+    Returns
+    -------
+    thickness : ndarray, shape (tag,)
+        Each tag's slice thickness, mm (the slab of :meth:`SliceStack.axis_aligned`).
+    positions : list of ndarray
+        Each tag's slice centres along its ``slice_axis``, mm, increasing; with
+        ``thickness`` the ``slice_thickness`` and ``slice_position`` arguments of
+        :func:`tagged_dataset`.
+
+    Raises
+    ------
+    ValueError
+        If the tags of one dataset have different slice axes.
+    """
+    thickness: list[float] = []
+    positions: list[FloatArray] = []
+    for ds in stacks:
+        axes = {str(s) for s in np.asarray(ds["slice_axis"].values)}
+        if len(axes) != 1:
+            raise ValueError(
+                f"the tags of one stack must share a slice_axis, got {sorted(axes)!r}; "
+                "pass one dataset per stack"
+            )
+        (axis,) = axes
+        stack = SliceStack.axis_aligned(ds, axis)
+        centres = stack.centres_along(axis)
+        assert centres is not None  # an axis-aligned stack's slices are grid planes
+        for _ in range(ds.sizes["tag"]):
+            thickness.append(2.0 * (stack.slab[1] - float(stack.offsets[-1])))
+            positions.append(centres)
+    return np.asarray(thickness, dtype=np.float64), positions
+
+
+def slice_coords(
+    ntag: int, thickness: ArrayLike, positions: Sequence[ArrayLike]
+) -> dict[str, tuple[Any, ...]]:
+    """The ``slice_thickness`` (tag) and ``slice_position`` (tag, slice) coordinates.
+
+    Parameters
+    ----------
+    ntag : int
+        Number of tags.
+    thickness : array_like, shape (tag,) or scalar
+        Slice thickness of each tag's slices along its ``slice_axis``, mm (NaN: unknown).
+    positions : sequence of array_like
+        One entry per tag: its slice centres along its ``slice_axis``, mm, increasing
+        (empty or all NaN: unknown). Shorter rows are NaN-padded.
+
+    Returns
+    -------
+    dict
+        ``{name: (dims, values, attrs)}`` for ``slice_thickness`` and ``slice_position``.
+
+    Raises
+    ------
+    ValueError
+        If ``thickness`` or ``positions`` does not have one entry per tag, or an entry of
+        ``positions`` is not one-dimensional.
+    """
+    thick = np.asarray(thickness, dtype=np.float64)
+    thick = np.broadcast_to(thick, (ntag,)).copy() if thick.ndim == 0 else thick
+    rows = [np.atleast_1d(np.asarray(p, dtype=np.float64)) for p in positions]
+    if thick.shape != (ntag,) or len(rows) != ntag or any(r.ndim != 1 for r in rows):
+        raise ValueError(
+            f"slice geometry for {ntag} tags: slice_thickness has shape {thick.shape} and "
+            f"slice_position {len(rows)} rows (shapes {[r.shape for r in rows]}); expected one "
+            "thickness and one 1-D row of slice centres (mm) per tag"
+        )
+    rows = [r[np.isfinite(r)] for r in rows]
+    table = np.full((ntag, max([1, *(r.size for r in rows)])), np.nan)
+    for t, r in enumerate(rows):  # per tag (<= 3)
+        table[t, : r.size] = r
+    return {
+        "slice_thickness": ("tag", thick, standard_attrs("slice_thickness")),
+        "slice_position": (("tag", "slice"), table, standard_attrs("slice_position")),
+    }
+
+
 def tagged_dataset(
     image: ArrayLike,
     *,
@@ -345,6 +470,8 @@ def tagged_dataset(
     body: ArrayLike | None = None,
     displacement_true: ArrayLike | None = None,
     attrs: Mapping[str, Any] | None = None,
+    slice_thickness: ArrayLike | None = None,
+    slice_position: Sequence[ArrayLike] | None = None,
     check: bool = True,
 ) -> xr.Dataset:
     """Assemble a ``tagged/1`` dataset with the standard coordinates, units and names.
@@ -377,6 +504,16 @@ def tagged_dataset(
         body).
     attrs : mapping, optional
         Further dataset attributes (``noise_sigma``, ``snr``, ...).
+    slice_thickness : array_like, shape (tag,) or scalar, optional
+        Thickness of each tag's slices along its ``slice_axis``, mm (NaN: unknown); given
+        together with ``slice_position`` (:func:`slice_coords`). The blur correction of the
+        tracker models the slice profile with them
+        (:func:`harpx.imaging.harp.slice_geometry`).
+    slice_position : sequence of array_like, optional
+        Each tag's slice centres along its ``slice_axis``, mm, increasing (rows of
+        different lengths are NaN-padded; an empty row: unknown).
+        :func:`stacks_slice_geometry` gives both for the stacks of :func:`resample_stacks`,
+        :meth:`SliceStack.centres_along` for one stack.
     check : bool, default True
         Run :func:`harpx.schema.validate` on the result.
 
@@ -388,9 +525,12 @@ def tagged_dataset(
     Raises
     ------
     ValueError
-        If a label has no default direction (pass ``tag_direction``).
+        If a label has no default direction (pass ``tag_direction``), only one of
+        ``slice_thickness`` and ``slice_position`` is given, or either has not one entry
+        per tag.
     SchemaError
-        If ``check`` and the dataset breaks ``tagged/1``.
+        If ``check`` and the dataset breaks ``tagged/1`` (e.g. slice centres not increasing,
+        a thickness that is not positive).
 
     Examples
     --------
@@ -416,18 +556,26 @@ def tagged_dataset(
             np.asarray(displacement_true),
             standard_attrs("displacement_true"),
         )
+    coords = image_coords(
+        tag=labels,
+        tag_direction=tag_direction,
+        tag_frequency=tag_frequency,
+        slice_axis=slice_axis,
+        time=time,
+        z=z,
+        y=y,
+        x=x,
+    )
+    if (slice_thickness is None) != (slice_position is None):
+        raise ValueError(
+            "slice_thickness and slice_position come together (either alone cannot place the "
+            "slabs); pass both or neither"
+        )
+    if slice_thickness is not None and slice_position is not None:
+        coords.update(slice_coords(len(labels), slice_thickness, slice_position))
     ds = xr.Dataset(
         data_vars,
-        coords=image_coords(
-            tag=labels,
-            tag_direction=tag_direction,
-            tag_frequency=tag_frequency,
-            slice_axis=slice_axis,
-            time=time,
-            z=z,
-            y=y,
-            x=x,
-        ),
+        coords=coords,
         attrs={"harpx_schema": "tagged/1", "sequence": sequence, **dict(attrs or {})},
     )
     if check:

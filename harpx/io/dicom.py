@@ -221,6 +221,18 @@ def _frequencies(tag_period: float | Mapping[str, float] | None, labels: list[st
     return 1.0 / np.asarray(periods)
 
 
+def _slice_geometry(stacks: list[_Stack], axes: list[str]) -> tuple[FloatArray, list[FloatArray]]:
+    """Each tag's SliceThickness and slice centres along its slice axis (NaN: unknown)."""
+    thickness = np.full(len(stacks), np.nan)
+    positions: list[FloatArray] = []
+    for t, (stack, axis) in enumerate(zip(stacks, axes, strict=True)):  # per tag (<= 3)
+        centres = stack.geometry.centres_along(axis)
+        positions.append(np.empty(0) if centres is None else centres)
+        if centres is not None and stack.thickness is not None:
+            thickness[t] = stack.thickness
+    return thickness, positions
+
+
 # ---------------------------------------------------------------------------------------------
 # public entry point
 
@@ -270,9 +282,16 @@ def read_tagged(
         ``tagged/1``: ``image`` (tag, time, z, y, x) float64 rescaled pixel values
         (``RescaleSlope``/``RescaleIntercept`` applied; 0 outside the tag's mask), ``mask``
         (tag, z, y, x) bool, coordinates ``x, y, z`` (patient LPS, mm, voxel centres),
-        ``time`` (mean TriggerTime per frame, ms), ``tag_direction``, ``tag_frequency`` and
-        ``slice_axis`` (the patient axis closest to each series' slice normal). Attributes
-        ``sequence``, ``source="DICOM"`` and ``dicom_series`` (tag label: SeriesInstanceUID).
+        ``time`` (mean TriggerTime per frame, ms), ``tag_direction``, ``tag_frequency``,
+        ``slice_axis`` (the patient axis closest to each series' slice normal), and the
+        slice geometry the tracker's blur correction models: ``slice_thickness`` (tag,
+        ``SliceThickness`` in mm) and ``slice_position`` (tag, slice: the slice centres'
+        coordinates along ``slice_axis``, mm, increasing, NaN-padded). A series whose
+        normal is tilted off its ``slice_axis`` (by more than
+        :data:`harpx.imaging.stacks.ALIGNMENT_TOL`) gets no slice positions and NaN
+        thickness, as does the thickness of a series without ``SliceThickness``: nothing
+        is guessed. Attributes ``sequence``, ``source="DICOM"`` and ``dicom_series`` (tag
+        label: SeriesInstanceUID).
 
     Raises
     ------
@@ -380,6 +399,8 @@ def read_tagged(
     image = np.stack([resampled[s.uid][0] for s in tag_stacks])
     mask = np.stack([resampled[s.uid][1] for s in tag_stacks])
     slice_axes = [AXES[int(np.argmax(np.abs(s.normal)))] for s in tag_stacks]
+    thickness, positions = _slice_geometry(tag_stacks, slice_axes)
+    known = np.isfinite(thickness).any() or any(p.size for p in positions)
 
     return tagged_dataset(
         image,
@@ -393,6 +414,8 @@ def read_tagged(
         x=x,
         sequence=kind,
         mask=mask,
+        slice_thickness=thickness if known else None,
+        slice_position=positions if known else None,
         attrs={
             "source": "DICOM",
             "dicom_series": "; ".join(

@@ -51,6 +51,7 @@ class _Stack:
     slab: tuple[float, float]  # through-plane extent along the normal from origin, mm
     times: FloatArray  # (T,) frame times, ms
     images: list[list[_Image]]  # [slice][frame]
+    thickness: float | None = None  # SliceThickness, mm (None: absent or not positive)
 
     @property
     def geometry(self) -> SliceStack:
@@ -175,6 +176,7 @@ def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
         slab=(float(offsets[0] - below), float(offsets[-1] + above)),
         times=times.mean(axis=0),
         images=frames,
+        thickness=thickness,
     )
 
 

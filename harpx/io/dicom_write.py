@@ -2,12 +2,27 @@
 
 Meant for examples and tests: synthetic scenes written as a scanner would write them, so
 that :func:`harpx.io.dicom.read_tagged` can be exercised end to end. Each tag becomes one
-series of *MR Image Storage* files, one per (slice, frame): slices are the grid planes
-normal to the tag's ``slice_axis`` where its ``mask`` holds data (every plane without a
-mask), in the grid's patient coordinates (LPS, mm), with ``SliceThickness`` equal to the
-grid spacing along that axis, ``TriggerTime`` from ``time`` and the pixel values stored as
+series of *MR Image Storage* files, one per (slice, frame), in the grid's patient
+coordinates (LPS, mm), with ``TriggerTime`` from ``time`` and the pixel values stored as
 ``uint16`` with one ``RescaleSlope``/``RescaleIntercept`` per series (quantisation error at
 most half a slope, i.e. range/131070). pydicom is needed (``pip install harpx[dicom]``).
+
+Slices
+------
+Where the dataset tells a tag's slice geometry (:func:`harpx.imaging.harp.slice_geometry`:
+the ``slice_thickness`` and ``slice_position`` coordinates, or a synthetic scene's stack
+attributes), the series has one slice per slice centre, at that position along the tag's
+``slice_axis``, with that ``SliceThickness`` (left empty where the thickness is unknown):
+the acquisition as the scanner made it, which :func:`~harpx.io.dicom.read_tagged` reads
+back with the same geometry. The grid images are then taken to be the slices interpolated
+as :func:`harpx.imaging.stacks.resample_stack` does (linear between slice centres, the
+nearest slice between the outermost centre and the slab face), and each slice image is the
+least-squares solution of that interpolation over the grid planes in the tag's ``mask``
+and slab: exact when the grid images were made that way (the scenes, a read-back DICOM
+stack), and a :class:`~harpx.errors.HarpxWarning` names the misfit when they were not.
+Without slice geometry the slices are the grid planes normal to the ``slice_axis`` where
+the ``mask`` holds data (every plane without a mask), ``SliceThickness`` the grid spacing
+along that axis.
 
 Every call writes a new study: fresh Study, Series and SOP Instance UIDs, so two exports
 never share a series. The files are written into a hidden folder beside the target and
@@ -20,14 +35,16 @@ import os
 import re
 import shutil
 import uuid
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import xarray as xr
 
-from harpx._typing import PathLike
-from harpx.errors import SchemaError
+from harpx._typing import FloatArray, IntArray, PathLike
+from harpx.errors import HarpxWarning, SchemaError
+from harpx.imaging.harp import slice_geometry
 from harpx.io.netcdf import remove_stale_temporaries, temporary_prefix
 from harpx.schema import validate
 
@@ -76,8 +93,10 @@ def write_tagged(ds: xr.Dataset, folder: PathLike, *, overwrite: bool = False) -
     Raises
     ------
     SchemaError
-        If ``ds`` is not a valid ``tagged/1`` dataset, its images are not finite, or a tag
-        label cannot be a folder name (letters, digits, ``_``, ``-`` and ``.`` only).
+        If ``ds`` is not a valid ``tagged/1`` dataset, its images are not finite, a tag
+        label cannot be a folder name (letters, digits, ``_``, ``-`` and ``.`` only), or
+        its grid does not resolve the slices its slice geometry names (a slice without a
+        grid plane in its reach: module notes).
     FileExistsError
         If ``folder`` is not empty and ``overwrite`` is False, or holds files that an export
         did not write (even with ``overwrite=True``), or is a file or a symbolic link.
@@ -190,6 +209,7 @@ def _write_series(ds: xr.Dataset, root: Path, study: str) -> dict[str, str]:
 
     described: dict[str, str] = {}
     times = np.asarray(ds["time"].values, dtype=np.float64)
+    geometry = slice_geometry(ds)
     for number, tag in enumerate(ds["tag"].values, start=1):  # one series per tag (≤ 3)
         label = str(tag)
         axis = str(ds["slice_axis"].sel(tag=tag).values)
@@ -206,11 +226,18 @@ def _write_series(ds: xr.Dataset, root: Path, study: str) -> dict[str, str]:
         if "mask" in ds:
             mask = ds["mask"].sel(tag=tag).transpose(axis, rows_dim, cols_dim).values
             planes = planes[mask.reshape(len(planes), -1).any(axis=1)]
+        coords = {d: np.asarray(ds[d].values, dtype=np.float64) for d in ("x", "y", "z")}
+        spacing = {d: float(np.diff(v).mean()) if v.size > 1 else 1.0 for d, v in coords.items()}
+        centres, thickness = _tag_slices(geometry, number - 1)
+        slice_coord = coords[axis][planes]
+        thickness_text = _decimal(spacing[axis])
+        if centres is not None:
+            values = _slice_images(values, coords[axis], planes, centres, thickness, label)
+            planes, slice_coord = np.arange(centres.size), centres
+            thickness_text = _decimal(thickness) if np.isfinite(thickness) else ""
         lo, hi = float(values.min()), float(values.max())
         slope = max((hi - lo) / 65535.0, 1e-12)
         stored = np.rint((values - lo) / slope).clip(0, 65535).astype("<u2")
-        coords = {d: np.asarray(ds[d].values, dtype=np.float64) for d in ("x", "y", "z")}
-        spacing = {d: float(np.diff(v).mean()) if v.size > 1 else 1.0 for d, v in coords.items()}
         series = generate_uid()
         description = f"tagged {label}"
         described[label] = description
@@ -218,7 +245,7 @@ def _write_series(ds: xr.Dataset, root: Path, study: str) -> dict[str, str]:
         out.mkdir(parents=True, exist_ok=True)
         for k in planes:  # slices of this series
             origin = {d: coords[d][0] for d in ("x", "y", "z")}
-            origin[axis] = coords[axis][k]
+            origin[axis] = slice_coord[k] if centres is not None else coords[axis][k]
             position = [origin["x"], origin["y"], origin["z"]]
             for t in range(len(times)):  # frames
                 path = out / f"{label}_{int(k):04d}_{t:03d}.dcm"
@@ -239,7 +266,7 @@ def _write_series(ds: xr.Dataset, root: Path, study: str) -> dict[str, str]:
                 f.ImagePositionPatient = [_decimal(v) for v in position]
                 f.ImageOrientationPatient = [_decimal(v) for v in (*r, *c)]
                 f.PixelSpacing = [_decimal(spacing[rows_dim]), _decimal(spacing[cols_dim])]
-                f.SliceThickness = _decimal(spacing[axis])
+                f.SliceThickness = thickness_text
                 f.TriggerTime = _decimal(times[t])
                 f.RescaleSlope, f.RescaleIntercept = _decimal(slope), _decimal(lo)
                 f.Rows, f.Columns = values.shape[2], values.shape[3]
@@ -249,3 +276,58 @@ def _write_series(ds: xr.Dataset, root: Path, study: str) -> dict[str, str]:
                 f.PixelData = np.ascontiguousarray(stored[t, k]).tobytes()
                 f.save_as(path, enforce_file_format=True)
     return described
+
+
+def _tag_slices(geometry: dict[str, xr.Variable], t: int) -> tuple[FloatArray | None, float]:
+    """Slice centres (None: unknown) and thickness (NaN: unknown) of tag number ``t``."""
+    if not geometry:
+        return None, float("nan")
+    positions = np.asarray(geometry["slice_position"].values, dtype=np.float64)[t]
+    centres = positions[np.isfinite(positions)]
+    thickness = float(np.asarray(geometry["slice_thickness"].values, dtype=np.float64)[t])
+    return (centres if centres.size else None), thickness
+
+
+def _slice_images(
+    values: FloatArray,
+    grid: FloatArray,
+    planes: IntArray,
+    centres: FloatArray,
+    thickness: float,
+    label: str,
+) -> FloatArray:
+    """The slice images (time, slice, rows, columns) whose resampling gives the grid's.
+
+    ``values`` (time, plane, rows, columns) on the grid planes at ``grid``; ``planes`` the
+    planes that hold data (the mask). Planes outside the slab are left out.
+    """
+    half = 0.5 * thickness if np.isfinite(thickness) else np.inf
+    at = grid[planes]
+    inside = (at >= centres[0] - half - 1e-6) & (at <= centres[-1] + half + 1e-6)
+    used, at = planes[inside], at[inside]
+    weights = np.stack(  # linear between centres, nearest beyond them (resample_stack)
+        [np.interp(at, centres, np.eye(centres.size)[s]) for s in range(centres.size)], axis=1
+    )
+    if used.size == 0 or np.linalg.matrix_rank(weights) < centres.size:
+        step = float(np.diff(grid).mean()) if grid.size > 1 else float("nan")
+        raise SchemaError(
+            f"tag {label!r}: its {centres.size} slices (centres {np.round(centres, 3).tolist()}"
+            f" mm) are not resolved by the {used.size} grid planes of its slab and mask "
+            f"(spacing {step:.4g} mm): a slice has no plane in its reach. Write the images on "
+            "a finer grid, or drop slice_thickness and slice_position to write the grid planes"
+        )
+    block = np.moveaxis(values[:, used], 1, 0).reshape(used.size, -1)
+    slices, *_ = np.linalg.lstsq(weights, block, rcond=None)
+    misfit = float(np.abs(weights @ slices - block).max())
+    scale = float(np.ptp(block)) if block.size else 0.0
+    if misfit > max(scale / 131070.0, 1e-9):  # above half a uint16 step of the range
+        warnings.warn(
+            f"tag {label!r}: the images are not linear between the slice centres that its "
+            f"slice geometry gives (largest misfit {misfit:.3g} of a range {scale:.3g}); the "
+            "written slices are their least-squares fit, so the series does not reproduce "
+            "the grid images",
+            HarpxWarning,
+            stacklevel=4,
+        )
+    shape = (centres.size, values.shape[0], *values.shape[2:])
+    return np.moveaxis(slices.reshape(shape), 0, 1)

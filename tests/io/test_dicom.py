@@ -399,8 +399,11 @@ def test_axis_aligned_stack_on_its_own_grid_is_not_interpolated(tmp_path: Path) 
     ds = read_tagged(
         tmp_path, tag_period=6.0, tag_directions=[("SA square", "x", "row")], sequence="SPAMM"
     )
-    assert ds.sizes == {"tag": 1, "time": 2, "z": 3, "y": 5, "x": 4, "axis": 3}
+    assert ds.sizes == {"tag": 1, "time": 2, "z": 3, "y": 5, "x": 4, "axis": 3, "slice": 3}
     np.testing.assert_allclose(ds.x, 1 + 1.5 * np.arange(4), rtol=1e-15)
+    # the slice geometry: SliceThickness and the slice centres, which here are the grid planes
+    assert ds.slice_thickness.values.tolist() == [1.5]
+    np.testing.assert_allclose(ds.slice_position.values[0], ds.z.values, rtol=1e-15)
     expected = np.stack(
         [np.stack([spec.stored(k, t) for k in range(3)]) * SLOPE + INTERCEPT for t in range(2)]
     )
@@ -612,3 +615,55 @@ def test_trigger_times_beyond_tolerance(tmp_path: Path) -> None:
 def test_bad_arguments(study: Path, changes: dict, match: str) -> None:
     with pytest.raises(HarpxError, match=match):
         read_tagged(study, **{**READ, **changes})
+
+
+# ---------------------------------------------------------------------------------------------
+# slice geometry
+
+
+def test_slice_geometry_from_the_headers(tagged: xr.Dataset) -> None:
+    # the axis-aligned SA stack: SliceThickness and the slice centres along z (origin z = 0,
+    # offsets 0, 5, 10); both tags of the series share them
+    np.testing.assert_array_equal(tagged.slice_thickness.sel(tag=["x", "y"]), [5.0, 5.0])
+    for tag in ("x", "y"):
+        np.testing.assert_allclose(tagged.slice_position.sel(tag=tag), SA.offsets, atol=1e-12)
+    # the doubly oblique LA stack's slices are no planes of the grid: nothing is guessed
+    assert np.isnan(tagged.slice_thickness.sel(tag="l"))
+    assert np.isnan(tagged.slice_position.sel(tag="l")).all()
+    # the phase carries them to the tracker's blur correction, which models the slice
+    # profile of the SA tags only (the SA slab is 5 mm on a 1 mm grid)
+    from harpx.imaging.harp import extract_phase
+    from harpx.tracking.blur import blur_models
+
+    phase = extract_phase(tagged, upsample=1)
+    np.testing.assert_array_equal(phase.slice_position, tagged.slice_position)
+    assert blur_models(phase) == ["slice-profile", "slice-profile", "in-plane"]
+
+
+def test_slice_geometry_of_a_stack_whose_normal_points_down(tmp_path: Path) -> None:
+    # r x c = -z: the offsets grow downwards from z = 20, so the centres are 10, 15, 20
+    frame = np.column_stack([[1.0, 0, 0], [0, -1.0, 0], [0, 0, -1.0]])
+    spec = StackSpec(**{**SA.__dict__, "frame": frame, "origin": np.array([-5.0, 7.0, 20.0])})
+    write_classic(tmp_path, spec)
+    ds = read_tagged(tmp_path, **{**READ, "tag_directions": {"SA tagged": ("x", "row")}})
+    np.testing.assert_allclose(ds.slice_position.values, [[10.0, 15.0, 20.0]], atol=1e-12)
+    # the slab is 7.5 .. 22.5 mm and the grid samples it
+    assert ds.z.values.min() >= 7.5 and ds.z.values.max() <= 22.5
+
+
+def test_slice_positions_without_slice_thickness(tmp_path: Path) -> None:
+    def edit(ds, k, t):
+        del ds.SliceThickness
+
+    write_classic(tmp_path, SA, edit=edit)
+    ds = read_tagged(tmp_path, **{**READ, "tag_directions": {"SA tagged": ("x", "row")}})
+    validate(ds, "tagged")
+    # the centres are known, the thickness is not (the slab then reaches half a slice gap)
+    assert np.isnan(ds.slice_thickness.values).all()
+    np.testing.assert_allclose(ds.slice_position.values, [SA.offsets], atol=1e-12)
+
+
+def test_only_oblique_series_give_no_slice_geometry(tmp_path: Path) -> None:
+    write_classic(tmp_path, LA)
+    ds = read_tagged(tmp_path, **{**READ, "tag_directions": {"LA tagged": ("l", "column")}})
+    assert "slice_thickness" not in ds.variables and "slice_position" not in ds.variables
