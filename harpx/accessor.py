@@ -45,7 +45,8 @@ class PlotMethods:
         return displacement_map(self._ds, **kwargs)
 
     def strain(self, **kwargs: Any) -> Any:
-        """Green–Lagrange strain per cell near a slice. See Also: harpx.plotting.strain_map."""
+        """Strain on a slice (radial, circumferential, longitudinal or Cartesian, %).
+        See Also: harpx.plotting.strain_map."""
         from harpx.plotting import strain_map
 
         return strain_map(self._ds, **kwargs)

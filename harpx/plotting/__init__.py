@@ -8,6 +8,8 @@ the dataset kind it draws; any other kind raises :class:`~harpx.errors.SchemaErr
 the expected and the actual kind.
 
 The modules: :mod:`harpx.plotting.maps` (one slice of a dataset, behind ``ds.harp.plot``),
+:mod:`harpx.plotting.strain` (strain on a slice, radial/circumferential/longitudinal or
+Cartesian), :mod:`harpx.plotting.regions` (fibre stretch per region),
 :mod:`harpx.plotting.cardiac` (the AHA bull's-eye and segment curves) and
 :mod:`harpx.plotting.figures` (method comparisons, run time, opening angle, stretch
 agreement); every public name is importable from :mod:`harpx.plotting`.
@@ -22,13 +24,9 @@ from harpx.plotting.figures import (
     opening_angle_view,
     plot_stretch_agreement,
 )
-from harpx.plotting.maps import (
-    displacement_map,
-    fiber_stretch_by_region,
-    phase_map,
-    strain_map,
-    tag_image,
-)
+from harpx.plotting.maps import displacement_map, phase_map, tag_image
+from harpx.plotting.regions import fiber_stretch_by_region
+from harpx.plotting.strain import strain_map
 
 __all__ = [
     "bullseye",

@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
 import matplotlib.pyplot as plt
+import numpy as np
 import xarray as xr
 
-from harpx.errors import SchemaError
+from harpx.cardiac.quality import user_stacklevel
+from harpx.errors import HarpxWarning, SchemaError
 from harpx.schema import KINDS
+
+# unit of each coordinate a slice is chosen along
+_UNITS = {"z": "mm", "y": "mm", "x": "mm", "time": "ms"}
 
 # what to do when a plot gets a dataset of another kind: (expected, actual) -> hint
 _KIND_HINTS: dict[tuple[str, str], str] = {
@@ -36,17 +42,32 @@ _MAP_DOC_TAIL = """
         If the dataset is not ``{kind}/1`` (the message names the kind it is) or has no
         {names}.
     """
+# what a map that shows the nearest frame and slice adds to its Raises section
+_SLICE_DOC_TAIL = """    ValueError
+        If ``time`` or ``z`` is not a finite number.
+
+    Warns
+    -----
+    HarpxWarning
+        If the slice (frame) shown, the nearest to ``z`` (``time``), lies more than half
+        the slice spacing (frame interval) away from it: ``z`` (``time``) is outside the
+        data.
+    """
 
 
-def _map_doc(kind: str, *variables: str) -> Callable[[_F], _F]:
+def _map_doc(kind: str, *variables: str, slices: bool = True) -> Callable[[_F], _F]:
     """Append the shared ``ax``, Returns and Raises sections to a plot's docstring; the
-    Raises entry names the dataset ``kind`` and the ``variables`` the plot needs."""
+    Raises entry names the dataset ``kind`` and the ``variables`` the plot needs, and for a
+    map that picks the nearest frame and slice (``slices``) what that raises and warns."""
     quoted = [f"``{v}``" for v in variables]
     names = quoted[-1] if len(quoted) == 1 else ", ".join(quoted[:-1]) + " or " + quoted[-1]
 
     def decorate(func: _F) -> _F:
         assert func.__doc__ is not None
-        func.__doc__ = func.__doc__.rstrip() + _MAP_DOC_TAIL.format(kind=kind, names=names)
+        tail = _MAP_DOC_TAIL.format(kind=kind, names=names)
+        if slices:
+            tail = tail.rstrip() + "\n" + _SLICE_DOC_TAIL
+        func.__doc__ = func.__doc__.rstrip() + tail
         return func
 
     return decorate
@@ -82,28 +103,75 @@ def _axes(ax: Any, figsize: tuple[float, float]) -> Any:
     return plt.subplots(figsize=figsize, layout="constrained")[1]
 
 
-def _where(da: xr.DataArray) -> str:
-    """Short title naming the frame and slice of a 2-D selection, e.g. ``t = 36 ms, z = 0.0 mm``."""
+def _number(value: float) -> str:
+    """A coordinate as written in a title: at most 3 decimals, no trailing zeros."""
+    text = f"{value:.3f}".rstrip("0").rstrip(".")
+    return "0" if text == "-0" else text
+
+
+def _where(da: xr.DataArray, notes: Sequence[str] = ()) -> str:
+    """Short title naming the tag, frame and slice of a 2-D selection, e.g. ``t = 36 ms,
+    z = 0.375 mm``, then ``notes`` (e.g. which slice was asked for)."""
     parts = []
     if "tag" in da.coords and da["tag"].ndim == 0:
         parts.append(f"tag {da['tag'].item()}")
     if "time" in da.coords and da["time"].ndim == 0:
-        parts.append(f"t = {float(da['time']):.0f} ms")
+        parts.append(f"t = {_number(float(da['time']))} ms")
     if "z" in da.coords and da["z"].ndim == 0:
-        parts.append(f"z = {float(da['z']):.1f} mm")
-    return ", ".join(parts)
+        parts.append(f"z = {_number(float(da['z']))} mm")
+    title = ", ".join(parts)
+    return "\n".join([title, *notes]) if notes else title
 
 
 def _magnitude(da: xr.DataArray) -> xr.DataArray:
     return (da**2).sum("axis", skipna=False) ** 0.5
 
 
-def _slice(da: xr.DataArray, time: float | None, z: float | None) -> xr.DataArray:
-    if "time" in da.dims:
-        da = da.sel(time=da.time[-1] if time is None else time, method="nearest")
-    if "z" in da.dims:
-        da = da.sel(z=da.z[da.sizes["z"] // 2] if z is None else z, method="nearest")
-    return da
+def _nearest(coord: Any, dim: str, value: float, plot: str) -> tuple[float, str | None]:
+    """The value of coordinate ``coord`` (1-D) nearest ``value``, and a note for the title
+    when it is not ``value``. Warns (:class:`HarpxWarning`) when it lies more than half a
+    spacing of the coordinate away (``value`` outside the data, or an uneven coordinate)."""
+    values = np.asarray(coord, dtype=np.float64).ravel()
+    if not np.isfinite(value):
+        raise ValueError(f"{plot}: {dim} must be a finite number, got {value!r}")
+    shown = float(values[int(np.argmin(np.abs(values - value)))])
+    unit = _UNITS.get(dim, "")
+    if np.isclose(shown, value, rtol=0.0, atol=1e-6 * max(1.0, abs(value))):
+        return shown, None
+    what = "frame" if dim == "time" else "slice"
+    note = f"(nearest {what} to {dim} = {_number(value)} {unit})".replace(" )", ")")
+    spacing = float(np.median(np.diff(np.sort(values)))) if values.size > 1 else np.nan
+    if np.isfinite(spacing) and abs(shown - value) > 0.5 * spacing * (1.0 + 1e-6):
+        warnings.warn(
+            f"{plot}: there is no {dim} = {_number(value)} {unit}; showing the nearest, "
+            f"{dim} = {_number(shown)} {unit} ({_number(abs(shown - value))} {unit} away, more "
+            f"than half the spacing {_number(spacing)} {unit}; {dim} spans "
+            f"{_number(values.min())} to {_number(values.max())} {unit})",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
+    return shown, note
+
+
+def _slice(
+    da: xr.DataArray, time: float | None, z: float | None, plot: str = "plot"
+) -> tuple[xr.DataArray, list[str]]:
+    """The frame nearest ``time`` (default the last) and the slice nearest ``z`` (default
+    the middle one) of ``da``, with title notes naming what was asked for when the shown
+    frame or slice differs from it (see :func:`_nearest`)."""
+    notes = []
+    for dim, value, default in (("time", time, -1), ("z", z, None)):
+        if dim not in da.dims:
+            continue
+        if value is None:
+            index = da.sizes[dim] // 2 if default is None else default
+            da = da.isel({dim: index})
+            continue
+        shown, note = _nearest(da[dim].values, dim, float(value), plot)
+        da = da.sel({dim: shown})
+        if note:
+            notes.append(note)
+    return da, notes
 
 
 def _slice_map(da: xr.DataArray, title: str, ax: Any, *, label: str, **kwargs: Any) -> Any:

@@ -1,4 +1,13 @@
-"""One slice of a dataset: tag image, harmonic phase, displacement, strain, fibre stretch."""
+"""One slice of a dataset: tag image, harmonic phase, displacement, fibre stretch by region.
+
+Every map shows the frame and slice nearest the ones asked for and names them in its title;
+when they differ from what was asked, the title says so ("nearest slice to z = 0 mm"), and a
+slice more than half a slice spacing away (outside the data) also warns with
+:class:`~harpx.errors.HarpxWarning`. The harmonic phase is drawn only where the tissue is:
+where the harmonic magnitude exceeds half its typical value in the tissue (the band-pass
+blurs the tissue's edge into a ramp whose midpoint is the edge) and stands out of its noise
+(``harmonic_noise``), so the noise phase outside the tissue is not shown.
+"""
 
 from __future__ import annotations
 
@@ -7,9 +16,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from harpx.errors import SchemaError
 from harpx.plotting._common import (
-    _axes,
     _magnitude,
     _map_doc,
     _require,
@@ -17,6 +24,20 @@ from harpx.plotting._common import (
     _slice_map,
     _where,
 )
+from harpx.plotting.regions import fiber_stretch_by_region
+from harpx.plotting.strain import strain_map
+
+__all__ = ["displacement_map", "fiber_stretch_by_region", "phase_map", "strain_map", "tag_image"]
+
+#: Harmonic magnitude, in units of its noise standard deviation (``harmonic_noise``),
+#: that tissue must exceed: noise alone exceeds k σ with probability exp(-k²)
+TISSUE_NOISE_FACTOR = 3.0
+#: Tissue is where the harmonic magnitude exceeds this fraction of the slice's typical
+#: tissue magnitude (the median over the pixels above the noise level)
+TISSUE_EDGE = 0.5
+#: Without ``harmonic_noise``, the noise level is taken as this fraction of the slice's
+#: 99th percentile of the magnitude
+NOISE_FRACTION = 0.1
 
 
 @_map_doc("tagged", "image")
@@ -37,11 +58,13 @@ def tag_image(
     tag : str, optional
         Tag label.
     time, z : float, optional
-        Frame time (ms) and slice position (mm), nearest.
+        Frame time (ms, default the last) and slice position (mm, default the middle
+        slice); the nearest frame and slice are shown and named in the title.
     """
-    _require(ds, "tagged", ["image"], "tag_image (ds.harp.plot.tag_image)")
-    da = _slice(ds["image"].sel(tag=ds.tag.values[0] if tag is None else tag), time, z)
-    return _slice_map(da, _where(da), ax, cmap="gray", label="intensity")
+    plot = "tag_image (ds.harp.plot.tag_image)"
+    _require(ds, "tagged", ["image"], plot)
+    da, notes = _slice(ds["image"].sel(tag=ds.tag.values[0] if tag is None else tag), time, z, plot)
+    return _slice_map(da, _where(da, notes), ax, cmap="gray", label="intensity")
 
 
 @_map_doc("phase", "phase")
@@ -51,6 +74,7 @@ def phase_map(
     tag: str | None = None,
     time: float | None = None,
     z: float | None = None,
+    mask: str | xr.DataArray | None = "tissue",
     ax: Any = None,
 ) -> Any:
     """One slice of a ``phase/1`` harmonic phase (rad, cyclic colour map).
@@ -62,13 +86,59 @@ def phase_map(
     tag : str, optional
         Tag label (default: the first).
     time, z : float, optional
-        Frame time (ms) and slice position (mm), nearest.
+        Frame time (ms, default the last) and slice position (mm, default the middle
+        slice); the nearest frame and slice are shown and named in the title.
+    mask : {"tissue"} or xarray.DataArray or None, default "tissue"
+        Where to show the phase. ``"tissue"``: pixels whose harmonic ``magnitude`` exceeds
+        :data:`TISSUE_EDGE` times the median magnitude of the pixels above the noise level
+        (:data:`TISSUE_NOISE_FACTOR` times the tag's ``harmonic_noise``; without it
+        :data:`NOISE_FRACTION` of the slice's 99th percentile of ``magnitude``), and the
+        noise level itself, within the acquisition's ``mask`` where the dataset has one.
+        A boolean DataArray on the grid (``z, y, x`` or ``y, x``, true inside) gives the
+        mask; None shows every pixel. Pixels outside are NaN (blank).
     """
-    _require(ds, "phase", ["phase"], "phase_map (ds.harp.plot.phase)")
-    da = _slice(ds["phase"].sel(tag=ds.tag.values[0] if tag is None else tag), time, z)
+    plot = "phase_map (ds.harp.plot.phase)"
+    _require(ds, "phase", ["phase"], plot)
+    label = ds.tag.values[0] if tag is None else tag
+    da, notes = _slice(ds["phase"].sel(tag=label), time, z, plot)
+    inside = _tissue(ds, da, label, mask)
+    if inside is not None:
+        da = da.where(inside)
     return _slice_map(
-        da, _where(da), ax, cmap="twilight", label="phase (rad)", vmin=-np.pi, vmax=np.pi
+        da, _where(da, notes), ax, cmap="twilight", label="phase (rad)", vmin=-np.pi, vmax=np.pi
     )
+
+
+def _tissue(ds: xr.Dataset, da: xr.DataArray, tag: Any, mask: Any) -> xr.DataArray | None:
+    """Boolean (y, x) mask of the pixels of the phase slice ``da`` to show (phase_map)."""
+    if mask is None or mask is False:
+        return None
+    where = {d: da[d].item() for d in ("time", "z") if d in da.coords and da[d].ndim == 0}
+    if isinstance(mask, xr.DataArray):
+        given = mask.sel({d: v for d, v in where.items() if d in mask.dims})
+        if set(given.dims) != {"y", "x"}:
+            raise ValueError(
+                f"phase_map: mask must be a boolean DataArray on (z, y, x) or (y, x); got dims "
+                f"{mask.dims}"
+            )
+        return given.astype(bool)
+    if mask != "tissue":
+        raise ValueError(f"phase_map: mask must be 'tissue', a DataArray or None; got {mask!r}")
+    inside = xr.ones_like(da, dtype=bool)
+    if "magnitude" in ds:
+        magnitude = ds["magnitude"].sel(tag=tag).sel(where)
+        m = np.asarray(magnitude.values, dtype=np.float64)
+        if "harmonic_noise" in ds:
+            noise = TISSUE_NOISE_FACTOR * float(ds["harmonic_noise"].sel(tag=tag))
+        else:
+            noise = NOISE_FRACTION * float(np.nanpercentile(m, 99.0))
+        above = m[m > noise]
+        level = max(noise, TISSUE_EDGE * float(np.median(above))) if above.size else noise
+        inside = inside & (magnitude > level)
+    if "mask" in ds.variables:
+        acquired = ds["mask"].sel(tag=tag)
+        inside = inside & acquired.sel({d: v for d, v in where.items() if d in acquired.dims})
+    return inside
 
 
 @_map_doc("tracked", "displacement_grid")
@@ -89,11 +159,13 @@ def displacement_map(
     component : {"x", "y", "z"}, optional
         Component to show; default the magnitude.
     time, z : float, optional
-        Frame time (ms) and slice position (mm), nearest.
+        Frame time (ms, default the last) and slice position (mm, default the middle
+        slice); the nearest frame and slice are shown and named in the title.
     """
-    _require(ds, "tracked", ["displacement_grid"], "displacement_map (ds.harp.plot.displacement)")
-    da = _slice(ds["displacement_grid"], time, z)
-    title = _where(da)
+    plot = "displacement_map (ds.harp.plot.displacement)"
+    _require(ds, "tracked", ["displacement_grid"], plot)
+    da, notes = _slice(ds["displacement_grid"], time, z, plot)
+    title = _where(da, notes)
     da = _magnitude(da) if component is None else da.sel(axis=component)
     return _slice_map(
         da,
@@ -102,73 +174,3 @@ def displacement_map(
         cmap="viridis" if component is None else "RdBu_r",
         label=f"u{'' if component is None else '_' + component} (mm)",
     )
-
-
-@_map_doc("tracked", "green_strain", "points", "cells")
-def strain_map(
-    ds: xr.Dataset,
-    *,
-    i: int = 0,
-    j: int = 0,
-    time: float | None = None,
-    z: float | None = None,
-    ax: Any = None,
-) -> Any:
-    """Green–Lagrange strain E_ij per cell, at the cell centres near one slice.
-
-    Parameters
-    ----------
-    ds : xarray.Dataset
-        ``tracked/1`` dataset with ``green_strain`` and a mesh (``points``, ``cells``).
-    i, j : int, default 0
-        Strain component (0 = x, 1 = y, 2 = z).
-    time, z : float, optional
-        Frame time (ms) and slice position (mm); cells whose centre lies within half the
-        typical cell height of ``z`` are shown.
-    """
-    _require(ds, "tracked", ["green_strain", "points", "cells"], "strain_map (ds.harp.plot.strain)")
-    centres = ds["points"].values[ds["cells"].values[:, :8]].mean(axis=1)
-    strain = ds["green_strain"].sel(time=ds.time[-1] if time is None else time, method="nearest")
-    values = strain.values[:, i, j]
-    zc = centres[:, 2]
-    z = float(np.median(zc)) if z is None else z
-    height = np.ptp(ds["points"].values[ds["cells"].values[:, :8], 2], axis=1).mean()
-    near = np.abs(zc - z) <= height / 2
-    ax = _axes(ax, (4.8, 4.2))
-    sc = ax.scatter(centres[near, 0], centres[near, 1], c=values[near], cmap="RdBu_r", s=12)
-    ax.figure.colorbar(sc, ax=ax, label=f"E_{'xyz'[i]}{'xyz'[j]}")
-    ax.set(xlabel="x (mm)", ylabel="y (mm)", aspect="equal")
-    ax.set_title(f"t = {float(strain.time):.0f} ms, z = {z:.1f} mm", fontsize=10)
-    return ax
-
-
-@_map_doc("tracked", "fiber_stretch")
-def fiber_stretch_by_region(ds: xr.Dataset, *, time: float | None = None, ax: Any = None) -> Any:
-    """Box plot of fibre stretch per region at one frame.
-
-    Parameters
-    ----------
-    ds : xarray.Dataset
-        ``tracked/1`` dataset with ``fiber_stretch`` and ``region`` (``flag_meanings``).
-    time : float, optional
-        Frame time, ms (default: the last).
-    """
-    _require(ds, "tracked", [], "fiber_stretch_by_region (ds.harp.plot.fiber_stretch)")
-    if "fiber_stretch" not in ds:
-        raise SchemaError(
-            "fiber_stretch_by_region: the dataset has no 'fiber_stretch' (the tracked body had "
-            "no fibres; give Body(..., fibers=...) to track fibre stretch)"
-        )
-    stretch = ds["fiber_stretch"].sel(time=ds.time[-1] if time is None else time, method="nearest")
-    if "region" in ds:
-        names = ds["region"].attrs.get("flag_meanings", "").split()
-        labels = ds["region"].values
-    else:
-        names, labels = ["body"], np.zeros(ds.sizes["cell"], dtype=int)
-    groups = [stretch.values[labels == k] for k in range(len(names))]
-    ax = _axes(ax, (max(1.2 * len(names) + 2, 4.0), 4.0))
-    ax.boxplot(groups, tick_labels=names)
-    ax.axhline(1.0, color="0.6", lw=0.8)
-    ax.set_ylabel("fibre stretch")
-    ax.set_title(f"t = {float(stretch.time):.0f} ms", fontsize=10)
-    return ax
