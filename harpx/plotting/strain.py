@@ -284,7 +284,7 @@ def strain_map(
         symbol = f"$E_{{{name}}}$"
         quantity = f"strain {symbol}"
     when = f"t = {_number(cut['time'])} ms, " if np.isfinite(cut["time"]) else ""
-    lines = [f"{quantity}, {when}z = {_number(cut['z'])} mm", *cut["notes"]]
+    lines = [quantity, f"{when}z = {_number(cut['z'])} mm", *cut["notes"]]
     inferred = source.size > 0 and all(s in _HATCH for s in source)
     if inferred:
         lines.append("inferred by the model: the tags do not see it")
