@@ -16,6 +16,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from harpx import conventions
+from harpx.conventions import *  # noqa: F403  (re-exported: see __all__)
 from harpx.conventions import (
     _MIN_SPACING,
     _REQUIRED_ATTRS,
@@ -23,43 +25,22 @@ from harpx.conventions import (
     _UNIT_ALIASES,
     _UNIT_NORM_TOL,
     AXES,
-    CF_AXES,
     ELEMENT_VERTICES,
     GRID_DIMS,
-    IMAGE_DIMS,
     KINDS,
-    LONG_NAMES,
     SCHEMA_PHASE,
     SCHEMA_TAGGED,
     SCHEMAS,
     SEQUENCES,
-    STANDARD_NAMES,
     UNITS,
     VarSpec,
-    fill_standard_attrs,
     newer_schema,
-    standard_attrs,
 )
 from harpx.errors import SchemaError
 
-__all__ = [
-    "AXES",
-    "CF_AXES",
-    "ELEMENT_VERTICES",
-    "GRID_DIMS",
-    "IMAGE_DIMS",
-    "KINDS",
-    "LONG_NAMES",
-    "SCHEMAS",
-    "SEQUENCES",
-    "STANDARD_NAMES",
-    "UNITS",
-    "VarSpec",
-    "fill_standard_attrs",
-    "newer_schema",
-    "standard_attrs",
-    "validate",
-]
+# the conventions are importable from here as well (module docstring)
+__all__ = ["validate"]
+__all__ += conventions.__all__
 
 
 def validate(ds: xr.Dataset, kind: str | None = None) -> None:
