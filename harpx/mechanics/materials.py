@@ -157,11 +157,6 @@ _SQRT2 = math.sqrt(2.0)
 _SQRT_HALF = math.sqrt(0.5)
 
 
-def _cross_outer(H: FloatArray) -> FloatArray:
-    """``H[..., i, L] H[..., k, J]`` as ``(..., 3, 3, 3, 3)``."""
-    return H[..., :, None, None, :] * np.swapaxes(H, -1, -2)[..., None, :, :, None]
-
-
 def _log_volumetric(kappa: float, J: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
     J = np.asarray(J, dtype=np.float64)
     lnJ = np.log(J)
@@ -180,6 +175,66 @@ class _Uncoupled:
     def isochoric_response(
         self, F: ArrayLike, fiber: ArrayLike | None = None
     ) -> tuple[FloatArray, FloatArray]:
+        """First Piola--Kirchhoff stress and tangent of the isochoric energy.
+
+        Parameters
+        ----------
+        F : array_like, shape (..., 3, 3)
+            Deformation gradients (dimensionless, ``det F > 0``).
+        fiber : array_like, shape (..., 3), optional
+            Unit reference fiber directions, broadcast against the batch of ``F``; required
+            by a law that ``needs_fibers``, ignored by an isotropic one.
+
+        Returns
+        -------
+        P : ndarray, shape (..., 3, 3)
+            ``dWbar/dF`` (kPa).
+        A : ndarray, shape (..., 3, 3, 3, 3)
+            ``A[..., i, J, k, L] = dP_iJ/dF_kL`` (kPa).
+
+        Raises
+        ------
+        ValueError
+            If ``det F <= 0`` somewhere, or the law needs fibers and ``fiber`` is None.
+        """
+        P, factors = self.isochoric_factors(F, fiber)
+        return P, factors.dense()
+
+    def isochoric_factors(
+        self,
+        F: ArrayLike,
+        fiber: ArrayLike | None = None,
+        *,
+        det_cof: tuple[FloatArray, FloatArray] | None = None,
+    ) -> tuple[FloatArray, TangentFactors]:
+        """Stress and the factored tangent of the isochoric energy (no 4th-order array).
+
+        Parameters
+        ----------
+        F, fiber : array_like
+            As for :meth:`isochoric_response`.
+        det_cof : (ndarray, ndarray), optional
+            ``(det F, cof F)`` if the caller has them (all ``det F > 0``), to save their
+            evaluation (a law working in a local fiber basis recomputes them).
+
+        Returns
+        -------
+        P : ndarray, shape (..., 3, 3)
+            ``dWbar/dF`` (kPa).
+        factors : TangentFactors
+            The low-rank factors the law's Notes give; ``factors.dense()`` is the tangent
+            of :meth:`isochoric_response`.
+
+        Raises
+        ------
+        ValueError
+            As :meth:`isochoric_response`.
+        """
+        return self._factors(_as_tensor(F), fiber, det_cof)
+
+    def _factors(
+        self, F: FloatArray, fiber: ArrayLike | None, det_cof: tuple[FloatArray, FloatArray] | None
+    ) -> tuple[FloatArray, TangentFactors]:
         raise NotImplementedError
 
     def volumetric(self, J: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -199,20 +254,9 @@ class _Uncoupled:
         return _log_volumetric(self.kappa, J)
 
     def strain_energy(self, F: ArrayLike, fiber: ArrayLike | None = None) -> FloatArray:
-        """Total strain energy density ``W = Wbar(Cbar) + U(J)``.
-
-        Parameters
-        ----------
-        F : array_like, shape (..., 3, 3)
-            Deformation gradients (dimensionless, ``det F > 0``).
-        fiber : array_like, shape (..., 3), optional
-            Unit reference fiber directions (needed when ``needs_fibers``).
-
-        Returns
-        -------
-        ndarray, shape (...)
-            Energy per unit reference volume (kPa, i.e. kJ/m^3).
-        """
+        """Total strain energy density ``W = Wbar(Cbar) + U(J)`` per unit reference volume
+        (kPa, i.e. kJ/m^3), shape ``(...)``; ``F`` and ``fiber`` as for
+        :meth:`isochoric_response`."""
         F = _as_tensor(F)
         J, _ = positive_det_cof(F)
         return self.isochoric_energy(F, fiber) + self.volumetric(J)[0]
@@ -222,10 +266,8 @@ class _Uncoupled:
 
         Parameters
         ----------
-        F : array_like, shape (..., 3, 3)
-            Deformation gradients (dimensionless, ``det F > 0``).
-        fiber : array_like, shape (..., 3), optional
-            Unit reference fiber directions (needed when ``needs_fibers``).
+        F, fiber : array_like
+            As for :meth:`isochoric_response`.
 
         Returns
         -------
@@ -270,7 +312,10 @@ class NeoHookean(_Uncoupled):
 
     with Cauchy stress :math:`\sigma = 2 C_1 J^{-5/3} (b - \tfrac{I_1}{3} I)
     + \kappa \tfrac{\ln J}{J} I`. The paper's "C1 = 1.0 kPa, kappa = 120 kPa" is
-    ``NeoHookean(c1=1.0, kappa=120.0)``. The tangent is derived in the module docstring.
+    ``NeoHookean(c1=1.0, kappa=120.0)``. The tangent is derived in the module docstring;
+    :meth:`isochoric_factors` gives it, with :math:`a = 2 C_1 J^{-2/3}`, as
+    :math:`Y = (F, H)`, :math:`Z = a\,(-\tfrac23 H,\ -\tfrac23 F + \tfrac29 I_1 H)`,
+    :math:`s = a`, :math:`c = a I_1/3` (``h_index = 1``).
 
     References
     ----------
@@ -301,58 +346,10 @@ class NeoHookean(_Uncoupled):
         I1 = np.einsum("...iJ,...iJ->...", F, F)
         return self.c1 * (J ** (-2.0 / 3.0) * I1 - 3.0)
 
-    def isochoric_response(
-        self, F: ArrayLike, fiber: ArrayLike | None = None
-    ) -> tuple[FloatArray, FloatArray]:
-        """First Piola--Kirchhoff stress and tangent of the isochoric energy.
-
-        Parameters
-        ----------
-        F : array_like, shape (..., 3, 3)
-            Deformation gradients (dimensionless, ``det F > 0``).
-        fiber : array_like, optional
-            Ignored (isotropic law).
-
-        Returns
-        -------
-        P : ndarray, shape (..., 3, 3)
-            ``dWbar/dF`` (kPa).
-        A : ndarray, shape (..., 3, 3, 3, 3)
-            ``A[..., i, J, k, L] = dP_iJ/dF_kL`` (kPa).
-        """
-        P, factors = self.isochoric_factors(F, fiber)
-        return P, factors.dense()
-
-    def isochoric_factors(
-        self,
-        F: ArrayLike,
-        fiber: ArrayLike | None = None,
-        *,
-        det_cof: tuple[FloatArray, FloatArray] | None = None,
+    def _factors(
+        self, F: FloatArray, fiber: ArrayLike | None, det_cof: tuple[FloatArray, FloatArray] | None
     ) -> tuple[FloatArray, TangentFactors]:
-        r"""Stress and the factored tangent of the isochoric energy (no 4th-order array).
-
-        Parameters
-        ----------
-        F : array_like, shape (..., 3, 3)
-            Deformation gradients (dimensionless, ``det F > 0``).
-        fiber : array_like, optional
-            Ignored (isotropic law).
-        det_cof : (ndarray, ndarray), optional
-            ``(det F, cof F)`` if the caller has them (all ``det F > 0``), to save their
-            evaluation.
-
-        Returns
-        -------
-        P : ndarray, shape (..., 3, 3)
-            ``dWbar/dF`` (kPa).
-        factors : TangentFactors
-            With :math:`a = 2 C_1 J^{-2/3}`: :math:`Y = (F, H)`,
-            :math:`Z = a\,(-\tfrac23 H,\ -\tfrac23 F + \tfrac29 I_1 H)`, :math:`s = a`,
-            :math:`c = a I_1/3` (``h_index = 1``); ``factors.dense()`` is the tangent of
-            :meth:`isochoric_response`.
-        """
-        F = _as_tensor(F)
+        """Stress and factors of the tangent (class Notes); ``fiber`` is ignored."""
         J, cof = positive_det_cof(F) if det_cof is None else det_cof
         H = cof / J[..., None, None]
         I1 = np.einsum("...iJ,...iJ->...", F, F)
@@ -407,7 +404,10 @@ class Guccione(_Uncoupled):
     :math:`E`) so that the mean-dilatation assembly can treat the volumetric part
     separately. The incompressible closed forms (e.g. uniaxial stretch along the fibre)
     therefore hold exactly at ``J = 1``, where :math:`\bar E = E`. Derivation of the tangent: module
-    docstring.
+    docstring; :meth:`isochoric_factors` gives its nine rank-one factors
+    (:math:`Y^r = K^r`, :math:`Z^r = J^{-2/3} (MK)^r`, the last one written with
+    :math:`Y = H = F^{-T}`, ``h_index = 8``), :math:`c = \bar p/3`,
+    :math:`S = J^{-2/3} \bar S` and :math:`s = 0`.
 
     References
     ----------
@@ -467,73 +467,11 @@ class Guccione(_Uncoupled):
         *_, Q = self._local(F, fiber)
         return 0.5 * self.c * np.expm1(Q)
 
-    def isochoric_response(
-        self, F: ArrayLike, fiber: ArrayLike | None = None
-    ) -> tuple[FloatArray, FloatArray]:
-        """First Piola--Kirchhoff stress and tangent of the isochoric energy.
-
-        Parameters
-        ----------
-        F : array_like, shape (..., 3, 3)
-            Deformation gradients (dimensionless, ``det F > 0``).
-        fiber : array_like, shape (..., 3)
-            Unit reference fiber directions, broadcast against the batch of ``F``.
-
-        Returns
-        -------
-        P : ndarray, shape (..., 3, 3)
-            ``dWbar/dF`` (kPa).
-        A : ndarray, shape (..., 3, 3, 3, 3)
-            ``A[..., i, J, k, L] = dP_iJ/dF_kL`` (kPa).
-
-        Raises
-        ------
-        ValueError
-            If ``fiber`` is None.
-        """
-        F = _as_tensor(F)
-        P, K, MK, pbar, Hbar, Sbar, j, _ = self._tangent_parts(F, fiber)
-        batch = j.shape
-        A = np.matmul(
-            np.swapaxes(K.reshape(batch + (9, 9)), -1, -2), MK.reshape(batch + (9, 9))
-        ).reshape(batch + (3, 3, 3, 3))
-        A += (pbar / 3.0)[..., None, None, None, None] * _cross_outer(Hbar)
-        for i in range(3):
-            A[..., i, :, i, :] += Sbar
-        A *= (j * j)[..., None, None, None, None]
-        return P, A
-
-    def isochoric_factors(
-        self,
-        F: ArrayLike,
-        fiber: ArrayLike | None = None,
-        *,
-        det_cof: tuple[FloatArray, FloatArray] | None = None,
+    def _factors(
+        self, F: FloatArray, fiber: ArrayLike | None, det_cof: tuple[FloatArray, FloatArray] | None
     ) -> tuple[FloatArray, TangentFactors]:
-        r"""Stress and the factored tangent of the isochoric energy (no 4th-order array).
-
-        Parameters
-        ----------
-        F : array_like, shape (..., 3, 3)
-            Deformation gradients (dimensionless, ``det F > 0``).
-        fiber : array_like, shape (..., 3)
-            Unit reference fiber directions, broadcast against the batch of ``F``.
-        det_cof : (ndarray, ndarray), optional
-            Accepted for the common signature; ``det F`` and ``cof F`` are recomputed with
-            the local basis.
-
-        Returns
-        -------
-        P : ndarray, shape (..., 3, 3)
-            ``dWbar/dF`` (kPa).
-        factors : TangentFactors
-            The nine rank-one factors of :meth:`isochoric_response`'s low-rank part
-            (:math:`Y^r = K^r`, :math:`Z^r = J^{-2/3} (MK)^r`, the last one written with
-            :math:`Y = H = F^{-T}`, ``h_index = 8``), :math:`c = \bar p/3`,
-            :math:`S = J^{-2/3} \bar S` and :math:`s = 0`; ``factors.dense()`` is the
-            tangent of :meth:`isochoric_response`.
-        """
-        F = _as_tensor(F)
+        """Stress and factors of the tangent (class Notes); ``det_cof`` is recomputed in the
+        local basis."""
         P, K, MK, pbar, Hbar, Sbar, j, H = self._tangent_parts(F, fiber)
         jj = (j * j)[..., None, None, None]
         Y = K
