@@ -116,8 +116,30 @@ def _components(components: Sequence[int]) -> tuple[int, ...]:
     return comps
 
 
+class _BoundaryDofs:
+    """Some displacement components on a boundary: what :class:`Fixed` and
+    :class:`Prescribed` share (their ``facet`` and ``components`` fields)."""
+
+    facet: Any
+    components: tuple[int, ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "components", _components(self.components))
+
+    def dofs(self, body: Body) -> IntArray:
+        """Constrained dof ids.
+
+        Raises
+        ------
+        EmptyBoundaryError
+            If ``facet`` names a boundary without facets.
+        """
+        facets = _facets(body, self.facet, type(self).__name__)
+        return body.facet_dofs(facets, self.components)
+
+
 @dataclass(frozen=True)
-class Fixed:
+class Fixed(_BoundaryDofs):
     """Zero displacement of some components on a boundary.
 
     Parameters
@@ -131,26 +153,13 @@ class Fixed:
     facet: Any
     components: tuple[int, ...] = (0, 1, 2)
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "components", _components(self.components))
-
-    def dofs(self, body: Body) -> IntArray:
-        """Constrained dof ids.
-
-        Raises
-        ------
-        EmptyBoundaryError
-            If ``facet`` names a boundary without facets.
-        """
-        return body.facet_dofs(_facets(body, self.facet, "Fixed"), self.components)
-
     def values(self, body: Body, s: float) -> FloatArray:
         """Zeros (mm)."""
         return np.zeros(self.dofs(body).size)
 
 
 @dataclass(frozen=True)
-class Prescribed:
+class Prescribed(_BoundaryDofs):
     """Prescribed displacement on a boundary.
 
     Parameters
@@ -173,19 +182,6 @@ class Prescribed:
     facet: Any
     displacement: Callable[[FloatArray, float], ArrayLike]
     components: tuple[int, ...] = (0, 1, 2)
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "components", _components(self.components))
-
-    def dofs(self, body: Body) -> IntArray:
-        """Constrained dof ids.
-
-        Raises
-        ------
-        EmptyBoundaryError
-            If ``facet`` names a boundary without facets.
-        """
-        return body.facet_dofs(_facets(body, self.facet, "Prescribed"), self.components)
 
     def values(self, body: Body, s: float) -> FloatArray:
         """Prescribed values (mm) of ``dofs(body)``."""
