@@ -3,12 +3,43 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import xarray as xr
 from numpy.typing import ArrayLike
 
 from harpx.imaging.stacks import tagged_dataset
+from harpx.mechanics.body import Body, ElementName
+from harpx.mechanics.meshspec import MeshSpec
+
+
+class MeshScene:
+    """What the scenes with one tracking mesh share: :meth:`body`, their tracking model.
+
+    A scene dataclass derives from it and has the fields ``mesh`` and ``material``.
+    """
+
+    mesh: MeshSpec
+    material: Any
+    #: Element order of :meth:`body` unless another is asked for.
+    default_element: ClassVar[ElementName] = "hex8"
+
+    def body(self, element: ElementName | None = None, material: Any = None) -> Body:
+        """The tracking model: the scene's mesh (with its regions and fibres) and material.
+
+        Parameters
+        ----------
+        element : {"hex8", "hex20"}, optional
+            Element order (default: the scene's ``default_element``).
+        material : object, optional
+            A material instead of the scene's ``material``.
+
+        Returns
+        -------
+        Body
+        """
+        chosen = self.material if material is None else material
+        return Body(self.mesh, chosen, element=element or self.default_element)
 
 
 def cspamm_dataset(

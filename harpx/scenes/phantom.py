@@ -18,9 +18,9 @@ import numpy as np
 import xarray as xr
 
 from harpx.imaging.synth import synthesize_tagged
-from harpx.mechanics.body import Body
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import MeshSpec, cylinder
+from harpx.scenes._common import MeshScene
 from harpx.scenes._motion import RotationalImpact
 
 Size = Literal["small", "paper"]
@@ -60,7 +60,7 @@ GEOMETRIES: dict[str, PhantomGeometry] = {
 
 
 @dataclass
-class Scene:
+class Scene(MeshScene):
     """A synthetic scene: tagged images with ground truth and a model to track them.
 
     Attributes
@@ -82,10 +82,6 @@ class Scene:
     material: Any
     motion: Any
     info: dict = field(default_factory=dict)
-
-    def body(self, element: Literal["hex8", "hex20"] = "hex8", material: Any = None) -> Body:
-        """The tracking model with ``element`` order (and optionally another material)."""
-        return Body(self.mesh, material if material is not None else self.material, element=element)
 
 
 def phantom(

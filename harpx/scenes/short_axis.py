@@ -54,11 +54,10 @@ import xarray as xr
 from harpx._typing import FloatArray
 from harpx.imaging.stacks import SliceStack, common_grid, resample_stacks
 from harpx.imaging.synth import synthesize_tagged, voxel_density
-from harpx.mechanics.body import Body
 from harpx.mechanics.loads import Fixed
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import MeshSpec, tube
-from harpx.scenes._common import cspamm_dataset
+from harpx.scenes._common import MeshScene, cspamm_dataset
 from harpx.scenes._motion import smooth_step
 from harpx.tracking.results import tracking_error
 
@@ -196,7 +195,7 @@ GEOMETRIES: dict[str, ShortAxisGeometry] = {
 
 
 @dataclass
-class ShortAxisScene:
+class ShortAxisScene(MeshScene):
     """The short-axis scene: images, truth, tracking model and its boundary conditions.
 
     Attributes
@@ -223,10 +222,6 @@ class ShortAxisScene:
     motion: ContractingTube
     dirichlet: tuple[Any, ...]
     info: dict = field(default_factory=dict)
-
-    def body(self, element: Literal["hex8", "hex20"] = "hex8", material: Any = None) -> Body:
-        """The tracking model with ``element`` order (and optionally another material)."""
-        return Body(self.mesh, material if material is not None else self.material, element=element)
 
     def error_split(self, tracked: xr.Dataset) -> xr.Dataset:
         """Tracking error split into the in-plane (x, y) and through-plane (z) parts.

@@ -29,7 +29,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 import xarray as xr
@@ -46,7 +46,7 @@ from harpx.mechanics.loads import Fixed
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import MeshSpec
 from harpx.physiology.active import simulate_activation
-from harpx.scenes._common import cspamm_dataset
+from harpx.scenes._common import MeshScene, cspamm_dataset
 from harpx.schema import standard_attrs
 from harpx.tracking.resample import interpolate_displacement
 from harpx.tracking.track import track
@@ -143,7 +143,7 @@ GEOMETRIES["small"] = replace(
 
 
 @dataclass
-class TongueScene:
+class TongueScene(MeshScene):
     """A synthetic tongue scene: tagged images with ground truth and a model to track them.
 
     Attributes
@@ -178,9 +178,7 @@ class TongueScene:
     truth_displacement: FloatArray
     info: dict = field(default_factory=dict)
 
-    def body(self, element: Literal["hex8", "hex20"] = "hex20", material: Any = None) -> Body:
-        """The passive tracking model (fibres and muscle regions) with ``element`` order."""
-        return Body(self.mesh, material if material is not None else self.material, element=element)
+    default_element: ClassVar[ElementName] = "hex20"
 
     def acquire(
         self,
