@@ -29,12 +29,12 @@ from collections.abc import Sequence
 
 import numpy as np
 import xarray as xr
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from harpx.imaging.bandpass import bandpass_mask
 from harpx.schema import GRID_DIMS, standard_attrs
 
-__all__ = ["harmonic_noise", "harmonic_noise_block", "slice_noise"]
+__all__ = ["band_share", "harmonic_noise", "harmonic_noise_block", "slice_noise"]
 
 #: Median absolute deviation of a standard normal variable.
 MAD_GAUSS = 0.6744897501960817
@@ -127,12 +127,47 @@ def harmonic_noise_block(
         normal = int(np.asarray(slice_index[t]).ravel()[0])
         plane = [a for a in range(3) if a != normal]
         slices = np.moveaxis(np.asarray(volume[t], dtype=np.float64), normal, 0)
-        f = [float(np.asarray(freq[t]).reshape(-1, 3)[0][a]) for a in plane]
+        f_tag = np.asarray(freq[t]).reshape(-1, 3)[0]
+        f = [float(f_tag[a]) for a in plane]
         d = [float(spacing[a]) for a in plane]
-        n1, n2 = slices.shape[-2:]
-        kept = bandpass_mask((n1, n2), d, f, radius * float(np.hypot(f[0], f[1]))).sum()
-        out[t] = slice_noise(slices, d, f) * np.sqrt(kept / (n1 * n2))
+        share = band_share(volume.shape[1:], spacing, f_tag, normal, radius)
+        out[t] = slice_noise(slices, d, f) * np.sqrt(share)
     return out
+
+
+def band_share(
+    shape: Sequence[int],
+    spacing: ArrayLike,
+    freq: ArrayLike,
+    normal: int,
+    radius: float,
+) -> float:
+    r"""Share :math:`n_d / N` of a slice's Fourier coefficients inside a tag's band-pass disk.
+
+    Parameters
+    ----------
+    shape : (int, int, int)
+        Grid shape (nz, ny, nx).
+    spacing : (float, float, float)
+        Grid spacing (dz, dy, dx), mm.
+    freq : (float, float, float)
+        The tag's frequency vector ``f d`` in cycles/mm, components (z, y, x).
+    normal : int
+        Axis (0 = z, 1 = y, 2 = x) normal to the tag's slices.
+    radius : float
+        Band-pass radius as a fraction of the tag's in-plane frequency.
+
+    Returns
+    -------
+    float
+        :math:`n_d / N` in [0, 1]: :math:`\sigma_H = \sigma \sqrt{n_d / N}` (module notes).
+    """
+    plane = [a for a in range(3) if a != normal]
+    f = [float(v) for v in np.asarray(freq, dtype=np.float64)[plane]]
+    d = [float(v) for v in np.asarray(spacing, dtype=np.float64)[plane]]
+    n = (int(shape[plane[0]]), int(shape[plane[1]]))
+    kept = bandpass_mask(n, d, f, radius * float(np.hypot(f[0], f[1]))).sum()
+    return float(kept) / float(n[0] * n[1])
 
 
 def harmonic_noise(
@@ -153,14 +188,11 @@ def harmonic_noise(
     ----------
     image : xarray.DataArray
         One frame of ``image`` with dims (tag, z, y, x), image units.
-    freq : xarray.Variable
-        Tag frequency vectors (tag, component) in cycles/mm, components (z, y, x).
-    slice_index : xarray.Variable
-        Axis index (tag) normal to each tag's slices (0 = z, 1 = y, 2 = x).
-    spacing : (float, float, float)
-        Grid spacing (dz, dy, dx), mm.
-    radius : float
-        Band-pass radius as a fraction of the tag frequency.
+    freq, slice_index : xarray.Variable
+        :func:`harmonic_noise_block`'s arrays of the same names, with dims
+        (tag, component) and (tag).
+    spacing, radius
+        As for :func:`harmonic_noise_block`.
 
     Returns
     -------

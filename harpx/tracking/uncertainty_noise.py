@@ -27,8 +27,7 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from harpx._typing import BoolArray, FloatArray, IntArray
-from harpx.imaging.bandpass import bandpass_mask
-from harpx.imaging.noise import MAD_GAUSS, MAX_TAG_LEAK, harmonic_noise_block
+from harpx.imaging.noise import MAD_GAUSS, MAX_TAG_LEAK, band_share, harmonic_noise_block
 from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.schema import AXES, GRID_DIMS, validate
 from harpx.tracking.results import acquired_grid
@@ -179,17 +178,6 @@ def _tag_geometry(ds: xr.Dataset) -> tuple[FloatArray, IntArray]:
     return freq, np.array([GRID_DIMS.index(str(s)) for s in axes], dtype=np.int64)
 
 
-def _kept_fraction(shape: tuple[int, ...], spacing: FloatArray, freq: FloatArray, axis: int,
-                   radius: float) -> float:  # fmt: skip
-    """Share n_d / N of a slice's DFT samples inside the tag's band-pass disk."""
-    plane = [a for a in range(3) if a != axis]
-    f = [float(freq[a]) for a in plane]
-    n = tuple(shape[a] for a in plane)
-    d = [float(spacing[a]) for a in plane]
-    kept = bandpass_mask(n, d, f, radius * float(np.hypot(f[0], f[1]))).sum()
-    return float(kept) / float(n[0] * n[1])
-
-
 def image_noise(phase: xr.Dataset, tagged: xr.Dataset | None = None) -> ImageNoise:
     r"""Noise model of the images behind a phase dataset (module notes).
 
@@ -265,7 +253,7 @@ def image_noise(phase: xr.Dataset, tagged: xr.Dataset | None = None) -> ImageNoi
     background, levels = np.zeros(ntag, bool), np.zeros(ntag)
     for t in range(ntag):  # ≤ 3 tags
         axis = int(slice_index[t])
-        white = float(sigma_h[t]) / np.sqrt(_kept_fraction(shape, spacing, freq[t], axis, radius))
+        white = float(sigma_h[t]) / np.sqrt(band_share(shape, spacing, freq[t], axis, radius))
         levels[t] = white
         cov = None
         if image0 is not None:
