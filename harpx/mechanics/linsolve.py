@@ -6,7 +6,12 @@
   SciPy's SuperLU (the pure-SciPy fallback).
 * ``"pardiso"`` — MKL PARDISO (pypardiso). Symmetric tangents use the symmetric indefinite
   mode on the upper triangle; the symbolic analysis (ordering) is done once per sparsity
-  pattern and reused: later factorisations run PARDISO phase 23 only.
+  pattern and reused: later factorisations run PARDISO phase 23 only. With ``reuse`` a
+  matrix on the same pattern is first solved by conjugate gradients (CGS for non-symmetric
+  ones) preconditioned with the last factorisation, which a sequence of nearby matrices
+  (Newton or Gauss–Newton tangents) converges in a few iterations; PARDISO factorises
+  afresh when that fails, and the solver does when the last reuse needed more than
+  ``reuse_iterations`` iterations (the factorisation has gone stale).
 * ``"superlu"`` — SuperLU with ``MMD_AT_PLUS_A`` ordering and symmetric mode for symmetric
   tangents (COLAMD for non-symmetric ones).
 * ``"superlu-colamd"`` — SuperLU with its default COLAMD ordering (reference).
@@ -118,6 +123,13 @@ class LinearSolver:
         Relative residual tolerance of the iterative method (``"amg-cg"``).
     maxiter : int, default 500
         Iteration limit of the iterative method.
+    reuse : float, optional
+        PARDISO only: relative accuracy (a power of ten, e.g. 1e-8) to which a matrix on the
+        pattern of the last one may be solved iteratively, preconditioned with the last
+        factorisation (module notes). None (default): every matrix is factorised.
+    reuse_iterations : int, default 15
+        With ``reuse``: a reuse that needed more iterations than this makes the next solve
+        factorise its matrix.
 
     Attributes
     ----------
@@ -127,9 +139,19 @@ class LinearSolver:
         Number of symbolic analyses (orderings) computed so far.
     factorizations : int
         Number of numerical factorisations computed so far.
+    reused : int
+        Number of solves done iteratively with an earlier factorisation (``reuse``).
     """
 
-    def __init__(self, method: str = "auto", *, rtol: float = 1e-10, maxiter: int = 500) -> None:
+    def __init__(
+        self,
+        method: str = "auto",
+        *,
+        rtol: float = 1e-10,
+        maxiter: int = 500,
+        reuse: float | None = None,
+        reuse_iterations: int = 15,
+    ) -> None:
         if method not in METHODS:
             raise ValueError(f"linear_solver={method!r} is not one of {METHODS!r}")
         if method == "auto":
@@ -147,8 +169,17 @@ class LinearSolver:
         self.method = method
         self.rtol = float(rtol)
         self.maxiter = int(maxiter)
+        if reuse is not None and not (0.0 < reuse < 1.0):
+            raise ValueError(f"reuse={reuse!r} must be a relative accuracy in (0, 1), or None")
+        if reuse_iterations < 1:
+            raise ValueError(f"reuse_iterations={reuse_iterations!r} must be at least 1")
+        # PARDISO's iparm(4) = 10 L + K: stop at 10^-L, K = 2 CG (symmetric), 1 CGS
+        self._reuse_digits = 0 if reuse is None else max(1, round(-np.log10(reuse)))
+        self.reuse_iterations = int(reuse_iterations)
+        self._fresh = True  # the next solve factorises (no reusable factorisation yet)
         self.analyses = 0
         self.factorizations = 0
+        self.reused = 0
         self._pardiso: Any = None
         self._pattern_key: tuple[Any, ...] | None = None
         self._upper: NDArray[np.int64] | None = None
@@ -218,8 +249,19 @@ class LinearSolver:
         solver.set_phase(13 if new_pattern else 23)
         if new_pattern:
             self.analyses += 1
-        self.factorizations += 1
+        reuse = self._reuse_digits > 0 and not (new_pattern or self._fresh)
+        solver.iparm[3] = 10 * self._reuse_digits + (2 if symmetric else 1) if reuse else 0
         x = self._call(solver, data, indptr, indices, np.asfortranarray(b, dtype=np.float64))
+        # iparm(20): > 0 iterations of a successful reuse; < 0 it failed and PARDISO
+        # factorised instead; 0 no reuse was tried
+        iterations = int(solver.iparm[19]) if reuse else 0
+        self.last_iterations = abs(iterations) // 10 if iterations < 0 else iterations
+        if iterations > 0:
+            self.reused += 1
+            self._fresh = iterations > self.reuse_iterations
+        else:
+            self.factorizations += 1
+            self._fresh = False
         return x
 
     @staticmethod
@@ -259,6 +301,10 @@ class LinearSolver:
         return np.ascontiguousarray(x)
 
     # ------------------------------------------------------------------ public
+    def refresh(self) -> None:
+        """Factorise the next matrix afresh (with ``reuse``: e.g. after a large change)."""
+        self._fresh = True
+
     def solve(
         self,
         K: sparse.csr_matrix,

@@ -94,21 +94,88 @@ def displacement_maps(
     return fig
 
 
-def error_vs_runtime(rows: Sequence[Mapping[str, Any]], *, path: PathLike | None = None) -> Any:
-    """Scatter of mean (and 95th percentile) error against wall time, one point per row.
+def run_seconds(result: xr.Dataset) -> float:
+    """Wall time, s, that a tracked result records for producing itself.
+
+    ``time_total`` of a ``tracked/1`` dataset from :func:`harpx.tracking.track.track` (the
+    whole call, from the phase images to the dataset), else the sum of its per-frame
+    ``wall_time`` (conventional HARP's :func:`harpx.imaging.harptrack.track_harp`).
+
+    Raises
+    ------
+    SchemaError
+        If the dataset records neither.
+    """
+    if "time_total" in result.attrs:
+        return float(result.attrs["time_total"])
+    if "wall_time" in result.variables:
+        return float(np.nansum(np.asarray(result["wall_time"].values, dtype=np.float64)))
+    raise SchemaError(
+        "the result records no run time (neither a 'time_total' attribute nor a 'wall_time' "
+        "variable): pass a dataset from harpx.tracking.track or track_harp"
+    )
+
+
+def _runtime_rows(
+    results: Mapping[str, xr.Dataset] | Sequence[Mapping[str, Any]], truth: xr.Dataset | None
+) -> list[Mapping[str, Any]]:
+    """Rows (method, seconds, mean, p95) from datasets against ``truth``, or as given."""
+    if not isinstance(results, Mapping):
+        return list(results)
+    if truth is None:
+        raise TypeError("error_vs_runtime of tracked datasets needs the truth (truth=...)")
+    rows: list[Mapping[str, Any]] = []
+    for label, result in results.items():
+        if not isinstance(result, xr.Dataset):
+            raise TypeError(f"results[{label!r}] must be an xarray.Dataset, not {type(result)}")
+        err = result.harp.error(truth)  # the accessor: harpx.tracking.results.tracking_error
+        rows.append(
+            {
+                "method": str(label),
+                "seconds": run_seconds(result),
+                "mean": float(err["mean_all"]),
+                "p95": float(err["p95_all"]),
+            }
+        )
+    return rows
+
+
+def error_vs_runtime(
+    results: Mapping[str, xr.Dataset] | Sequence[Mapping[str, Any]],
+    truth: xr.Dataset | None = None,
+    *,
+    path: PathLike | None = None,
+) -> Any:
+    """Scatter of mean (and 95th percentile) error against wall time, one point per result.
 
     Parameters
     ----------
-    rows : sequence of mappings
-        Each with ``method`` (str), ``seconds`` (s), ``mean`` and ``p95`` (mm).
+    results : mapping of str to xarray.Dataset, or sequence of mappings
+        Method name → tracked result (``tracked/1`` from :func:`harpx.tracking.track.track`
+        or conventional HARP's result with ``displacement_grid``): its error against
+        ``truth`` (:func:`harpx.tracking.results.tracking_error`, frames after the first)
+        and the run time it records (:func:`run_seconds`: the tracker's ``time_total``,
+        HARP's summed ``wall_time``; phase extraction, shared by both, is not included).
+        Or precomputed rows, each with ``method`` (str), ``seconds`` (s), ``mean`` and
+        ``p95`` (mm).
+    truth : xarray.Dataset, optional
+        Dataset with ``displacement_true`` (a synthetic ``tagged/1`` scene); needed with
+        datasets.
     path : path-like, optional
         Write the figure here (PNG).
 
     Returns
     -------
     matplotlib.figure.Figure
+
+    Raises
+    ------
+    TypeError
+        If datasets come without ``truth``, or a result is not a dataset.
+    SchemaError
+        If a result records no run time (:func:`run_seconds`).
     """
-    rows = list(rows)
+    rows = _runtime_rows(results, truth)
     # the legend sits below the axes (one line per row) so it never hides a point
     fig, ax = plt.subplots(figsize=(6.5, 3.8 + 0.2 * len(rows)), layout="constrained")
     for row in rows:

@@ -42,7 +42,10 @@ class Timings:
     interpolation, ``prediction`` picks each frame's starting guess, ``blur`` predicts and
     removes the band-pass blur between passes (:mod:`harpx.tracking.blur`) and ``output``
     builds the ``tracked/1`` dataset (strain, resampling onto the image grid). Parts that
-    repeat in every pass add up.
+    repeat in every pass add up. By stage: ``first_pass`` and ``correction_pass`` are the
+    frames 1… of the first pass and of the blur-correction passes (each frame's
+    preparation, prediction and Gauss–Newton solves), and ``total`` the whole call, from
+    the phase images to the returned dataset.
     """
 
     sampling: float = 0.0
@@ -54,6 +57,9 @@ class Timings:
     prediction: float = 0.0
     blur: float = 0.0
     output: float = 0.0
+    first_pass: float = 0.0
+    correction_pass: float = 0.0
+    total: float = 0.0
 
     def as_attrs(self) -> dict[str, float]:
         """The timings as dataset attributes (``time_sampling`` …), s."""

@@ -50,13 +50,23 @@ def test_tracked_dataset_follows_the_schema(tracked):
     np.testing.assert_array_equal(tracked.displacement.isel(time=0).values, 0.0)
 
 
+STAGES = ("time_phase", "time_setup", "time_first_pass", "time_blur", "time_correction_pass",
+          "time_output")  # fmt: skip
+
+
 def test_time_split_accounts_for_the_whole_run(tracked):
-    parts = {k: v for k, v in tracked.attrs.items() if k.startswith("time_")}
+    times = {k: v for k, v in tracked.attrs.items() if k.startswith("time_")}
+    parts = {k: v for k, v in times.items()
+             if k not in ("time_first_pass", "time_correction_pass", "time_total")}  # fmt: skip
     assert set(parts) >= {"time_sampling", "time_assembly", "time_solve", "time_prefilter"}
     # the per-frame wall times cover set-up and frames; phase validation and output lie
     # outside them. Timer reads between the parts cost microseconds: 2 % + 10 ms of slack
     total = float(tracked.wall_time.sum()) + parts["time_phase"] + parts["time_output"]
     assert abs(sum(parts.values()) - total) <= 0.02 * total + 0.01, (parts, total)
+    # the stages add up to the whole call (the same slack)
+    staged = sum(times[k] for k in STAGES)
+    assert abs(times["time_total"] - staged) <= 0.02 * staged + 0.01, times
+    assert times["time_correction_pass"] == 0.0  # a user-given epsilon: no correction pass
 
 
 def test_penalty_reaches_epsilon_every_frame(tracked):

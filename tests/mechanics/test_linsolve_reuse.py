@@ -1,0 +1,55 @@
+"""PARDISO solves nearby matrices with the factorisation of an earlier one (``reuse``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import sparse
+
+from harpx.mechanics.linsolve import LinearSolver, available_methods
+
+pytestmark = pytest.mark.skipif(
+    "pardiso" not in available_methods(), reason="PARDISO (pypardiso) is not available"
+)
+
+
+def _laplacian(n: int, shift: float) -> sparse.csr_matrix:
+    """3D seven-point Laplacian plus ``shift`` on the diagonal (SPD), n³ unknowns."""
+    one = sparse.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n))
+    eye = sparse.identity(n)
+    lap = (sparse.kron(sparse.kron(one, eye), eye) + sparse.kron(sparse.kron(eye, one), eye)
+           + sparse.kron(sparse.kron(eye, eye), one))  # fmt: skip
+    return (lap + shift * sparse.identity(n**3)).tocsr()
+
+
+def test_nearby_matrices_are_solved_with_the_earlier_factorisation_to_the_accuracy_asked(rng):
+    b = rng.standard_normal(12**3)
+    solver = LinearSolver("pardiso", reuse=1e-8)
+    for k, shift in enumerate((0.10, 0.11, 0.12, 0.125)):  # a Newton-like drift
+        K = _laplacian(12, shift)
+        x = solver.solve(K, b)
+        exact = sparse.linalg.spsolve(K.tocsc(), b)
+        # CG preconditioned by an earlier factorisation, stopped at 1e-8: the error is that
+        # of the stopping rule (a factor 10 of slack for the conditioning), not of rounding
+        assert np.linalg.norm(x - exact) <= 1e-7 * np.linalg.norm(exact), k
+    assert solver.factorizations == 1
+    assert solver.reused == 3
+    assert 0 < solver.last_iterations <= solver.reuse_iterations
+
+
+def test_a_far_matrix_or_a_refresh_is_factorised_afresh(rng):
+    b = rng.standard_normal(10**3)
+    solver = LinearSolver("pardiso", reuse=1e-8, reuse_iterations=3)
+    solver.solve(_laplacian(10, 0.1), b)
+    x = solver.solve(_laplacian(10, 30.0), b)  # far: CG needs many iterations or fails
+    exact = sparse.linalg.spsolve(_laplacian(10, 30.0).tocsc(), b)
+    assert np.linalg.norm(x - exact) <= 1e-7 * np.linalg.norm(exact)
+    solver.refresh()
+    before = solver.factorizations
+    solver.solve(_laplacian(10, 30.0), b)
+    assert solver.factorizations == before + 1
+
+
+def test_reuse_out_of_range_is_named():
+    with pytest.raises(ValueError, match="reuse=2"):
+        LinearSolver("pardiso", reuse=2.0)
