@@ -1,12 +1,17 @@
-"""One slice of a dataset: tag image, harmonic phase, displacement, fibre stretch by region.
+"""One slice of an image dataset: tag image, harmonic phase, tracked displacement.
 
 Every map shows the frame and slice nearest the ones asked for and names them in its title;
 when they differ from what was asked, the title says so ("nearest slice to z = 0 mm"), and a
 slice more than half a slice spacing away (outside the data) also warns with
-:class:`~harpx.errors.HarpxWarning`. The harmonic phase is drawn only where the tissue is:
-where the harmonic magnitude exceeds half its typical value in the tissue (the band-pass
-blurs the tissue's edge into a ramp whose midpoint is the edge) and stands out of its noise
-(``harmonic_noise``), so the noise phase outside the tissue is not shown.
+:class:`~harpx.errors.HarpxWarning`.
+
+The harmonic phase is drawn only where the tissue is: where the harmonic magnitude exceeds
+half its typical value in the tissue (the band-pass blurs the tissue's edge into a ramp
+whose midpoint is the edge) and stands out of its noise (``harmonic_noise``), so the noise
+phase outside the tissue is not shown.
+
+Strain on a slice is in :mod:`harpx.plotting.strain`, fibre stretch by region in
+:mod:`harpx.plotting.regions`.
 """
 
 from __future__ import annotations
@@ -24,10 +29,9 @@ from harpx.plotting._common import (
     _slice_map,
     _where,
 )
-from harpx.plotting.regions import fiber_stretch_by_region
-from harpx.plotting.strain import strain_map
 
-__all__ = ["displacement_map", "fiber_stretch_by_region", "phase_map", "strain_map", "tag_image"]
+__all__ = ["NOISE_FRACTION", "TISSUE_EDGE", "TISSUE_NOISE_FACTOR", "displacement_map",
+           "phase_map", "tag_image"]  # fmt: skip
 
 #: Harmonic magnitude, in units of its noise standard deviation (``harmonic_noise``),
 #: that tissue must exceed: noise alone exceeds k σ with probability exp(-k²)
