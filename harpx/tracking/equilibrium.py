@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from concurrent.futures import Executor, Future
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -126,15 +127,24 @@ def _admissible_step(
     max_halvings: int,
     iteration: int,
     history: list[float],
-) -> tuple[FloatArray, Any, float]:
-    """The step ``u + alpha du``, halved until no element inverts."""
-    for _ in range(max_halvings + 1):
+    executor: Executor | None = None,
+) -> tuple[FloatArray, Any, float, Future[ConstraintState] | None]:
+    """The step ``u + alpha du``, halved until no element inverts.
+
+    With an ``executor`` the constraint state at the first trial is sampled on it while the
+    internal forces are assembled here (image sampling and assembly do not depend on each
+    other); its future is returned when that trial is taken, else None.
+    """
+    for halving in range(max_halvings + 1):
         trial = u + alpha * du
         if seen is not None:
             trial = seen.remove_unseen(trial)
+        pending = executor.submit(constraint.state, trial) if executor and not halving else None
         internal_trial = internal_forces(body, trial, pressure_stiffness=False)
         if internal_trial.r is not None:
-            return trial, internal_trial, alpha
+            return trial, internal_trial, alpha, pending
+        if pending is not None and not pending.cancel():
+            pending.result()  # an inverting trial: its samples are not needed
         alpha *= 0.5
     raise ElementInversionError(
         f"Gauss-Newton step {iteration} of frame {constraint.frame} inverts cells "
@@ -162,6 +172,7 @@ def equilibrate(
     timings: Timings | None = None,
     start: EquilibriumResult | None = None,
     tuning: SolverTuning | None = None,
+    executor: Executor | None = None,
 ) -> EquilibriumResult:
     """Solve for equilibrium at the constraint's current penalty and multipliers.
 
@@ -204,6 +215,12 @@ def equilibrate(
     tuning : SolverTuning, optional
         Damping of cycling iterations and the geometric stopping bound; the defaults of
         :class:`~harpx.tracking.settings.SolverTuning` if omitted.
+    executor : concurrent.futures.Executor, optional
+        A worker (one thread suffices) that samples the images at each trial step while
+        this thread assembles the internal forces there: the two are independent and
+        release the interpreter for most of their time, so on two cores they overlap. The
+        iterates are the same either way. ``timings.sampling`` then counts only the time
+        spent waiting for the samples after the assembly.
 
     Returns
     -------
@@ -240,11 +257,14 @@ def equilibrate(
         internal = start.internal
     else:
         tic = time.perf_counter()
-        result = EquilibriumResult(u, constraint.state(u), 0)
-        clock.sampling += time.perf_counter() - tic
-        tic = time.perf_counter()
+        pending = executor.submit(constraint.state, u) if executor is not None else None
         internal = internal_forces(body, u, pressure_stiffness=False)
         clock.assembly += time.perf_counter() - tic
+        tic = time.perf_counter()
+        result = EquilibriumResult(
+            u, constraint.state(u) if pending is None else pending.result(), 0
+        )
+        clock.sampling += time.perf_counter() - tic
     if internal.r is None:
         raise ElementInversionError(
             f"the starting displacement of frame {constraint.frame} inverts cells "
@@ -286,12 +306,13 @@ def equilibrate(
             # are what carry a point past a wrap into the right tag basin)
             damping *= 0.5
         alpha *= damping
-        trial, internal_trial, alpha = _admissible_step(
-            body, constraint, u, du, alpha, seen, max_halvings, iteration, result.step_norms
-        )
+        trial, internal_trial, alpha, pending = _admissible_step(
+            body, constraint, u, du, alpha, seen, max_halvings, iteration, result.step_norms,
+            executor,
+        )  # fmt: skip
         clock.assembly += time.perf_counter() - tic
         tic = time.perf_counter()
-        state_trial = constraint.state(trial)
+        state_trial = constraint.state(trial) if pending is None else pending.result()
         clock.sampling += time.perf_counter() - tic
         u = trial
         internal = internal_trial

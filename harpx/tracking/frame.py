@@ -10,6 +10,7 @@ targeted at the frame, the loads, the linear solver, the settings and the timing
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,6 +44,9 @@ class FrameProblem:
     offset : ndarray, shape (ndof,), optional
         Constant force added to the residual (minus the previous frame's mechanical force
         when only the increment is regularised), mN.
+    executor : concurrent.futures.Executor, optional
+        A worker that samples the images while the solves assemble
+        (:func:`~harpx.tracking.equilibrium.equilibrate`); None: one thread does both.
     """
 
     body: Any
@@ -53,6 +57,7 @@ class FrameProblem:
     terms: Sequence[Any] = ()
     timings: Timings = field(default_factory=Timings)
     offset: FloatArray | None = None
+    executor: Executor | None = None
 
     def solve(
         self, u: FloatArray, max_iterations: int, start: EquilibriumResult | None = None
@@ -75,6 +80,7 @@ class FrameProblem:
             timings=self.timings,
             start=start,
             tuning=self.settings.tuning,
+            executor=self.executor,
         )
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import time as _time
 import warnings
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -268,24 +269,28 @@ def track(
     seen = constraint.observe(fixed)
     _warn_unseen(constraint)
     solver = LinearSolver(settings.linear_solver, reuse=_SOLVE_REUSE)
-    problem = FrameProblem(body, constraint, settings, solver, dirichlet, terms, timings)
-    result = _track_frames(problem, phase, setup_start)
-    wall = result.wall.copy()  # per frame, over every pass
-    timings.first_pass = float(wall[1:].sum())
-    pass_iterations = [int(result.iterations.sum())]
-    correction_mean = np.zeros(phase.sizes["time"])
-    passes = settings.effective_blur_passes if phase.attrs.get("bandpass") == "disk" else 0
-    for _ in range(passes):
-        clock = _time.perf_counter()
-        correction = blur_correction(phase, body, result.U)
-        corrected = deblurred(phase, correction)
-        constraint.replace_images(corrected)  # frame 0 is uncorrected: its samples stay
-        correction_mean = _mean_correction(correction)
-        timings.blur += _time.perf_counter() - clock
-        result = _track_frames(problem, corrected, _time.perf_counter(), result)
-        wall[1:] += result.wall[1:]
-        timings.correction_pass += float(result.wall[1:].sum())
-        pass_iterations.append(int(result.iterations.sum()))
+    # one worker samples the images at each trial step while the solve assembles there
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="harpx-sampling") as pool:
+        problem = FrameProblem(body, constraint, settings, solver, dirichlet, terms, timings,
+                               executor=pool)  # fmt: skip
+        result = _track_frames(problem, phase, setup_start)
+        wall = result.wall.copy()  # per frame, over every pass
+        timings.first_pass = float(wall[1:].sum())
+        pass_iterations = [int(result.iterations.sum())]
+        correction_mean = np.zeros(phase.sizes["time"])
+        passes = settings.effective_blur_passes if phase.attrs.get("bandpass") == "disk" else 0
+        for _ in range(passes):
+            clock = _time.perf_counter()
+            correction = blur_correction(phase, body, result.U)
+            corrected = deblurred(phase, correction)
+            constraint.replace_images(corrected)  # frame 0 is uncorrected: its samples stay
+            correction_mean = _mean_correction(correction)
+            del correction, corrected  # grid-sized: the constraint holds what it needs
+            timings.blur += _time.perf_counter() - clock
+            result = _track_frames(problem, constraint.phase, _time.perf_counter(), result)
+            wall[1:] += result.wall[1:]
+            timings.correction_pass += float(result.wall[1:].sum())
+            pass_iterations.append(int(result.iterations.sum()))
     wall[0] = timings.setup + timings.blur  # frame 0: every pass's set-up and the corrections
     _warn_frames(phase, result.reached, result.converged, result.eps, result.target, result.floor)
     clock = _time.perf_counter()
