@@ -23,6 +23,7 @@
 from __future__ import annotations
 
 import copy
+import ctypes
 import functools
 from typing import Any, Literal
 
@@ -130,6 +131,11 @@ class LinearSolver:
     reuse_iterations : int, default 15
         With ``reuse``: a reuse that needed more iterations than this makes the next solve
         factorise its matrix.
+    threads : int, optional
+        PARDISO only: threads of each call (MKL's thread-local setting, restored after the
+        call), e.g. 1 where another thread of the caller keeps the other cores busy, or
+        on a machine shared with other jobs, where spinning OpenMP threads wait for cores.
+        None (default): MKL's own setting.
 
     Attributes
     ----------
@@ -151,6 +157,7 @@ class LinearSolver:
         maxiter: int = 500,
         reuse: float | None = None,
         reuse_iterations: int = 15,
+        threads: int | None = None,
     ) -> None:
         if method not in METHODS:
             raise ValueError(f"linear_solver={method!r} is not one of {METHODS!r}")
@@ -173,6 +180,9 @@ class LinearSolver:
             raise ValueError(f"reuse={reuse!r} must be a relative accuracy in (0, 1), or None")
         if reuse_iterations < 1:
             raise ValueError(f"reuse_iterations={reuse_iterations!r} must be at least 1")
+        if threads is not None and threads < 1:
+            raise ValueError(f"threads={threads!r} must be at least 1, or None")
+        self.threads = threads
         # PARDISO's iparm(4) = 10 L + K: stop at 10^-L, K = 2 CG (symmetric), 1 CGS
         self._reuse_digits = 0 if reuse is None else max(1, round(-np.log10(reuse)))
         self.reuse_iterations = int(reuse_iterations)
@@ -251,7 +261,17 @@ class LinearSolver:
             self.analyses += 1
         reuse = self._reuse_digits > 0 and not (new_pattern or self._fresh)
         solver.iparm[3] = 10 * self._reuse_digits + (2 if symmetric else 1) if reuse else 0
-        x = self._call(solver, data, indptr, indices, np.asfortranarray(b, dtype=np.float64))
+        rhs = np.asfortranarray(b, dtype=np.float64)
+        if self.threads is None:
+            x = self._call(solver, data, indptr, indices, rhs)
+        else:
+            local = solver.libmkl.MKL_Set_Num_Threads_Local  # this thread's setting only
+            local.restype, local.argtypes = ctypes.c_int, [ctypes.c_int]
+            previous = local(self.threads)
+            try:
+                x = self._call(solver, data, indptr, indices, rhs)
+            finally:
+                local(previous)  # 0: back to MKL's global setting
         # iparm(20): > 0 iterations of a successful reuse; < 0 it failed and PARDISO
         # factorised instead; 0 no reuse was tried
         iterations = int(solver.iparm[19]) if reuse else 0
@@ -268,8 +288,6 @@ class LinearSolver:
     def _call(
         solver: Any, data: FloatArray, indptr: Any, indices: Any, b: FloatArray
     ) -> FloatArray:
-        import ctypes
-
         x = np.zeros_like(b)
         err = ctypes.c_int32(0)
         i32 = ctypes.POINTER(ctypes.c_int32)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import time as _time
 import warnings
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Executor, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -62,6 +62,7 @@ def _predict(
     last: np.ndarray,
     before: np.ndarray,
     tuning: SolverTuning,
+    executor: Executor | None = None,
 ) -> np.ndarray:
     """Start of a frame: u(n−1) + α (u(n−1) − u(n−2)), the steady motion first.
 
@@ -70,18 +71,26 @@ def _predict(
     ``tuning.predictor_margin`` (relative): wrapped phase repeats every tag period, so
     starts a quarter period short of and beyond the motion have the same residual, and such
     a tie carries no information. With no admissible factor the frame starts from u(n−1).
+    With an ``executor`` the candidates' phase residuals are sampled on it while the mesh
+    checks run here.
     """
     step = last - before
+    alphas = sorted(set(tuning.predictor_factors), reverse=True)
+    guesses = [last + alpha * step for alpha in alphas]
+    # one image sampling per candidate, on the worker while the fold checks run here
+    pending = [executor.submit(constraint.epsilon_at, g) for g in guesses] if executor else None
     best, best_eps = last, np.inf
     chosen = False
-    for alpha in sorted(set(tuning.predictor_factors), reverse=True):
-        guess = last + alpha * step
+    for k, (alpha, guess) in enumerate(zip(alphas, guesses, strict=True)):
         if alpha and internal_forces(body, guess, tangent=False).r is None:
             continue  # folds the mesh (or overstretches it): not a candidate
-        eps = constraint.epsilon_at(guess)  # one image sampling per candidate
+        eps = constraint.epsilon_at(guess) if pending is None else pending[k].result()
         eps = eps if np.isfinite(eps) else np.inf
         if not chosen or eps < (1.0 - tuning.predictor_margin) * best_eps:
             best, best_eps, chosen = guess, eps, True
+    for job in pending or ():  # a folding candidate's sample: wait for it, then drop it
+        if not job.cancel():
+            job.result()
     return best
 
 
@@ -268,7 +277,8 @@ def track(
     fixed, _ = split_dirichlet(body, dirichlet)
     seen = constraint.observe(fixed)
     _warn_unseen(constraint)
-    solver = LinearSolver(settings.linear_solver, reuse=_SOLVE_REUSE)
+    # one PARDISO thread: the other core samples the images (the worker below)
+    solver = LinearSolver(settings.linear_solver, reuse=_SOLVE_REUSE, threads=1)
     # one worker samples the images at each trial step while the solve assembles there
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="harpx-sampling") as pool:
         problem = FrameProblem(body, constraint, settings, solver, dirichlet, terms, timings,
@@ -401,7 +411,7 @@ def _track_frames(
         if earlier is not None:
             u0, lam = earlier.U[n], max(settings.penalty, float(earlier.penalty[n]))
         elif settings.predictor == "linear" and n >= 2:
-            u0 = _predict(body, constraint, U[n - 1], U[n - 2], settings.tuning)
+            u0 = _predict(body, constraint, U[n - 1], U[n - 2], settings.tuning, problem.executor)
         if settings.regularization == "increment":
             problem.offset = -_mechanical_force(body, U[n - 1], terms)
         out.floor[n] = constraint.epsilon_floor(u0)

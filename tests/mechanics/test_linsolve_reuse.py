@@ -53,3 +53,20 @@ def test_a_far_matrix_or_a_refresh_is_factorised_afresh(rng):
 def test_reuse_out_of_range_is_named():
     with pytest.raises(ValueError, match="reuse=2"):
         LinearSolver("pardiso", reuse=2.0)
+
+
+def test_a_thread_count_applies_to_the_call_and_leaves_mkls_setting_as_it_was(rng):
+    import ctypes
+
+    b = rng.standard_normal(8**3)
+    solver = LinearSolver("pardiso", threads=1)
+    K = _laplacian(8, 0.2)
+    x = solver.solve(K, b)
+    assert np.linalg.norm(K @ x - b) <= 1e-10 * np.linalg.norm(b)
+    threads = solver._pardiso.libmkl.MKL_Get_Max_Threads
+    threads.restype = ctypes.c_int
+    before = threads()
+    solver.solve(K, b)
+    assert threads() == before
+    with pytest.raises(ValueError, match="threads=0"):
+        LinearSolver("pardiso", threads=0)
