@@ -130,6 +130,8 @@ def run(case: str) -> dict[str, Any]:
         "p95": round(float(err.p95_all), 5),
         "max": round(float(err.max_all), 4),
     }
+    if "constraint_points" in out.attrs:
+        row["points"] = int(out.attrs["constraint_points"])
     if "iterations_per_pass" in out.attrs:
         row["iterations"] = [int(i) for i in np.atleast_1d(out.attrs["iterations_per_pass"])]
     row.update({k: float(v) for k, v in out.attrs.items() if k.startswith("time_")})

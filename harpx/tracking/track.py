@@ -44,6 +44,11 @@ STRATEGIES = {"penalty": track_frame_penalty, "augmented-lagrangian": track_fram
 #: earlier one (PARDISO; :class:`~harpx.mechanics.linsolve.LinearSolver` ``reuse``): far below
 #: the step tolerance, so the iterates are those of exact solves to rounding.
 _SOLVE_REUSE = 1e-8
+#: Constraint points from which a worker thread samples the images while the solve
+#: assembles (:func:`~harpx.tracking.equilibrium.equilibrate`): below this the arrays are
+#: small, the two threads mostly wait for the interpreter lock, and one thread is faster
+#: (measured in benchmarks/results/tracking_speed.md).
+_OVERLAP_POINTS = 50_000
 
 
 def _as_phase(ds: xr.Dataset) -> xr.Dataset:
@@ -281,8 +286,9 @@ def track(
     solver = LinearSolver(settings.linear_solver, reuse=_SOLVE_REUSE, threads=1)
     # one worker samples the images at each trial step while the solve assembles there
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="harpx-sampling") as pool:
+        overlap = constraint.points.shape[0] >= _OVERLAP_POINTS
         problem = FrameProblem(body, constraint, settings, solver, dirichlet, terms, timings,
-                               executor=pool)  # fmt: skip
+                               executor=pool if overlap else None)  # fmt: skip
         result = _track_frames(problem, phase, setup_start)
         wall = result.wall.copy()  # per frame, over every pass
         timings.first_pass = float(wall[1:].sum())
