@@ -262,16 +262,15 @@ class LinearSolver:
         reuse = self._reuse_digits > 0 and not (new_pattern or self._fresh)
         solver.iparm[3] = 10 * self._reuse_digits + (2 if symmetric else 1) if reuse else 0
         rhs = np.asfortranarray(b, dtype=np.float64)
-        if self.threads is None:
-            x = self._call(solver, data, indptr, indices, rhs)
-        else:
-            local = solver.libmkl.MKL_Set_Num_Threads_Local  # this thread's setting only
-            local.restype, local.argtypes = ctypes.c_int, [ctypes.c_int]
-            previous = local(self.threads)
-            try:
-                x = self._call(solver, data, indptr, indices, rhs)
-            finally:
-                local(previous)  # 0: back to MKL's global setting
+        try:
+            x = self._threaded_call(solver, data, indptr, indices, rhs)
+        except ConvergenceError:
+            if not reuse:
+                raise
+            # CG's fallback factorisation refuses a singular matrix (e.g. a frame without
+            # data leaves rigid modes free) that a plain one perturbs its pivots for
+            solver.iparm[3], reuse = 0, False
+            x = self._threaded_call(solver, data, indptr, indices, rhs)
         # iparm(20): > 0 iterations of a successful reuse; < 0 it failed and PARDISO
         # factorised instead; 0 no reuse was tried
         iterations = int(solver.iparm[19]) if reuse else 0
@@ -283,6 +282,20 @@ class LinearSolver:
             self.factorizations += 1
             self._fresh = False
         return x
+
+    def _threaded_call(
+        self, solver: Any, data: FloatArray, indptr: Any, indices: Any, b: FloatArray
+    ) -> FloatArray:
+        """:meth:`_call` on ``threads`` threads (MKL's setting for this thread, restored)."""
+        if self.threads is None:
+            return self._call(solver, data, indptr, indices, b)
+        local = solver.libmkl.MKL_Set_Num_Threads_Local
+        local.restype, local.argtypes = ctypes.c_int, [ctypes.c_int]
+        previous = local(self.threads)
+        try:
+            return self._call(solver, data, indptr, indices, b)
+        finally:
+            local(previous)  # 0: back to MKL's global setting
 
     @staticmethod
     def _call(
