@@ -298,10 +298,11 @@ def track(
         for _ in range(passes):
             clock = _time.perf_counter()
             correction = blur_correction(phase, body, result.U)
-            corrected = deblurred(phase, correction)
-            constraint.replace_images(corrected)  # frame 0 is uncorrected: its samples stay
             correction_mean = _mean_correction(correction)
-            del correction, corrected  # grid-sized: the constraint holds what it needs
+            corrected = deblurred(phase, correction)
+            del correction  # grid-sized: freed before the images are swapped
+            constraint.replace_images(corrected)  # frame 0 is uncorrected: its samples stay
+            del corrected  # the constraint holds it
             timings.blur += _time.perf_counter() - clock
             result = _track_frames(problem, constraint.phase, _time.perf_counter(), result)
             wall[1:] += result.wall[1:]
