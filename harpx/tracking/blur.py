@@ -80,6 +80,7 @@ from scipy import sparse
 
 from harpx._typing import FloatArray
 from harpx.imaging.fft import get_plan
+from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.imaging.sample import wrap
 from harpx.schema import GRID_DIMS
 from harpx.tracking.resample import interpolate_displacement
@@ -186,7 +187,7 @@ def _disk(phase: xr.Dataset, tag: Any, shape: tuple[int, ...], spacing: FloatArr
     plane = [a for a, d in enumerate(GRID_DIMS) if d != normal]
     d1, d2 = (float(one["tag_direction"].sel(axis=GRID_DIMS[a])) for a in plane)
     f_plane = float(one["tag_frequency"]) * float(np.hypot(d1, d2))
-    radius = float(phase.attrs["radius"]) * f_plane
+    radius = PhaseParameters.from_dataset(phase).radius * f_plane
     nu = [np.fft.fftfreq(shape[a], spacing[a]) for a in plane]
     disk = (nu[0][:, None] ** 2 + nu[1][None, :] ** 2) <= radius**2
     return disk, GRID_DIMS.index(normal)
