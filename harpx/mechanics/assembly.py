@@ -447,7 +447,12 @@ def cauchy_stress(body: Body, u: ArrayLike) -> FloatArray:
 
 
 def internal_forces(
-    body: Body, u: ArrayLike, *, tangent: bool = True, pressure_stiffness: bool = True
+    body: Body,
+    u: ArrayLike,
+    *,
+    tangent: bool = True,
+    pressure_stiffness: bool = True,
+    tangent_jacobian: ArrayLike | None = None,
 ) -> Internal:
     """Internal force vector and consistent tangent of the body's stored energy.
 
@@ -466,6 +471,13 @@ def internal_forces(
         incompressible body (κ ≫ C1) can carry pressures p ≫ μ after a large step, which make
         the consistent tangent indefinite; without that term the tangent stays positive on
         the isochoric modes and the next step restores the volume instead of diverging.
+    tangent_jacobian : array_like, shape (ncell, nqp), optional
+        Gauss-point values that stand in for ``det F`` when the dilatation of the
+        *tangent's* volumetric terms (pressure stiffness, condensed or pointwise ``U''``
+        block) is formed -- projected, vertex-averaged or pointwise as the body's
+        formulation; the residual and the kinematics keep ``u``'s own ``det F``. Newton
+        (:mod:`harpx.mechanics.newton`) passes the linearised ``J + cof F : Grad δu`` of
+        the previous iterate: the dilatation a three-field u--p--θ iteration carries.
 
     Returns
     -------
@@ -499,6 +511,10 @@ def internal_forces(
             P, A = material_response(body, F, tangent=tangent)
         p, cof, J, extra = _volumetric(body, F, (Jq, cof))
         P = P + p[..., None, None] * cof
+        if tangent and tangent_jacobian is not None:
+            # pressure and volumetric stiffness of the tangent from the stand-in dilatation
+            Jt = np.asarray(tangent_jacobian, dtype=np.float64)
+            p, _, _, extra = _volumetric(body, F, (Jt, cof))
     # an exponential law (Guccione) overflows at extreme strain before det F reaches 0: such
     # a state is as inadmissible as an inverted one (the caller halves its step)
     with np.errstate(over="ignore", invalid="ignore"):  # inf - inf is the point of the test

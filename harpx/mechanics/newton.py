@@ -5,9 +5,9 @@ r"""Total-Lagrangian Newton--Raphson with line search and automatic step cut-bac
 from a given displacement (the tracking loop calls it repeatedly with changing constraint
 penalties).
 
-At each iterate :math:`u_k` the residual :math:`R = f_{int} - f_{ext}` and the consistent
-tangent :math:`K = \partial R/\partial u` are assembled (``assembly.internal_forces`` plus
-every load term's ``residual_tangent``). Dirichlet dofs :math:`D` are eliminated on the fixed
+At each iterate :math:`u_k` the residual :math:`R = f_{int} - f_{ext}` and the tangent
+:math:`K` are assembled (``assembly.internal_forces`` plus every load term's
+``residual_tangent``). Dirichlet dofs :math:`D` are eliminated on the fixed
 sparsity pattern (rows and columns zeroed, a diagonal of typical size): with the remaining
 prescribed increment :math:`\Delta g = g(s) - u_D`,
 
@@ -37,6 +37,45 @@ the load increment, at most ``max_cutbacks`` times in a row
 and never below ``1/(steps · 2**max_cutbacks)`` (otherwise, near a limit point, a converged
 tiny step between failures would reset the count and the load factor would creep towards it
 forever); after a converged step the increment doubles again up to ``1/steps``.
+
+Volumetric tangent
+------------------
+The residual is always that of the body's displacement formulation, whose pressure is
+:math:`p = U'(\theta)` of the dilatation :math:`\theta = \Pi J(u)` (projected, vertex-averaged
+or pointwise, ``harpx.mechanics.assembly``). The tangent at the first iterate of a step is
+the consistent one. At a later iterate :math:`u_{k+1} = u_k + \alpha\,\delta u_k` the
+volumetric part of the tangent (the pressure's geometric stiffness
+:math:`(p/J)(\operatorname{cof}F \otimes \operatorname{cof}F - \operatorname{cof}F
+\,\overline{\otimes}\, \operatorname{cof}F)` and the :math:`U''` block) is formed at the
+dilatation the linearisation carries,
+
+.. math::
+
+    \theta_{k+1} = \Pi\big[J(u_k) + \alpha \operatorname{cof}F(u_k) : \operatorname{Grad}
+    \delta u_k\big],
+
+instead of at :math:`\Pi J(u_{k+1})` (``assembly.internal_forces``' ``tangent_jacobian``).
+This is the update of the dilatation in the Newton iteration of the three-field
+:math:`u`--:math:`p`--:math:`\theta` formulation, where :math:`\theta` and :math:`p` are
+unknowns condensed element by element (Simo, Taylor & Pister 1985; Simo & Taylor 1991): with
+the residual unchanged the iteration has the same solutions, and the tangent differs from the
+consistent one by :math:`O(\kappa\,|\operatorname{Grad}\delta u_k|^2)`, which vanishes
+quadratically as the iterates converge. What it removes is the pressure
+:math:`\kappa\,O(|\operatorname{Grad}\delta u_k|^2)` that the second-order volume error of
+a full linearised step puts into a nearly incompressible body (:math:`\kappa \gg \mu`):
+in the consistent tangent its geometric stiffness outweighs the isochoric stiffness and
+turns the next step away from the solution, so that the displacement-only Newton converges
+only from within a distance that shrinks like :math:`\mu/\kappa` (load increments cut back
+over and over, or a manual ramp of :math:`\kappa`). A linearised :math:`J` that is not
+positive at some Gauss point falls back to the iterate's own dilatation.
+
+References
+----------
+.. [1] Simo JC, Taylor RL, Pister KS. Variational and projection methods for the volume
+   constraint in finite deformation elasto-plasticity. Comput Methods Appl Mech Eng
+   51:177--208, 1985.
+.. [2] Simo JC, Taylor RL. Quasi-incompressible finite elasticity in principal stretches.
+   Continuum basis and numerical algorithms. Comput Methods Appl Mech Eng 85:273--310, 1991.
 """
 
 from __future__ import annotations
@@ -55,6 +94,7 @@ from harpx._progress import progress_bar
 from harpx._typing import FloatArray, IntArray
 from harpx.errors import ConvergenceError, ElementInversionError
 from harpx.mechanics.assembly import Pattern, internal_forces, sparsity
+from harpx.mechanics.kinematics import cofactor
 from harpx.mechanics.linsolve import LinearSolver, rigid_body_modes
 
 if TYPE_CHECKING:
@@ -160,6 +200,11 @@ class _Outcome:
 class _Newton:
     """Newton iterations for one body and load set (caches Dirichlet data and solver)."""
 
+    #: form the volumetric tangent at the dilatation carried by the linearisation (the
+    #: three-field iteration of the module notes); False: at the iterate's own dilatation
+    #: (the displacement-only Newton, kept for benchmarks/bench_newton.py)
+    carry_dilatation: bool = True
+
     def __init__(
         self,
         body: Body,
@@ -224,11 +269,13 @@ class _Newton:
             self._sym_cache[key] = bool(diff <= 1e-12 * max(abs(K).max(), 1e-300))
         return self._sym_cache[key]
 
-    def assemble(self, u: FloatArray, s: float) -> _Assembled:
+    def assemble(self, u: FloatArray, s: float, jacobian: FloatArray | None = None) -> _Assembled:
+        """Residual and tangent at ``u``; ``jacobian``: the stand-in ``det F`` of the
+        volumetric tangent (``assembly.internal_forces``' ``tangent_jacobian``)."""
         t0 = time.perf_counter()
         if self.t_max is not None:  # activation ramped with the loads: t_max(s) = s t_max
             self.body.t_max = s * self.t_max
-        internal = internal_forces(self.body, u, tangent=True)
+        internal = internal_forces(self.body, u, tangent=True, tangent_jacobian=jacobian)
         if internal.r is None or internal.K is None:
             self.time_assembly += time.perf_counter() - t0
             return _Assembled(None, None, True, internal.min_jacobian, internal.inverted_cells)
@@ -258,6 +305,17 @@ class _Newton:
                 data += np.bincount(pos, weights=coo.data, minlength=pat.nnz)
         self.time_assembly += time.perf_counter() - t0
         return _Assembled(R, data, symmetric, internal.min_jacobian, internal.inverted_cells)
+
+    def _jacobian_linearisation(
+        self, u: FloatArray, step: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """``det F(u)`` and its derivative ``cof F(u) : Grad step`` at the Gauss points."""
+        body = self.body
+        F = body.deformation_gradient(u)
+        cof = cofactor(F)
+        J = np.einsum("...j,...j->...", F[..., 0, :], cof[..., 0, :])
+        dF = body.deformation_gradient(step) - np.eye(3)
+        return J, np.einsum("eqij,eqij->eq", cof, dF)
 
     def _stalled(self, history: list[float]) -> bool:
         """No progress: the last ``k`` residuals never undercut the ``k`` before them."""
@@ -341,12 +399,17 @@ class _Newton:
                 return _Outcome(False, u, history, it, reason, min_jacobian=asm.min_jacobian)
             alpha = 1.0
             slope0 = dot_one_thread(step, RF)
+            # dilatation carried to u + α δu: J(u) + α cof F(u) : Grad δu at the Gauss points
+            lin = self._jacobian_linearisation(u, step) if self.carry_dilatation else None
             last_bad = asm.inverted
             accepted = None
             fallback = None
             for _ in range(self.max_backtracks + 1):
                 ut = u + alpha * step
-                trial = self.assemble(ut, s)
+                jt = None if lin is None else lin[0] + alpha * lin[1]
+                if jt is not None and not jt.min() > 0.0:
+                    jt = None  # not a volume ratio: the trial's own dilatation
+                trial = self.assemble(ut, s, jt)
                 if trial.R is None or not np.all(np.isfinite(trial.R)):
                     if trial.R is None:
                         last_bad = trial.inverted
