@@ -129,6 +129,7 @@ __all__ = [
     "first_piola",
     "cauchy_stress",
     "internal_forces",
+    "linearised_jacobian",
     "material_response",
     "sparsity",
 ]
@@ -420,6 +421,51 @@ def _volumetric(
     return p, cof, J, extra
 
 
+def _stand_in_volumetric(
+    body: Body, F: FloatArray, cof: FloatArray, Jt: ArrayLike, p: FloatArray, extra: dict
+) -> tuple[FloatArray, dict]:
+    """Pressure and tangent data of ``_volumetric`` at a stand-in ``det F`` (``Jt``), or the
+    given ``(p, extra)`` where its dilatation is not a volume ratio (not finite, or not
+    positive after the formulation's projection)."""
+    Jt = np.asarray(Jt, dtype=np.float64)
+    if Jt.shape != p.shape:
+        raise ValueError(
+            f"tangent_jacobian has shape {Jt.shape!r}; expected (ncell, nqp) = {p.shape!r}"
+        )
+    if not Jt.min() > 0.0:  # also NaN
+        return p, extra
+    pt, _, _, xt = _volumetric(body, F, (Jt, cof))
+    positive = "theta" not in xt or bool((xt["theta"] > 0.0).all())
+    checks = [pt, *(xt[k] for k in ("d2U", "Q", "nodal") if k in xt)]
+    if positive and all(np.isfinite(c).all() for c in checks):
+        return pt, xt
+    return p, extra
+
+
+def linearised_jacobian(body: Body, u: ArrayLike, step: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """``det F`` at ``u`` and its derivative along ``step`` at the Gauss points.
+
+    ``J(u + α step) = J + α dJ + O(α²)`` with ``dJ = cof F(u) : Grad step``: the
+    dilatation a linearised step carries (``internal_forces``' ``tangent_jacobian``).
+
+    Parameters
+    ----------
+    body : Body
+        The body.
+    u, step : array_like, shape (ndof,)
+        Displacement and its increment, mm.
+
+    Returns
+    -------
+    J, dJ : ndarray, shape (ncell, nqp)
+        Dimensionless.
+    """
+    J, cof = _det_cof(body.deformation_gradient(u))
+    ue = body.element_displacement(step)
+    dJ = np.einsum("eqiJ,eai,eqaJ->eq", cof, ue, body.grad_N, optimize=True)
+    return J, dJ
+
+
 def _det_cof(F: FloatArray) -> tuple[FloatArray, FloatArray]:
     cof = kinematics.cofactor(F)
     J = np.einsum("...j,...j->...", F[..., 0, :], cof[..., 0, :])
@@ -512,9 +558,10 @@ def internal_forces(
         p, cof, J, extra = _volumetric(body, F, (Jq, cof))
         P = P + p[..., None, None] * cof
         if tangent and tangent_jacobian is not None:
-            # pressure and volumetric stiffness of the tangent from the stand-in dilatation
-            Jt = np.asarray(tangent_jacobian, dtype=np.float64)
-            p, _, _, extra = _volumetric(body, F, (Jt, cof))
+            # pressure and volumetric stiffness of the tangent from the stand-in dilatation;
+            # one that is not a volume ratio (a projection not positive everywhere) leaves
+            # the tangent at u's own
+            p, extra = _stand_in_volumetric(body, F, cof, tangent_jacobian, p, extra)
     # an exponential law (Guccione) overflows at extreme strain before det F reaches 0: such
     # a state is as inadmissible as an inverted one (the caller halves its step)
     with np.errstate(over="ignore", invalid="ignore"):  # inf - inf is the point of the test

@@ -40,42 +40,30 @@ forever); after a converged step the increment doubles again up to ``1/steps``.
 
 Volumetric tangent
 ------------------
-The residual is always that of the body's displacement formulation, whose pressure is
-:math:`p = U'(\theta)` of the dilatation :math:`\theta = \Pi J(u)` (projected, vertex-averaged
-or pointwise, ``harpx.mechanics.assembly``). The tangent at the first iterate of a step is
-the consistent one. At a later iterate :math:`u_{k+1} = u_k + \alpha\,\delta u_k` the
-volumetric part of the tangent (the pressure's geometric stiffness
-:math:`(p/J)(\operatorname{cof}F \otimes \operatorname{cof}F - \operatorname{cof}F
-\,\overline{\otimes}\, \operatorname{cof}F)` and the :math:`U''` block) is formed at the
-dilatation the linearisation carries,
+The residual is always that of the body's displacement formulation, with the pressure
+:math:`p = U'(\theta)` of the dilatation :math:`\theta = \Pi J(u)` (projected,
+vertex-averaged or pointwise, ``harpx.mechanics.assembly``). The tangent at the first iterate
+of a step is the consistent one; at a later iterate :math:`u_{k+1} = u_k + \alpha\,\delta
+u_k` its volumetric part (the pressure's geometric stiffness and the :math:`U''` block) is
+formed at the dilatation the linearisation carries,
+:math:`\theta_{k+1} = \Pi[J(u_k) + \alpha \operatorname{cof}F(u_k) : \operatorname{Grad}
+\delta u_k]`, instead of at :math:`\Pi J(u_{k+1})` (``internal_forces``'
+``tangent_jacobian``; where that is not a positive volume ratio, at the iterate's own). This
+is how the dilatation is updated in Newton's iteration of the three-field
+:math:`u`--:math:`p`--:math:`\theta` formulation (Simo, Taylor & Pister 1985). With the
+residual unchanged the solutions are the same; the tangent differs from the consistent one
+by :math:`O(\kappa\,|\operatorname{Grad}\delta u_k|^2)`, which vanishes quadratically as
+the iterates converge, so the convergence stays quadratic. What it leaves out is the
+pressure :math:`\kappa\, O(|\operatorname{Grad}\delta u_k|^2)` that the second-order
+volume error of a full step puts into a nearly incompressible body (:math:`\kappa \gg
+\mu`): in the consistent tangent its geometric stiffness outweighs the isochoric stiffness
+and turns the next step away from the solution, so that the displacement-only Newton
+converges only from within a distance that shrinks like :math:`\mu/\kappa` (load
+increments cut back over and over, or a manual ramp of :math:`\kappa`).
 
-.. math::
-
-    \theta_{k+1} = \Pi\big[J(u_k) + \alpha \operatorname{cof}F(u_k) : \operatorname{Grad}
-    \delta u_k\big],
-
-instead of at :math:`\Pi J(u_{k+1})` (``assembly.internal_forces``' ``tangent_jacobian``).
-This is the update of the dilatation in the Newton iteration of the three-field
-:math:`u`--:math:`p`--:math:`\theta` formulation, where :math:`\theta` and :math:`p` are
-unknowns condensed element by element (Simo, Taylor & Pister 1985; Simo & Taylor 1991): with
-the residual unchanged the iteration has the same solutions, and the tangent differs from the
-consistent one by :math:`O(\kappa\,|\operatorname{Grad}\delta u_k|^2)`, which vanishes
-quadratically as the iterates converge. What it removes is the pressure
-:math:`\kappa\,O(|\operatorname{Grad}\delta u_k|^2)` that the second-order volume error of
-a full linearised step puts into a nearly incompressible body (:math:`\kappa \gg \mu`):
-in the consistent tangent its geometric stiffness outweighs the isochoric stiffness and
-turns the next step away from the solution, so that the displacement-only Newton converges
-only from within a distance that shrinks like :math:`\mu/\kappa` (load increments cut back
-over and over, or a manual ramp of :math:`\kappa`). A linearised :math:`J` that is not
-positive at some Gauss point falls back to the iterate's own dilatation.
-
-References
-----------
-.. [1] Simo JC, Taylor RL, Pister KS. Variational and projection methods for the volume
-   constraint in finite deformation elasto-plasticity. Comput Methods Appl Mech Eng
-   51:177--208, 1985.
-.. [2] Simo JC, Taylor RL. Quasi-incompressible finite elasticity in principal stretches.
-   Continuum basis and numerical algorithms. Comput Methods Appl Mech Eng 85:273--310, 1991.
+References: Simo JC, Taylor RL, Pister KS. Variational and projection methods for the volume
+constraint in finite deformation elasto-plasticity. Comput Methods Appl Mech Eng
+51:177--208, 1985.
 """
 
 from __future__ import annotations
@@ -93,8 +81,7 @@ from harpx._blas import dot_one_thread, norm_one_thread
 from harpx._progress import progress_bar
 from harpx._typing import FloatArray, IntArray
 from harpx.errors import ConvergenceError, ElementInversionError
-from harpx.mechanics.assembly import Pattern, internal_forces, sparsity
-from harpx.mechanics.kinematics import cofactor
+from harpx.mechanics.assembly import Pattern, internal_forces, linearised_jacobian, sparsity
 from harpx.mechanics.linsolve import LinearSolver, rigid_body_modes
 
 if TYPE_CHECKING:
@@ -306,17 +293,6 @@ class _Newton:
         self.time_assembly += time.perf_counter() - t0
         return _Assembled(R, data, symmetric, internal.min_jacobian, internal.inverted_cells)
 
-    def _jacobian_linearisation(
-        self, u: FloatArray, step: FloatArray
-    ) -> tuple[FloatArray, FloatArray]:
-        """``det F(u)`` and its derivative ``cof F(u) : Grad step`` at the Gauss points."""
-        body = self.body
-        F = body.deformation_gradient(u)
-        cof = cofactor(F)
-        J = np.einsum("...j,...j->...", F[..., 0, :], cof[..., 0, :])
-        dF = body.deformation_gradient(step) - np.eye(3)
-        return J, np.einsum("eqij,eqij->eq", cof, dF)
-
     def _stalled(self, history: list[float]) -> bool:
         """No progress: the last ``k`` residuals never undercut the ``k`` before them."""
         k = self.stall_iterations
@@ -400,16 +376,13 @@ class _Newton:
             alpha = 1.0
             slope0 = dot_one_thread(step, RF)
             # dilatation carried to u + α δu: J(u) + α cof F(u) : Grad δu at the Gauss points
-            lin = self._jacobian_linearisation(u, step) if self.carry_dilatation else None
+            lin = linearised_jacobian(body, u, step) if self.carry_dilatation else None
             last_bad = asm.inverted
             accepted = None
             fallback = None
             for _ in range(self.max_backtracks + 1):
                 ut = u + alpha * step
-                jt = None if lin is None else lin[0] + alpha * lin[1]
-                if jt is not None and not jt.min() > 0.0:
-                    jt = None  # not a volume ratio: the trial's own dilatation
-                trial = self.assemble(ut, s, jt)
+                trial = self.assemble(ut, s, None if lin is None else lin[0] + alpha * lin[1])
                 if trial.R is None or not np.all(np.isfinite(trial.R)):
                     if trial.R is None:
                         last_bad = trial.inverted

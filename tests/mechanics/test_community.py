@@ -4,6 +4,7 @@ rest)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from harpx.anatomy.ventricle import cavity_volume, ventricle
 from harpx.mechanics import Body, Fixed, Guccione, Pressure, box, solve
@@ -24,6 +25,7 @@ def test_land_beam_hex20_q2p1_matches_the_consensus():
     assert abs(z - 4.17) < 0.01 * 4.17
 
 
+@pytest.mark.slow  # ~4 s on a quiet machine (93 Newton iterations on 993 dofs)
 def test_land_inflation_nearly_incompressible_without_a_kappa_ladder():
     # Land et al. 2015 problem 2 on the coarsest ventricle of benchmarks/bench_community.py
     # (44 curved hex20 Q2/P1 cells): truncated ellipsoid (endo 7/17, epi 10/20 mm, base
