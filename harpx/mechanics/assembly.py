@@ -460,10 +460,17 @@ def linearised_jacobian(body: Body, u: ArrayLike, step: ArrayLike) -> tuple[Floa
     J, dJ : ndarray, shape (ncell, nqp)
         Dimensionless.
     """
-    J, cof = _det_cof(body.deformation_gradient(u))
-    ue = body.element_displacement(step)
-    dJ = np.einsum("eqiJ,eai,eqaJ->eq", cof, ue, body.grad_N, optimize=True)
+    J, cof = _det_cof(_gradient(body, u) + np.eye(3))
+    dJ = np.einsum("eqij,eqij->eq", cof, _gradient(body, step))
     return J, dJ
+
+
+def _gradient(body: Body, u: ArrayLike) -> FloatArray:
+    """``Grad u`` (ncell, nqp, 3, 3): one (3, nb) @ (nb, 3 nq) product per element."""
+    nel, nq = body.dV.shape
+    grads = body.cached("gradient_layouts", lambda: kernel.Gradients.of(body.grad_N))
+    ue = body.element_displacement(u)  # (e, a, i)
+    return np.matmul(np.swapaxes(ue, 1, 2), grads.Gn).reshape(nel, 3, nq, 3).transpose(0, 2, 1, 3)
 
 
 def _det_cof(F: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -534,10 +541,7 @@ def internal_forces(
     G = body.grad_N  # (e, q, a, J)
     nel, nq, nb, _ = G.shape
     grads = body.cached("gradient_layouts", lambda: kernel.Gradients.of(G))
-    # F_iJ = δ_iJ + Σ_a u_ai ∂_J N_a as one (3, nb) @ (nb, 3 nq) product per element
-    ue = body.element_displacement(u)  # (e, a, i)
-    F = np.matmul(np.swapaxes(ue, 1, 2), grads.Gn).reshape(nel, 3, nq, 3).transpose(0, 2, 1, 3)
-    F = F + np.eye(3)
+    F = _gradient(body, u) + np.eye(3)  # F_iJ = δ_iJ + Σ_a u_ai ∂_J N_a
     Jq, cof = _det_cof(F)
     min_j = float(Jq.min()) if Jq.size else 1.0
     bad = np.nonzero(~(Jq > 0.0).all(axis=1))[0]
