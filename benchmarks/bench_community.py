@@ -107,6 +107,11 @@ def _row(problem, label, quantity, value, ref, cells, dofs, seconds, res):
             f"| {cells} | {dofs} | {seconds:.1f} | {steps} |")  # fmt: skip
 
 
+def _newton(res):
+    """Newton's counts of a solve, printed beside its rows (not in the table)."""
+    return f"[{res.iterations} Newton iterations, {res.cutbacks} cut-backs]"
+
+
 def _at(body, u, points):
     """Displacement at reference points (mm); for curved hexahedra, which the point
     locator does not take, at the dof node on the point (the apices are vertices for
@@ -143,7 +148,7 @@ def beam(levels, elements):
             z = 1.0 + float(body.displacement_at(res.u, [10.0, 0.5, 1.0])[2])
             rows.append(_row("1 beam", label, "z(10, 0.5, 1)", z, BEAM_REF, body.ncell,
                              body.ndof, dt, res))  # fmt: skip
-            print(rows[-1], flush=True)
+            print(rows[-1], _newton(res), flush=True)
     return rows
 
 
@@ -191,7 +196,7 @@ def inflation(levels, elements):
                 z = z0 + float(apex[k, 2])
                 rows.append(_row("2 inflation", label, f"{name} apex z", z, APEX_REF[name][0],
                                  body.ncell, body.ndof, dt, res))  # fmt: skip
-                print(rows[-1], flush=True)
+                print(rows[-1], _newton(res), flush=True)
     return rows
 
 
@@ -229,7 +234,8 @@ def contraction(levels, elements):
                 ref = P3_REF.get(name, float("nan"))
                 rows.append(_row("3 contraction", label, name, float(value), ref, body.ncell,
                                  body.ndof, dt, res))  # fmt: skip
-                print(rows[-1], f"RuntimeWarnings seen by the caller: {leaked}", flush=True)
+                print(rows[-1], _newton(res), f"RuntimeWarnings seen by the caller: {leaked}",
+                      flush=True)  # fmt: skip
     return rows
 
 

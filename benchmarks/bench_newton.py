@@ -14,6 +14,20 @@ it converged, and wall time. Run the script on two revisions to compare them (e.
 Markdown table::
 
     python benchmarks/bench_newton.py --label after --out benchmarks/results/newton.md
+
+``--land`` runs instead Land et al. 2015 problem 2 (passive inflation of the truncated
+ellipsoid: endocardium rs = 7, rl = 17 mm, epicardium rs = 10, rl = 20 mm, base plane
+z = 5 mm; isotropic Guccione C = 10 kPa, bf = bt = bfs = 1, nearly incompressible
+κ = 10⁴ C; base fixed; 10 kPa follower pressure on the endocardium) on
+``ventricle(..., curved=True)`` with hex20 Q2/P1 (``volumetric="linear-dilatation"``) in
+one plain ``solve(steps=10)``, at the ventricle levels of ``benchmarks/bench_community.py``
+(``--land-levels 0 1 2``: 44, 320, 1116 cells). It reports, besides the counts, the deformed
+z of the endocardial and epicardial apex and the cavity volume
+(:func:`harpx.anatomy.ventricle.cavity_volume`). ``--land-solver before`` reproduces the
+displacement-only Newton (volumetric tangent at each iterate's own dilatation,
+``_Newton.carry_dilatation = False``) in the same revision::
+
+    python benchmarks/bench_newton.py --land --land-levels 1 --land-solver after before
 """
 
 from __future__ import annotations
@@ -72,12 +86,67 @@ def box_case() -> dict:
     }
 
 
+def _reasons(reasons: list[str]) -> str:
+    return ", ".join(f"{r} {reasons.count(r)}" for r in sorted(set(reasons))) or "-"
+
+
+LAND_LEVELS = [(8, 4, 1), (16, 8, 2), (24, 12, 3)]
+
+
+def land_case(level: tuple[int, int, int], solver: str) -> dict:
+    """Land et al. 2015 problem 2 at κ = 10⁴ C, curved hex20 Q2/P1, ``solve(steps=10)``."""
+    from harpx.anatomy.ventricle import cavity_volume, ventricle
+    from harpx.mechanics import Body, Fixed, Guccione, Pressure, solve
+    from harpx.mechanics.newton import _Newton
+
+    nc, nl, nt = level
+    spec = ventricle(inner=(7.0, 17.0), outer=(10.0, 20.0), truncation=5.0,
+                     n_circumferential=nc, n_longitudinal=nl, n_transmural=nt,
+                     segments=False, curved=True)  # fmt: skip
+    c = 10.0
+    body = Body(spec.mesh, Guccione(c=c, bf=1.0, bt=1.0, bfs=1.0, kappa=1e4 * c),
+                fibers=spec.fibers, element="hex20", volumetric="linear-dilatation",
+                boundaries=spec.boundaries, regions=spec.regions)  # fmt: skip
+    loads = [Fixed("base", (0, 1, 2)), Pressure("endo", 10.0)]
+    _Newton.carry_dilatation = solver == "after"
+    try:
+        t0 = time.perf_counter()
+        res = solve(body, loads, steps=10, raise_on_failure=False, progress=False)
+        wall = time.perf_counter() - t0
+    finally:
+        _Newton.carry_dilatation = True
+    # the apices are dof nodes (n_circumferential a multiple of 8)
+    apex = np.array([[0.0, 0.0, -17.0], [0.0, 0.0, -20.0]])
+    node = np.linalg.norm(body.dof_points[None] - apex[:, None], axis=-1).argmin(axis=1)
+    z = apex[:, 2] + body.nodal_displacement(res.u)[node, 2]
+    return {
+        "case": f"Land P2, {body.ncell} curved hex20 Q2/P1 ({body.ndof} dofs), κ = 1e4 C",
+        "converged": res.converged,
+        "iterations": res.iterations,
+        "cutbacks": res.cutbacks,
+        "steps": len(res.load_factors),
+        "wall": wall,
+        "reasons": _reasons(res.cutback_reasons),
+        "endo": float(z[0]),
+        "epi": float(z[1]),
+        "volume": cavity_volume(body, res.u),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--label", default="current")
     parser.add_argument("--steps", type=int, default=5)
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument("--land", action="store_true", help="Land problem 2 instead")
+    parser.add_argument("--land-levels", nargs="+", type=int, default=[1],
+                        help="ventricle levels (0 = coarsest)")  # fmt: skip
+    parser.add_argument("--land-solver", nargs="+", default=["after"],
+                        choices=["after", "before"])  # fmt: skip
     args = parser.parse_args()
+    if args.land:
+        _land(args)
+        return
     rows = [box_case(), ventricle_case(args.steps)]
     lines = []
     for r in rows:
@@ -91,6 +160,29 @@ def main() -> None:
     )
     print(header)
     print("\n".join(lines))
+    if args.out is not None:
+        with args.out.open("a") as fh:
+            fh.write("\n".join(lines) + "\n")
+
+
+def _land(args: argparse.Namespace) -> None:
+    header = (
+        "| solver | case | converged | iterations | cut-backs | why (cut-back) | accepted "
+        "steps | endo apex z (mm) | epi apex z (mm) | cavity volume (mm³) | wall (s) |\n"
+        + "|"
+        + " --- |" * 11
+    )
+    print(header, flush=True)
+    lines = []
+    for level in args.land_levels:
+        for solver in args.land_solver:
+            r = land_case(LAND_LEVELS[level], solver)
+            lines.append(
+                f"| {solver} ({args.label}) | {r['case']} | {r['converged']} | "
+                f"{r['iterations']} | {r['cutbacks']} | {r['reasons']} | {r['steps']} | "
+                f"{r['endo']:.5f} | {r['epi']:.5f} | {r['volume']:.3f} | {r['wall']:.1f} |"
+            )
+            print(lines[-1], flush=True)
     if args.out is not None:
         with args.out.open("a") as fh:
             fh.write("\n".join(lines) + "\n")

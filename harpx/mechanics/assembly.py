@@ -129,6 +129,7 @@ __all__ = [
     "first_piola",
     "cauchy_stress",
     "internal_forces",
+    "linearised_jacobian",
     "material_response",
     "sparsity",
 ]
@@ -420,6 +421,58 @@ def _volumetric(
     return p, cof, J, extra
 
 
+def _stand_in_volumetric(
+    body: Body, F: FloatArray, cof: FloatArray, Jt: ArrayLike, p: FloatArray, extra: dict
+) -> tuple[FloatArray, dict]:
+    """Pressure and tangent data of ``_volumetric`` at a stand-in ``det F`` (``Jt``), or the
+    given ``(p, extra)`` where its dilatation is not a volume ratio (not finite, or not
+    positive after the formulation's projection)."""
+    Jt = np.asarray(Jt, dtype=np.float64)
+    if Jt.shape != p.shape:
+        raise ValueError(
+            f"tangent_jacobian has shape {Jt.shape!r}; expected (ncell, nqp) = {p.shape!r}"
+        )
+    if not Jt.min() > 0.0:  # also NaN
+        return p, extra
+    pt, _, _, xt = _volumetric(body, F, (Jt, cof))
+    positive = "theta" not in xt or bool((xt["theta"] > 0.0).all())
+    checks = [pt, *(xt[k] for k in ("d2U", "Q", "nodal") if k in xt)]
+    if positive and all(np.isfinite(c).all() for c in checks):
+        return pt, xt
+    return p, extra
+
+
+def linearised_jacobian(body: Body, u: ArrayLike, step: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """``det F`` at ``u`` and its derivative along ``step`` at the Gauss points.
+
+    ``J(u + α step) = J + α dJ + O(α²)`` with ``dJ = cof F(u) : Grad step``: the
+    dilatation a linearised step carries (``internal_forces``' ``tangent_jacobian``).
+
+    Parameters
+    ----------
+    body : Body
+        The body.
+    u, step : array_like, shape (ndof,)
+        Displacement and its increment, mm.
+
+    Returns
+    -------
+    J, dJ : ndarray, shape (ncell, nqp)
+        Dimensionless.
+    """
+    J, cof = _det_cof(_gradient(body, u) + np.eye(3))
+    dJ = np.einsum("eqij,eqij->eq", cof, _gradient(body, step))
+    return J, dJ
+
+
+def _gradient(body: Body, u: ArrayLike) -> FloatArray:
+    """``Grad u`` (ncell, nqp, 3, 3): one (3, nb) @ (nb, 3 nq) product per element."""
+    nel, nq = body.dV.shape
+    grads = body.cached("gradient_layouts", lambda: kernel.Gradients.of(body.grad_N))
+    ue = body.element_displacement(u)  # (e, a, i)
+    return np.matmul(np.swapaxes(ue, 1, 2), grads.Gn).reshape(nel, 3, nq, 3).transpose(0, 2, 1, 3)
+
+
 def _det_cof(F: FloatArray) -> tuple[FloatArray, FloatArray]:
     cof = kinematics.cofactor(F)
     J = np.einsum("...j,...j->...", F[..., 0, :], cof[..., 0, :])
@@ -447,7 +500,12 @@ def cauchy_stress(body: Body, u: ArrayLike) -> FloatArray:
 
 
 def internal_forces(
-    body: Body, u: ArrayLike, *, tangent: bool = True, pressure_stiffness: bool = True
+    body: Body,
+    u: ArrayLike,
+    *,
+    tangent: bool = True,
+    pressure_stiffness: bool = True,
+    tangent_jacobian: ArrayLike | None = None,
 ) -> Internal:
     """Internal force vector and consistent tangent of the body's stored energy.
 
@@ -466,6 +524,13 @@ def internal_forces(
         incompressible body (κ ≫ C1) can carry pressures p ≫ μ after a large step, which make
         the consistent tangent indefinite; without that term the tangent stays positive on
         the isochoric modes and the next step restores the volume instead of diverging.
+    tangent_jacobian : array_like, shape (ncell, nqp), optional
+        Gauss-point values that stand in for ``det F`` when the dilatation of the
+        *tangent's* volumetric terms (pressure stiffness, condensed or pointwise ``U''``
+        block) is formed -- projected, vertex-averaged or pointwise as the body's
+        formulation; the residual and the kinematics keep ``u``'s own ``det F``. Newton
+        (:mod:`harpx.mechanics.newton`) passes the linearised ``J + cof F : Grad δu`` of
+        the previous iterate: the dilatation a three-field u--p--θ iteration carries.
 
     Returns
     -------
@@ -476,10 +541,7 @@ def internal_forces(
     G = body.grad_N  # (e, q, a, J)
     nel, nq, nb, _ = G.shape
     grads = body.cached("gradient_layouts", lambda: kernel.Gradients.of(G))
-    # F_iJ = δ_iJ + Σ_a u_ai ∂_J N_a as one (3, nb) @ (nb, 3 nq) product per element
-    ue = body.element_displacement(u)  # (e, a, i)
-    F = np.matmul(np.swapaxes(ue, 1, 2), grads.Gn).reshape(nel, 3, nq, 3).transpose(0, 2, 1, 3)
-    F = F + np.eye(3)
+    F = _gradient(body, u) + np.eye(3)  # F_iJ = δ_iJ + Σ_a u_ai ∂_J N_a
     Jq, cof = _det_cof(F)
     min_j = float(Jq.min()) if Jq.size else 1.0
     bad = np.nonzero(~(Jq > 0.0).all(axis=1))[0]
@@ -499,6 +561,11 @@ def internal_forces(
             P, A = material_response(body, F, tangent=tangent)
         p, cof, J, extra = _volumetric(body, F, (Jq, cof))
         P = P + p[..., None, None] * cof
+        if tangent and tangent_jacobian is not None:
+            # pressure and volumetric stiffness of the tangent from the stand-in dilatation;
+            # one that is not a volume ratio (a projection not positive everywhere) leaves
+            # the tangent at u's own
+            p, extra = _stand_in_volumetric(body, F, cof, tangent_jacobian, p, extra)
     # an exponential law (Guccione) overflows at extreme strain before det F reaches 0: such
     # a state is as inadmissible as an inverted one (the caller halves its step)
     with np.errstate(over="ignore", invalid="ignore"):  # inf - inf is the point of the test

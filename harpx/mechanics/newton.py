@@ -5,9 +5,9 @@ r"""Total-Lagrangian Newton--Raphson with line search and automatic step cut-bac
 from a given displacement (the tracking loop calls it repeatedly with changing constraint
 penalties).
 
-At each iterate :math:`u_k` the residual :math:`R = f_{int} - f_{ext}` and the consistent
-tangent :math:`K = \partial R/\partial u` are assembled (``assembly.internal_forces`` plus
-every load term's ``residual_tangent``). Dirichlet dofs :math:`D` are eliminated on the fixed
+At each iterate :math:`u_k` the residual :math:`R = f_{int} - f_{ext}` and the tangent
+:math:`K` are assembled (``assembly.internal_forces`` plus every load term's
+``residual_tangent``). Dirichlet dofs :math:`D` are eliminated on the fixed
 sparsity pattern (rows and columns zeroed, a diagonal of typical size): with the remaining
 prescribed increment :math:`\Delta g = g(s) - u_D`,
 
@@ -37,6 +37,33 @@ the load increment, at most ``max_cutbacks`` times in a row
 and never below ``1/(steps · 2**max_cutbacks)`` (otherwise, near a limit point, a converged
 tiny step between failures would reset the count and the load factor would creep towards it
 forever); after a converged step the increment doubles again up to ``1/steps``.
+
+Volumetric tangent
+------------------
+The residual is always that of the body's displacement formulation, with the pressure
+:math:`p = U'(\theta)` of the dilatation :math:`\theta = \Pi J(u)` (projected,
+vertex-averaged or pointwise, ``harpx.mechanics.assembly``). The tangent at the first iterate
+of a step is the consistent one; at a later iterate :math:`u_{k+1} = u_k + \alpha\,\delta
+u_k` its volumetric part (the pressure's geometric stiffness and the :math:`U''` block) is
+formed at the dilatation the linearisation carries,
+:math:`\theta_{k+1} = \Pi[J(u_k) + \alpha \operatorname{cof}F(u_k) : \operatorname{Grad}
+\delta u_k]`, instead of at :math:`\Pi J(u_{k+1})` (``internal_forces``'
+``tangent_jacobian``; where that is not a positive volume ratio, at the iterate's own). This
+is how the dilatation is updated in Newton's iteration of the three-field
+:math:`u`--:math:`p`--:math:`\theta` formulation (Simo, Taylor & Pister 1985). With the
+residual unchanged the solutions are the same; the tangent differs from the consistent one
+by :math:`O(\kappa\,|\operatorname{Grad}\delta u_k|^2)`, which vanishes quadratically as
+the iterates converge, so the convergence stays quadratic. What it leaves out is the
+pressure :math:`\kappa\, O(|\operatorname{Grad}\delta u_k|^2)` that the second-order
+volume error of a full step puts into a nearly incompressible body (:math:`\kappa \gg
+\mu`): in the consistent tangent its geometric stiffness outweighs the isochoric stiffness
+and turns the next step away from the solution, so that the displacement-only Newton
+converges only from within a distance that shrinks like :math:`\mu/\kappa` (load
+increments cut back over and over, or a manual ramp of :math:`\kappa`).
+
+References: Simo JC, Taylor RL, Pister KS. Variational and projection methods for the volume
+constraint in finite deformation elasto-plasticity. Comput Methods Appl Mech Eng
+51:177--208, 1985.
 """
 
 from __future__ import annotations
@@ -54,7 +81,7 @@ from harpx._blas import dot_one_thread, norm_one_thread
 from harpx._progress import progress_bar
 from harpx._typing import FloatArray, IntArray
 from harpx.errors import ConvergenceError, ElementInversionError
-from harpx.mechanics.assembly import Pattern, internal_forces, sparsity
+from harpx.mechanics.assembly import Pattern, internal_forces, linearised_jacobian, sparsity
 from harpx.mechanics.linsolve import LinearSolver, rigid_body_modes
 
 if TYPE_CHECKING:
@@ -160,6 +187,11 @@ class _Outcome:
 class _Newton:
     """Newton iterations for one body and load set (caches Dirichlet data and solver)."""
 
+    #: form the volumetric tangent at the dilatation carried by the linearisation (the
+    #: three-field iteration of the module notes); False: at the iterate's own dilatation
+    #: (the displacement-only Newton, kept for benchmarks/bench_newton.py)
+    carry_dilatation: bool = True
+
     def __init__(
         self,
         body: Body,
@@ -224,11 +256,13 @@ class _Newton:
             self._sym_cache[key] = bool(diff <= 1e-12 * max(abs(K).max(), 1e-300))
         return self._sym_cache[key]
 
-    def assemble(self, u: FloatArray, s: float) -> _Assembled:
+    def assemble(self, u: FloatArray, s: float, jacobian: FloatArray | None = None) -> _Assembled:
+        """Residual and tangent at ``u``; ``jacobian``: the stand-in ``det F`` of the
+        volumetric tangent (``assembly.internal_forces``' ``tangent_jacobian``)."""
         t0 = time.perf_counter()
         if self.t_max is not None:  # activation ramped with the loads: t_max(s) = s t_max
             self.body.t_max = s * self.t_max
-        internal = internal_forces(self.body, u, tangent=True)
+        internal = internal_forces(self.body, u, tangent=True, tangent_jacobian=jacobian)
         if internal.r is None or internal.K is None:
             self.time_assembly += time.perf_counter() - t0
             return _Assembled(None, None, True, internal.min_jacobian, internal.inverted_cells)
@@ -341,12 +375,14 @@ class _Newton:
                 return _Outcome(False, u, history, it, reason, min_jacobian=asm.min_jacobian)
             alpha = 1.0
             slope0 = dot_one_thread(step, RF)
+            # dilatation carried to u + α δu: J(u) + α cof F(u) : Grad δu at the Gauss points
+            lin = linearised_jacobian(body, u, step) if self.carry_dilatation else None
             last_bad = asm.inverted
             accepted = None
             fallback = None
             for _ in range(self.max_backtracks + 1):
                 ut = u + alpha * step
-                trial = self.assemble(ut, s)
+                trial = self.assemble(ut, s, None if lin is None else lin[0] + alpha * lin[1])
                 if trial.R is None or not np.all(np.isfinite(trial.R)):
                     if trial.R is None:
                         last_bad = trial.inverted

@@ -28,7 +28,13 @@ from harpx.mechanics import (
     equilibrate,
     solve,
 )
-from harpx.mechanics.assembly import cauchy_stress, first_piola, internal_forces
+from harpx.mechanics.assembly import (
+    _pressure_space,
+    cauchy_stress,
+    first_piola,
+    internal_forces,
+    linearised_jacobian,
+)
 from harpx.mechanics.linsolve import LinearSolver, available_methods
 from harpx.mechanics.mesh import tetrahedralize
 from harpx.mechanics.newton import _Newton
@@ -185,6 +191,101 @@ def test_newton_converges_quadratically():
         # e_k ≈ 1e-3..1e-6; linear convergence gives ≈ 1. Hence ≥ 1.7 and a bounded C.
         assert np.log(b) / np.log(a) >= 1.7, f"not quadratic: {e}"
         assert b / a**2 <= 50.0, f"not quadratic: {e}"
+
+
+# ----------------------------------------------------------------------------- volumetric tangent
+VOLUMETRIC = [("hex8", "mean-dilatation"), ("hex20", "linear-dilatation"), ("hex8", "pointwise"),
+              ("tet10", "nodal-dilatation")]  # fmt: skip
+
+
+def _strained(element, volumetric, rng):
+    spec = box((1.0, 1.0, 1.0), (2, 2, 2))
+    if element.startswith("tet"):
+        spec = tetrahedralize(spec)
+    body = Body(spec, NeoHookean(c1=C1, kappa=1e4 * C1), element=element, volumetric=volumetric)
+    u = (body.dof_points @ (0.05 * rng.standard_normal((3, 3))).T).ravel()
+    u += 0.01 * rng.standard_normal(body.ndof)
+    return body, u
+
+
+@pytest.mark.parametrize(("element", "volumetric"), VOLUMETRIC)
+def test_stand_in_dilatation_changes_only_the_volumetric_tangent(element, volumetric, rng):
+    body, u = _strained(element, volumetric, rng)
+    a = internal_forces(body, u)
+    # the iterate's own det F as the stand-in: the consistent tangent, to round-off
+    b = internal_forces(body, u, tangent_jacobian=body.jacobian(u))
+    np.testing.assert_array_equal(a.r, b.r)
+    np.testing.assert_allclose(b.K.data, a.K.data, rtol=0, atol=1e-12 * np.abs(a.K.data).max())
+    # uniform dilatation F = λ I and a uniform stand-in J*: the residual stays, the pressure
+    # stiffness scales with U'(J*)/U'(J), U'(J) = κ ln J / J (closed form), and the rest of
+    # the volumetric tangent is that of pressure_stiffness=False at the same stand-in
+    lam, ratio = 1.01, 1.002
+    u = (lam - 1.0) * body.dof_points.ravel()
+    J = np.full(body.dV.shape, lam**3)
+    du = [internal_forces(body, u, pressure_stiffness=ps) for ps in (True, False)]
+    dt = [internal_forces(body, u, pressure_stiffness=ps, tangent_jacobian=ratio * J)
+          for ps in (True, False)]  # fmt: skip
+    np.testing.assert_array_equal(du[0].r, dt[0].r)
+    pressure = (np.log(ratio * lam**3) / ratio) / np.log(lam**3)  # U'(J*)/U'(J)
+    geometric = (du[0].K - du[1].K).toarray()
+    assert np.abs(geometric).max() > 0.0
+    np.testing.assert_allclose((dt[0].K - dt[1].K).toarray(), pressure * geometric, rtol=0,
+                               atol=1e-10 * np.abs(geometric).max())  # fmt: skip
+
+
+def test_carried_dilatation_is_the_linearised_jacobian(rng):
+    # J(u + h δ) = J(u) + h cof F(u) : Grad δ + O(h²): the error quarters as h halves
+    body, u = _strained("hex20", "linear-dilatation", rng)
+    step = 0.1 * rng.standard_normal(body.ndof)
+    J, dJ = linearised_jacobian(body, u, step)
+    np.testing.assert_allclose(J, body.jacobian(u), rtol=1e-13)
+    errors = [np.abs(body.jacobian(u + h * step) - (J + h * dJ)).max() for h in (0.1, 0.05)]
+    assert 3.8 < errors[0] / errors[1] < 4.2, errors
+
+
+def test_stand_in_that_is_no_volume_ratio_leaves_the_consistent_tangent(rng):
+    body, u = _strained("hex20", "linear-dilatation", rng)
+    a = internal_forces(body, u)
+    J = body.jacobian(u)
+    # positive at every Gauss point but not after the element's linear projection: a spike
+    # at one Gauss point of cell 0 tilts the projected dilatation below 0 across the cell
+    bad = J.copy()
+    bad[0] = 1e-3
+    bad[0, 0] = 100.0
+    assert (_pressure_space(body)[3][0] @ bad[0]).min() < 0.0
+    for stand_in in (bad, -J, np.full_like(J, np.nan)):
+        b = internal_forces(body, u, tangent_jacobian=stand_in)
+        np.testing.assert_array_equal(b.r, a.r)
+        np.testing.assert_array_equal(b.K.data, a.K.data)
+    with pytest.raises(ValueError, match="tangent_jacobian has shape"):
+        internal_forces(body, u, tangent_jacobian=J[:, :3])
+
+
+@pytest.mark.parametrize("carry", [True, False])
+def test_nearly_incompressible_beam_in_one_step(carry):
+    # Land et al. 2015 problem 1 (tests/mechanics/test_community.py) on 10x2x2 hex8 with
+    # mean dilatation, κ = 10⁴ C instead of 10³ C, in one load step. Measured: 9 Newton
+    # iterations and no cut-back with the carried dilatation (module notes of
+    # harpx.mechanics.newton); the displacement-only Newton (carry False) 26 and one cut-back
+    # (its first full step inverts elements). Both reach z(10, 0.5, 1) = 3.76529 mm,
+    # 4e-6 mm apart (the residual tolerance at κ = 10⁴ C)
+    cells = np.tile([1.0, 0.0, 0.0], (40, 1))
+    body = Body(box((10.0, 1.0, 1.0), (10, 2, 2)), Guccione(c=2.0, bf=8.0, bt=2.0, bfs=4.0,
+                kappa=2e4), fibers=cells)  # fmt: skip
+    loads = [Fixed("left", (0, 1, 2)), Pressure("bottom", 0.004)]
+    _Newton.carry_dilatation = carry
+    try:
+        res = solve(body, loads, steps=1, raise_on_failure=False)
+    finally:
+        _Newton.carry_dilatation = True
+    z = 1.0 + float(body.displacement_at(res.u, [10.0, 0.5, 1.0])[2])
+    print(f"carry {carry}: {res.iterations} iterations, {res.cutbacks} cut-backs, z {z:.7f}")
+    assert res.converged
+    if carry:
+        assert res.iterations <= 11 and res.cutbacks == 0
+    else:  # what the carried dilatation removes
+        assert res.iterations >= 20 and res.cutbacks >= 1
+    assert abs(z - 3.765294) < 1e-5
 
 
 def _manufactured(element, n, volumetric):
