@@ -25,6 +25,7 @@ from harpx._progress import progress_bar
 from harpx._typing import BoolArray
 from harpx.errors import HarpxWarning, SchemaError
 from harpx.imaging.coverage import explain_missing_data, phase_direction_mismatch
+from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.schema import validate
@@ -41,9 +42,10 @@ from harpx.tracking.settings import SolverTuning, TrackingSettings
 
 STRATEGIES = {"penalty": track_frame_penalty, "augmented-lagrangian": track_frame_augmented}
 #: Relative accuracy of a Gauss–Newton tangent solved iteratively with the factorisation of an
-#: earlier one (PARDISO; :class:`~harpx.mechanics.linsolve.LinearSolver` ``reuse``): far below
-#: the step tolerance, so the iterates are those of exact solves to rounding.
-_SOLVE_REUSE = 1e-8
+#: earlier one (PARDISO; :class:`~harpx.mechanics.linsolve.LinearSolver` ``reuse``), or None:
+#: factorise every tangent. Off: PARDISO's own iterative reuse does not return on a singular
+#: tangent (a frame whose images hold no tag pattern).
+_SOLVE_REUSE: float | None = None
 #: Constraint points from which a worker thread samples the images while the solve
 #: assembles (:func:`~harpx.tracking.equilibrium.equilibrate`): below this the arrays are
 #: small, the two threads mostly wait for the interpreter lock, and one thread is faster
@@ -294,7 +296,8 @@ def track(
         timings.first_pass = float(wall[1:].sum())
         pass_iterations = [int(result.iterations.sum())]
         correction_mean = np.zeros(phase.sizes["time"])
-        passes = settings.effective_blur_passes if phase.attrs.get("bandpass") == "disk" else 0
+        disk = PhaseParameters.from_dataset(phase).disk_bandpass  # the blur correction models it
+        passes = settings.effective_blur_passes if disk else 0
         for _ in range(passes):
             clock = _time.perf_counter()
             correction = blur_correction(phase, body, result.U)
