@@ -14,9 +14,9 @@ frame is averaged over the 17 AHA segments for
 * the truth's displacement on the same voxels, differentiated the same way (what a voxel
   method could at best reach on this grid).
 
-Phase extraction uses ``--radius 0.8`` (band-pass radius as a fraction of the tag
-frequency): CSPAMM has no DC peak, and the wider filter blurs the 10 mm wall less
-(``benchmarks/results/infarct_radius.md``).
+Phase extraction uses the library's defaults (upsample 2; band-pass radius 0.8 for these
+CSPAMM images: no DC peak, and the wider filter blurs the 10 mm wall less,
+``benchmarks/results/infarct_radius.md``); ``--radius`` and ``--upsample`` override them.
 
 Summary statistics are over segments 1-16 (the short-axis segments; HARP has no value in
 the apical cap 17, which only long-axis slices image); segment 17 is listed per segment.
@@ -133,7 +133,7 @@ def radius_study(radii: list[float]) -> None:
         "# Band-pass radius on every small scene",
         "",
         f"`{command}` ({time.strftime('%Y-%m-%d')}, {platform.node() or 'host'}). Phase "
-        "`extract_phase(tagged, radius=r)` (upsample 2, the default; LV upsample 1), FE "
+        "`extract_phase(tagged, radius=r)` (upsample 2, the default), FE "
         "`track(phase, scene.body(), dirichlet=...)` with the tracker's defaults, HARP "
         "`track_harp`. Errors: mean displacement error over frames 1..N-1 and body voxels "
         "(mm; short axis: in-plane x-y part); Err bias: mean over segments of (peak Err − "
@@ -181,7 +181,7 @@ def radius_study(radii: list[float]) -> None:
     template = sc.template()
     truth = cardiac_strain(sc.truth_result(), template)
     for r in radii:
-        _, fe, hp, wall = run(sc, sc.body(), sc.dirichlet(), r, upsample=1)
+        _, fe, hp, wall = run(sc, sc.body(), sc.dirichlet(), r)
         row("LV", "CSPAMM", r, float(tracking_error(fe, sc.tagged).mean_all),
             float(tracking_error(hp, sc.tagged).mean_all), cardiac_strain(fe, template),
             cardiac_strain(hp, template, body=sc.tagged["body"]), truth, wall)  # fmt: skip
@@ -214,7 +214,12 @@ def main() -> None:
         default=None,
         help="fixed tracking residual, rad (default: the tracker's, with the blur correction)",
     )
-    parser.add_argument("--radius", type=float, default=0.8)
+    parser.add_argument(
+        "--radius", type=float, default=None, help="band-pass radius (default: the library's)"
+    )
+    parser.add_argument(
+        "--upsample", type=int, default=2, help="phase upsampling (default: the library's, 2)"
+    )
     parser.add_argument(
         "--in-plane-blur",
         action="store_true",
@@ -255,7 +260,7 @@ def main() -> None:
     t_fit = time.perf_counter() - start
     template = fit.template
 
-    phase = extract_phase(tagged, upsample=1, radius=args.radius)
+    phase = extract_phase(tagged, upsample=args.upsample, radius=args.radius)
     if args.in_plane_blur:
         phase = phase.drop_vars(["slice_thickness", "slice_position"], errors="ignore")
     start = time.perf_counter()
@@ -280,7 +285,7 @@ def main() -> None:
     rows = {
         fe_name: cardiac_strain(tracked, template),
         seg_name: cardiac_strain(seg_tracked, template),
-        harp_name: cardiac_strain(harp, template, body=tagged["body"]),
+        harp_name: cardiac_strain(harp, template, body=phase["body"] > 0.5),
         "truth displacement on voxels": cardiac_strain(tagged, template),
     }
     wall = {fe_name: t_fe, seg_name: t_seg, harp_name: t_harp}
@@ -383,7 +388,8 @@ def main() -> None:
         args.epsilon is None) else f"ε {args.epsilon} rad (no blur correction)"  # fmt: skip
     lines += [
         "",
-        f"Phase: upsample 1, band-pass radius {args.radius}. FE tracking: {epsilon}, "
+        f"Phase: upsample {args.upsample}, band-pass radius {phase.attrs['radius']:g}. "
+        f"FE tracking: {epsilon}, "
         f"blur model {tracked.attrs.get('blur_model', 'none')!r}, "
         f"{len(tracked.time)} frames; template mesh {tracked.sizes['cell']} cells; "
         f"segmentation mesh {q.cells} cells (min scaled Jacobian {q.min_scaled_jacobian:.2f}, "

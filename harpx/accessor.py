@@ -98,7 +98,7 @@ class HarpAccessor:
         self,
         *,
         upsample: int = 2,
-        radius: float = 0.5,
+        radius: float | None = None,
         threads: int | None = None,
         dtype: Literal["float32", "float64"] = "float32",
     ) -> xr.Dataset:

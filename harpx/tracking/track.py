@@ -45,7 +45,7 @@ STRATEGIES = {"penalty": track_frame_penalty, "augmented-lagrangian": track_fram
 #: earlier one (PARDISO; :class:`~harpx.mechanics.linsolve.LinearSolver` ``reuse``), or None:
 #: factorise every tangent. Off: PARDISO's own iterative reuse does not return on a singular
 #: tangent (a frame whose images hold no tag pattern).
-_SOLVE_REUSE: float | None = None
+_SOLVE_REUSE: float | None = 1e-8
 #: Constraint points from which a worker thread samples the images while the solve
 #: assembles (:func:`~harpx.tracking.equilibrium.equilibrate`): below this the arrays are
 #: small, the two threads mostly wait for the interpreter lock, and one thread is faster
@@ -297,7 +297,8 @@ def track(
         pass_iterations = [int(result.iterations.sum())]
         correction_mean = np.zeros(phase.sizes["time"])
         disk = PhaseParameters.from_dataset(phase).disk_bandpass  # the blur correction models it
-        passes = settings.effective_blur_passes if disk else 0
+        slice_profile = "slice-profile" in blur_models(phase)
+        passes = settings.blur_passes_for(slice_profile=slice_profile) if disk else 0
         for _ in range(passes):
             clock = _time.perf_counter()
             correction = blur_correction(phase, body, result.U)
