@@ -7,11 +7,14 @@
 * ``"pardiso"`` — MKL PARDISO (pypardiso). Symmetric tangents use the symmetric indefinite
   mode on the upper triangle; the symbolic analysis (ordering) is done once per sparsity
   pattern and reused: later factorisations run PARDISO phase 23 only. With ``reuse`` a
-  matrix on the same pattern is first solved by conjugate gradients (CGS for non-symmetric
-  ones) preconditioned with the last factorisation, which a sequence of nearby matrices
-  (Newton or Gauss–Newton tangents) converges in a few iterations; PARDISO factorises
-  afresh when that fails, and the solver does when the last reuse needed more than
-  ``reuse_iterations`` iterations (the factorisation has gone stale).
+  matrix on the pattern of the last factorised one is first solved by a bounded Krylov loop
+  in Python (SciPy's conjugate gradients for symmetric matrices, BiCGSTAB otherwise, at most
+  ``reuse_iterations`` iterations), preconditioned by PARDISO's solve phase (33) with the
+  held factors of that earlier matrix; a sequence of nearby matrices (Newton or
+  Gauss–Newton tangents) converges in a few iterations. The matrix is factorised afresh when
+  the loop does not reach the relative residual ``reuse``, returns non-finite values, or the
+  pattern changed, so a singular matrix meets the same factorisation (and the same errors)
+  as without ``reuse``, after at most ``reuse_iterations`` iterations.
 * ``"superlu"`` — SuperLU with ``MMD_AT_PLUS_A`` ordering and symmetric mode for symmetric
   tangents (COLAMD for non-symmetric ones).
 * ``"superlu-colamd"`` — SuperLU with its default COLAMD ordering (reference).
@@ -22,9 +25,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import ctypes
 import functools
+from collections.abc import Iterator
 from typing import Any, Literal
 
 import numpy as np
@@ -125,12 +130,12 @@ class LinearSolver:
     maxiter : int, default 500
         Iteration limit of the iterative method.
     reuse : float, optional
-        PARDISO only: relative accuracy (a power of ten, e.g. 1e-8) to which a matrix on the
-        pattern of the last one may be solved iteratively, preconditioned with the last
-        factorisation (module notes). None (default): every matrix is factorised.
+        PARDISO only: relative residual ``|b - K x| / |b|`` to which a matrix on the pattern
+        of the last factorised one may be solved iteratively, preconditioned with that
+        factorisation (module notes), e.g. 1e-8. None (default): every matrix is factorised.
     reuse_iterations : int, default 15
-        With ``reuse``: a reuse that needed more iterations than this makes the next solve
-        factorise its matrix.
+        With ``reuse``: the iteration limit of the Krylov loop; a matrix it does not solve
+        within this many iterations is factorised afresh.
     threads : int, optional
         PARDISO only: threads of each call (MKL's thread-local setting, restored after the
         call), e.g. 1 where another thread of the caller keeps the other cores busy, or
@@ -147,6 +152,12 @@ class LinearSolver:
         Number of numerical factorisations computed so far.
     reused : int
         Number of solves done iteratively with an earlier factorisation (``reuse``).
+    reuse_failures : int
+        Number of Krylov loops (``reuse``) that did not reach the tolerance, so that the
+        matrix was factorised afresh.
+    last_iterations : int
+        Iterations of the last solve's Krylov loop (``reuse`` or ``"amg-cg"``); 0 when it
+        factorised without trying one.
     """
 
     def __init__(
@@ -183,18 +194,21 @@ class LinearSolver:
         if threads is not None and threads < 1:
             raise ValueError(f"threads={threads!r} must be at least 1, or None")
         self.threads = threads
-        # PARDISO's iparm(4) = 10 L + K: stop at 10^-L, K = 2 CG (symmetric), 1 CGS
-        self._reuse_digits = 0 if reuse is None else max(1, round(-np.log10(reuse)))
+        self.reuse = None if reuse is None else float(reuse)
         self.reuse_iterations = int(reuse_iterations)
         self._fresh = True  # the next solve factorises (no reusable factorisation yet)
+        # the data array of the factorised matrix, as PARDISO read it (phase 33 needs it)
+        self._held: FloatArray | None = None
         self.analyses = 0
         self.factorizations = 0
         self.reused = 0
+        self.reuse_failures = 0
         self._pardiso: Any = None
         self._pattern_key: tuple[Any, ...] | None = None
         self._upper: NDArray[np.int64] | None = None
         self._upper_indptr: NDArray[np.int32] | None = None
         self._upper_indices: NDArray[np.int32] | None = None
+        self._diagonal: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None
         self.last_iterations = 0
 
     # ------------------------------------------------------------------ pardiso
@@ -217,6 +231,7 @@ class LinearSolver:
                 pass
             self._pardiso = None
             self._pattern_key = None
+            self._held = None
 
     def __del__(self) -> None:
         self.close()
@@ -247,53 +262,112 @@ class LinearSolver:
                 ip = np.zeros(K.shape[0] + 1, dtype=np.int32)
                 np.cumsum(counts, out=ip[1:])
                 self._upper_indptr = ip
+                on = np.nonzero(self._upper_indices == rows[upper])[0]
+                self._diagonal = (rows[upper][on], on)
             self._pattern_key = (K.indptr, K.indices, symmetric)
         if symmetric:
             assert self._upper is not None
             data = np.ascontiguousarray(K.data[self._upper])
             indptr, indices = self._upper_indptr, self._upper_indices
         else:
-            data = np.ascontiguousarray(K.data)
+            # a copy: the caller may change K.data in place while the factors are held
+            data = np.array(K.data, dtype=np.float64)
             indptr, indices = K.indptr.astype(np.int32), K.indices.astype(np.int32)
+        rhs = np.ascontiguousarray(b, dtype=np.float64)
+        self.last_iterations = 0
+        with self._mkl_threads():
+            if self.reuse is not None and not (new_pattern or self._fresh):
+                x = self._krylov(data, indptr, indices, rhs, symmetric)
+                if x is not None:
+                    self.reused += 1
+                    return x
+                self.reuse_failures += 1
+            return self._factorise(data, indptr, indices, rhs, new_pattern)
+
+    def _factorise(
+        self, data: FloatArray, indptr: Any, indices: Any, b: FloatArray, new_pattern: bool
+    ) -> FloatArray:
+        """PARDISO phase 13 (new pattern) or 23: factorise ``data`` and solve; hold the factors."""
         solver = self._pardiso
         solver.set_phase(13 if new_pattern else 23)
+        solver.iparm[3] = 0  # no PARDISO-internal iterative solve: it may not return
         if new_pattern:
             self.analyses += 1
-        reuse = self._reuse_digits > 0 and not (new_pattern or self._fresh)
-        solver.iparm[3] = 10 * self._reuse_digits + (2 if symmetric else 1) if reuse else 0
-        rhs = np.asfortranarray(b, dtype=np.float64)
-        try:
-            x = self._threaded_call(solver, data, indptr, indices, rhs)
-        except ConvergenceError:
-            if not reuse:
-                raise
-            # CG's fallback factorisation refuses a singular matrix (e.g. a frame without
-            # data leaves rigid modes free) that a plain one perturbs its pivots for
-            solver.iparm[3], reuse = 0, False
-            x = self._threaded_call(solver, data, indptr, indices, rhs)
-        # iparm(20): > 0 iterations of a successful reuse; < 0 it failed and PARDISO
-        # factorised instead; 0 no reuse was tried
-        iterations = int(solver.iparm[19]) if reuse else 0
-        self.last_iterations = abs(iterations) // 10 if iterations < 0 else iterations
-        if iterations > 0:
-            self.reused += 1
-            self._fresh = iterations > self.reuse_iterations
-        else:
-            self.factorizations += 1
-            self._fresh = False
+        self._held, self._fresh = None, True  # until this factorisation has succeeded
+        x = self._call(solver, data, indptr, indices, b)
+        self.factorizations += 1
+        if np.all(np.isfinite(x)):  # factors worth preconditioning with
+            self._held, self._fresh = data, False
         return x
 
-    def _threaded_call(
-        self, solver: Any, data: FloatArray, indptr: Any, indices: Any, b: FloatArray
-    ) -> FloatArray:
-        """:meth:`_call` on ``threads`` threads (MKL's setting for this thread, restored)."""
-        if self.threads is None:
-            return self._call(solver, data, indptr, indices, b)
-        local = solver.libmkl.MKL_Set_Num_Threads_Local
+    def _krylov(
+        self, data: FloatArray, indptr: Any, indices: Any, b: FloatArray, symmetric: bool
+    ) -> FloatArray | None:
+        """Solve by CG (symmetric) or BiCGSTAB preconditioned with the held factors.
+
+        Returns None when the loop does not reach ``reuse`` in ``reuse_iterations``
+        iterations, or its result or the preconditioner is not finite.
+        """
+        assert self._held is not None and self.reuse is not None
+        n = len(b)
+        A = sparse.csr_matrix((data, indices, indptr), shape=(n, n))
+        if symmetric:  # the operator PARDISO reads: the upper triangle, mirrored
+            assert self._diagonal is not None
+            rows, positions = self._diagonal
+            diagonal = np.zeros(n)
+            diagonal[rows] = data[positions]
+            At = A.T
+
+            def apply(v: FloatArray) -> FloatArray:
+                return np.asarray(A @ v + At @ v - diagonal * v)
+        else:
+
+            def apply(v: FloatArray) -> FloatArray:
+                return np.asarray(A @ v)
+
+        solver, held = self._pardiso, self._held
+
+        def precondition(r: FloatArray) -> FloatArray:
+            solver.set_phase(33)  # solve only, with the factors of ``held``
+            return self._call(solver, held, indptr, indices, np.ascontiguousarray(r))
+
+        count = [0]
+
+        def step(_: FloatArray) -> None:
+            count[0] += 1
+
+        operator = spla.LinearOperator((n, n), matvec=apply, dtype=np.float64)
+        preconditioner = spla.LinearOperator((n, n), matvec=precondition, dtype=np.float64)
+        krylov = spla.cg if symmetric else spla.bicgstab
+        # a breakdown (a singular or indefinite matrix) divides by zero: non-finite values,
+        # caught below, not warnings
+        with np.errstate(all="ignore"):
+            try:
+                x, info = krylov(operator, b, rtol=self.reuse, atol=0.0,
+                                 maxiter=self.reuse_iterations, M=preconditioner,
+                                 callback=step)  # fmt: skip
+            except ConvergenceError:  # the solve phase refused: factorise afresh
+                return None
+            finally:
+                self.last_iterations = count[0]
+            if info != 0 or not np.all(np.isfinite(x)):
+                return None
+            # the true residual, not the loop's recurrence
+            if not np.linalg.norm(b - apply(x)) <= self.reuse * np.linalg.norm(b):
+                return None
+        return np.asarray(x)
+
+    @contextlib.contextmanager
+    def _mkl_threads(self) -> Iterator[None]:
+        """MKL's thread-local thread count set to ``threads`` inside, restored after."""
+        if self.threads is None or self._pardiso is None:
+            yield
+            return
+        local = self._pardiso.libmkl.MKL_Set_Num_Threads_Local
         local.restype, local.argtypes = ctypes.c_int, [ctypes.c_int]
         previous = local(self.threads)
         try:
-            return self._call(solver, data, indptr, indices, b)
+            yield
         finally:
             local(previous)  # 0: back to MKL's global setting
 
