@@ -18,6 +18,7 @@ import importlib.abc
 import importlib.machinery
 import sys
 import warnings
+from collections.abc import Callable
 from types import ModuleType
 from typing import Any
 
@@ -70,6 +71,20 @@ def moved_attribute(package: str, name: str) -> Any:
         raise AttributeError(f"module {package!r} has no attribute {name!r}")
     _warn(f"{package}.{name}", f"{new}.{name}")
     return getattr(importlib.import_module(new), name)
+
+
+def moved_getattr(package: str) -> Callable[[str], Any]:
+    """A module ``__getattr__`` that answers the moved names of ``package``.
+
+    ``__getattr__ = moved_getattr(__name__)`` at the end of a module that lost names
+    resolves each of them through :func:`moved_attribute` (with its warning and its
+    :class:`AttributeError` for a name that never lived there).
+    """
+
+    def __getattr__(name: str) -> Any:
+        return moved_attribute(package, name)
+
+    return __getattr__
 
 
 class _Alias(importlib.abc.MetaPathFinder, importlib.abc.Loader):

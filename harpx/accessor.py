@@ -5,7 +5,7 @@ Every method is one call; the full documentation lives on the function it forwar
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, Literal
 
 import xarray as xr
@@ -20,54 +20,43 @@ if TYPE_CHECKING:
 from harpx.tracking.settings import TrackingSettings
 
 
+def _plot(function: str, summary: str) -> Callable[..., Any]:
+    """A :class:`PlotMethods` method: ``harpx.plotting.<function>(ds, **kwargs)``.
+
+    The plotting package is imported at the first call (matplotlib stays unloaded until a
+    picture is asked for); ``summary`` is the method's docstring before its pointer to the
+    function.
+    """
+
+    def method(self: PlotMethods, **kwargs: Any) -> Any:
+        import harpx.plotting
+
+        return getattr(harpx.plotting, function)(self._ds, **kwargs)
+
+    method.__doc__ = f"{summary} See Also: harpx.plotting.{function}."
+    return method
+
+
 class PlotMethods:
-    """``ds.harp.plot``: matplotlib pictures of harpx datasets (see :mod:`harpx.plotting`)."""
+    """``ds.harp.plot``: matplotlib pictures of harpx datasets (see :mod:`harpx.plotting`).
+
+    Each method forwards the dataset and its keywords to the plotting function named in its
+    docstring (built by :func:`_plot`).
+    """
 
     def __init__(self, ds: xr.Dataset) -> None:
         self._ds = ds
 
-    def tag_image(self, **kwargs: Any) -> Any:
-        """One slice of a tagged image. See Also: harpx.plotting.tag_image."""
-        from harpx.plotting import tag_image
-
-        return tag_image(self._ds, **kwargs)
-
-    def phase(self, **kwargs: Any) -> Any:
-        """One slice of a harmonic phase. See Also: harpx.plotting.phase_map."""
-        from harpx.plotting import phase_map
-
-        return phase_map(self._ds, **kwargs)
-
-    def displacement(self, **kwargs: Any) -> Any:
-        """Tracked displacement on a slice. See Also: harpx.plotting.displacement_map."""
-        from harpx.plotting import displacement_map
-
-        return displacement_map(self._ds, **kwargs)
-
-    def strain(self, **kwargs: Any) -> Any:
-        """Strain on a slice (radial, circumferential, longitudinal or Cartesian, %).
-        See Also: harpx.plotting.strain_map."""
-        from harpx.plotting import strain_map
-
-        return strain_map(self._ds, **kwargs)
-
-    def fiber_stretch(self, **kwargs: Any) -> Any:
-        """Fibre stretch per region. See Also: harpx.plotting.fiber_stretch_by_region."""
-        from harpx.plotting import fiber_stretch_by_region
-
-        return fiber_stretch_by_region(self._ds, **kwargs)
-
-    def bullseye(self, **kwargs: Any) -> Any:
-        """AHA 17-segment bull's-eye of a segment value. See Also: harpx.plotting.bullseye."""
-        from harpx.plotting import bullseye
-
-        return bullseye(self._ds, **kwargs)
-
-    def segment_curves(self, **kwargs: Any) -> Any:
-        """AHA segment strain over time by ring. See Also: harpx.plotting.segment_curves."""
-        from harpx.plotting import segment_curves
-
-        return segment_curves(self._ds, **kwargs)
+    tag_image = _plot("tag_image", "One slice of a tagged image.")
+    phase = _plot("phase_map", "One slice of a harmonic phase.")
+    displacement = _plot("displacement_map", "Tracked displacement on a slice.")
+    strain = _plot(
+        "strain_map",
+        "Strain on a slice (radial, circumferential, longitudinal or Cartesian, %).",
+    )
+    fiber_stretch = _plot("fiber_stretch_by_region", "Fibre stretch per region.")
+    bullseye = _plot("bullseye", "AHA 17-segment bull's-eye of a segment value.")
+    segment_curves = _plot("segment_curves", "AHA segment strain over time by ring.")
 
 
 @xr.register_dataset_accessor("harp")

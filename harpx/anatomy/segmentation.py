@@ -48,6 +48,7 @@ import scipy.ndimage as ndi
 import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
+from harpx._moved import moved_getattr
 from harpx._typing import FloatArray, IntArray
 from harpx.errors import HarpxError, HarpxWarning
 from harpx.io.labels import read_labels
@@ -638,7 +639,4 @@ def body_from_segmentation(
     return body
 
 
-def __getattr__(name: str) -> Any:
-    from harpx._moved import moved_attribute
-
-    return moved_attribute(__name__, name)
+__getattr__ = moved_getattr(__name__)

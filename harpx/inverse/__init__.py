@@ -35,8 +35,7 @@ The forward simulations they use live in :mod:`harpx.physiology.active`
 
 from __future__ import annotations
 
-from typing import Any
-
+from harpx._moved import moved_getattr
 from harpx.inverse.calibration import calibrate_activation
 from harpx.inverse.comparison import resimulate
 from harpx.inverse.correction import correct_activation
@@ -57,7 +56,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    from harpx._moved import moved_attribute
-
-    return moved_attribute(__name__, name)
+__getattr__ = moved_getattr(__name__)

@@ -14,8 +14,7 @@ still resolve, with a :class:`DeprecationWarning`.
 
 from __future__ import annotations
 
-from typing import Any
-
+from harpx._moved import moved_getattr
 from harpx.mechanics.body import Body
 from harpx.mechanics.fiber_laws import ActiveContraction, FiberGrowth
 from harpx.mechanics.loads import BodyForce, Fixed, Prescribed, Pressure
@@ -46,7 +45,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    from harpx._moved import moved_attribute
-
-    return moved_attribute(__name__, name)
+__getattr__ = moved_getattr(__name__)

@@ -37,6 +37,7 @@ from numpy.typing import ArrayLike
 from scipy import sparse
 from skfem.io.meshio import HEX_MAPPING
 
+from harpx._moved import moved_getattr
 from harpx._typing import FloatArray, IntArray
 from harpx.mechanics import kinematics
 from harpx.mechanics.body_inputs import (
@@ -626,7 +627,4 @@ class Body:
         )
 
 
-def __getattr__(name: str) -> Any:
-    from harpx._moved import moved_attribute
-
-    return moved_attribute(__name__, name)
+__getattr__ = moved_getattr(__name__)

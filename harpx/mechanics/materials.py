@@ -126,11 +126,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from harpx._moved import moved_getattr
 from harpx._typing import FloatArray
 from harpx.mechanics.kernel import TangentFactors
 from harpx.mechanics.kinematics import _as_tensor, fiber_basis, positive_det_cof
@@ -520,7 +521,4 @@ class Guccione(_Uncoupled):
         return P, K, MK, pbar, Hbar, Sbar, j, cof / J[..., None, None]
 
 
-def __getattr__(name: str) -> Any:
-    from harpx._moved import moved_attribute
-
-    return moved_attribute(__name__, name)
+__getattr__ = moved_getattr(__name__)
