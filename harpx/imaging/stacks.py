@@ -35,7 +35,7 @@ and the slab), not the tissue: the tissue's support at the reference frame is ``
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -324,6 +324,27 @@ def resample_stack(
     return image.reshape(*lead, *mask.shape), mask
 
 
+def _axis_aligned_stacks(
+    stacks: Sequence[xr.Dataset],
+) -> Iterator[tuple[xr.Dataset, str, SliceStack]]:
+    """Each stack with its one ``slice_axis`` and its :meth:`SliceStack.axis_aligned`.
+
+    Raises
+    ------
+    ValueError
+        If the tags of one dataset have different slice axes.
+    """
+    for ds in stacks:
+        axes = {str(s) for s in np.asarray(ds["slice_axis"].values)}
+        if len(axes) != 1:
+            raise ValueError(
+                f"the tags of one stack must share a slice_axis, got {sorted(axes)!r}; "
+                "pass one dataset per stack"
+            )
+        (axis,) = axes
+        yield ds, axis, SliceStack.axis_aligned(ds, axis)
+
+
 def resample_stacks(
     stacks: Sequence[xr.Dataset], x: ArrayLike, y: ArrayLike, z: ArrayLike
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -351,15 +372,7 @@ def resample_stacks(
         If the tags of one dataset have different slice axes.
     """
     images, masks = [], []
-    for ds in stacks:
-        axes = {str(s) for s in np.asarray(ds["slice_axis"].values)}
-        if len(axes) != 1:
-            raise ValueError(
-                f"the tags of one stack must share a slice_axis, got {sorted(axes)!r}; "
-                "pass one dataset per stack"
-            )
-        (axis,) = axes
-        stack = SliceStack.axis_aligned(ds, axis)
+    for ds, axis, stack in _axis_aligned_stacks(stacks):
         volume = SliceStack.volume(ds["image"].transpose("tag", "time", *GRID_DIMS), axis)
         image, mask = resample_stack(stack, volume, x, y, z)
         images.append(image)
@@ -392,15 +405,7 @@ def stacks_slice_geometry(stacks: Sequence[xr.Dataset]) -> tuple[FloatArray, lis
     """
     thickness: list[float] = []
     positions: list[FloatArray] = []
-    for ds in stacks:
-        axes = {str(s) for s in np.asarray(ds["slice_axis"].values)}
-        if len(axes) != 1:
-            raise ValueError(
-                f"the tags of one stack must share a slice_axis, got {sorted(axes)!r}; "
-                "pass one dataset per stack"
-            )
-        (axis,) = axes
-        stack = SliceStack.axis_aligned(ds, axis)
+    for ds, axis, stack in _axis_aligned_stacks(stacks):
         centres = stack.centres_along(axis)
         assert centres is not None  # an axis-aligned stack's slices are grid planes
         for _ in range(ds.sizes["tag"]):
