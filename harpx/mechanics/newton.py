@@ -246,6 +246,14 @@ class _Newton:
             g[np.asarray(d.dofs(self.body), dtype=np.int64)] = d.values(self.body, s)
         return g[self.D]
 
+    def count_into(self, res: SolveResult) -> None:
+        """Copy the counters over all attempts so far (iterations, timings, line-search
+        reductions) into ``res``."""
+        res.iterations = self.iterations
+        res.time_assembly = self.time_assembly
+        res.time_solve = self.time_solve
+        res.line_search_steps = self.line_search_steps
+
     def _term_symmetric(self, term: Any, K: sparse.spmatrix) -> bool:
         flag = getattr(term, "symmetric_tangent", None)
         if flag is not None:
@@ -511,15 +519,12 @@ def equilibrate(
     res = SolveResult(
         u=out.u if out.ok else u,
         converged=out.ok,
-        iterations=nt.iterations,
         step_iterations=[out.iterations] if out.ok else [],
         residual_history=[out.history] if out.ok else [],
         min_jacobian=out.min_jacobian,
-        time_assembly=nt.time_assembly,
-        time_solve=nt.time_solve,
         load_factors=[float(s)] if out.ok else [],
-        line_search_steps=nt.line_search_steps,
     )
+    nt.count_into(res)
     if not out.ok:
         err = _failure(out.reason, out.cells, float(s), out.history, 0)
         if raise_on_failure:
@@ -677,12 +682,7 @@ def _ramp(
             else:
                 err = _failure(out.reason, out.cells, s, out.history, res.cutbacks)
             res.u, res.min_jacobian, res.message = u, min_j, str(err)
-            res.iterations, res.time_assembly, res.time_solve = (
-                nt.iterations,
-                nt.time_assembly,
-                nt.time_solve,
-            )
-            res.line_search_steps = nt.line_search_steps
+            nt.count_into(res)
             if raise_on_failure:
                 raise err
             return res
@@ -690,8 +690,5 @@ def _ramp(
     res.u = u
     res.converged = True
     res.min_jacobian = min_j
-    res.iterations = nt.iterations
-    res.time_assembly = nt.time_assembly
-    res.time_solve = nt.time_solve
-    res.line_search_steps = nt.line_search_steps
+    nt.count_into(res)
     return res
