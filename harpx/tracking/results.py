@@ -126,10 +126,9 @@ def tracked_dataset(
 
     Parameters
     ----------
-    body : Body
-        The tracked body.
-    U : ndarray, shape (ntime, ndof)
-        Displacement per frame, mm.
+    body, U
+        The tracked body and its displacement per frame, as for
+        :func:`displacement_on_grid`.
     phase : xarray.Dataset
         The ``phase/1`` dataset that was tracked (for time and grid coordinates).
     diagnostics : mapping of str to ndarray or (dims, ndarray)
