@@ -42,6 +42,11 @@ _MAP_DOC_TAIL = """
         If the dataset is not ``{kind}/1`` (the message names the kind it is) or has no
         {names}.
     """
+# the ``time, z`` parameters of a map of the image grid that shows the nearest frame and slice
+_SLICE_PARAM_DOC = """
+    time, z : float, optional
+        Frame time (ms, default the last) and slice position (mm, default the middle
+        slice); the nearest frame and slice are shown and named in the title."""
 # what a map that shows the nearest frame and slice adds to its Raises section
 _SLICE_DOC_TAIL = """    ValueError
         If ``time`` or ``z`` is not a finite number.
@@ -55,10 +60,14 @@ _SLICE_DOC_TAIL = """    ValueError
     """
 
 
-def _map_doc(kind: str, *variables: str, slices: bool = True) -> Callable[[_F], _F]:
+def _map_doc(
+    kind: str, *variables: str, slices: bool = True, slice_params: bool = False
+) -> Callable[[_F], _F]:
     """Append the shared ``ax``, Returns and Raises sections to a plot's docstring; the
     Raises entry names the dataset ``kind`` and the ``variables`` the plot needs, and for a
-    map that picks the nearest frame and slice (``slices``) what that raises and warns."""
+    map that picks the nearest frame and slice (``slices``) what that raises and warns.
+    ``slice_params``: also document ``time`` and ``z`` as the image-grid maps take them
+    (after the plot's own parameters, before ``ax``)."""
     quoted = [f"``{v}``" for v in variables]
     names = quoted[-1] if len(quoted) == 1 else ", ".join(quoted[:-1]) + " or " + quoted[-1]
 
@@ -67,6 +76,8 @@ def _map_doc(kind: str, *variables: str, slices: bool = True) -> Callable[[_F], 
         tail = _MAP_DOC_TAIL.format(kind=kind, names=names)
         if slices:
             tail = tail.rstrip() + "\n" + _SLICE_DOC_TAIL
+        if slice_params:
+            tail = _SLICE_PARAM_DOC + tail
         func.__doc__ = func.__doc__.rstrip() + tail
         return func
 

@@ -44,7 +44,7 @@ TISSUE_EDGE = 0.5
 NOISE_FRACTION = 0.1
 
 
-@_map_doc("tagged", "image")
+@_map_doc("tagged", "image", slice_params=True)
 def tag_image(
     ds: xr.Dataset,
     *,
@@ -61,9 +61,6 @@ def tag_image(
         ``tagged/1`` dataset.
     tag : str, optional
         Tag label.
-    time, z : float, optional
-        Frame time (ms, default the last) and slice position (mm, default the middle
-        slice); the nearest frame and slice are shown and named in the title.
     """
     plot = "tag_image (ds.harp.plot.tag_image)"
     _require(ds, "tagged", ["image"], plot)
@@ -71,14 +68,14 @@ def tag_image(
     return _slice_map(da, _where(da, notes), ax, cmap="gray", label="intensity")
 
 
-@_map_doc("phase", "phase")
+@_map_doc("phase", "phase", slice_params=True)
 def phase_map(
     ds: xr.Dataset,
     *,
     tag: str | None = None,
+    mask: str | xr.DataArray | None = "tissue",
     time: float | None = None,
     z: float | None = None,
-    mask: str | xr.DataArray | None = "tissue",
     ax: Any = None,
 ) -> Any:
     """One slice of a ``phase/1`` harmonic phase (rad, cyclic colour map).
@@ -89,9 +86,6 @@ def phase_map(
         ``phase/1`` dataset.
     tag : str, optional
         Tag label (default: the first).
-    time, z : float, optional
-        Frame time (ms, default the last) and slice position (mm, default the middle
-        slice); the nearest frame and slice are shown and named in the title.
     mask : {"tissue"} or xarray.DataArray or None, default "tissue"
         Where to show the phase. ``"tissue"``: pixels whose harmonic ``magnitude`` exceeds
         :data:`TISSUE_EDGE` times the median magnitude of the pixels above the noise level
@@ -145,7 +139,7 @@ def _tissue(ds: xr.Dataset, da: xr.DataArray, tag: Any, mask: Any) -> xr.DataArr
     return inside
 
 
-@_map_doc("tracked", "displacement_grid")
+@_map_doc("tracked", "displacement_grid", slice_params=True)
 def displacement_map(
     ds: xr.Dataset,
     *,
@@ -162,9 +156,6 @@ def displacement_map(
         ``tracked/1`` dataset with ``displacement_grid``.
     component : {"x", "y", "z"}, optional
         Component to show; default the magnitude.
-    time, z : float, optional
-        Frame time (ms, default the last) and slice position (mm, default the middle
-        slice); the nearest frame and slice are shown and named in the title.
     """
     plot = "displacement_map (ds.harp.plot.displacement)"
     _require(ds, "tracked", ["displacement_grid"], plot)
