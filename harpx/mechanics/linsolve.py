@@ -29,7 +29,7 @@ import contextlib
 import copy
 import ctypes
 import functools
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any, Literal
 
 import numpy as np
@@ -44,6 +44,14 @@ __all__ = ["LinearSolver", "METHODS", "available_methods", "rigid_body_modes"]
 
 METHODS = ("auto", "pardiso", "superlu", "superlu-colamd", "umfpack", "amg-cg")
 Method = Literal["auto", "pardiso", "superlu", "superlu-colamd", "umfpack", "amg-cg"]
+
+
+#: The Krylov loop of ``reuse`` gives up on a matrix from this iteration on when the mean rate
+#: of decrease of its residual so far would need more than ``_GIVE_UP_SLACK`` times
+#: ``reuse_iterations`` to reach the tolerance (chosen on the residual histories of the
+#: tracking benchmarks, benchmarks/results/tracking_speed.md).
+_GIVE_UP_AFTER = 4
+_GIVE_UP_SLACK = 1.25
 
 
 @functools.cache
@@ -331,6 +339,84 @@ class LinearSolver:
             solver.set_phase(33)  # solve only, with the factors of ``held``
             return self._call(solver, held, indptr, indices, np.ascontiguousarray(r))
 
+        # a breakdown (a singular or indefinite matrix) divides by zero: non-finite values,
+        # caught below, not warnings
+        with np.errstate(all="ignore"):
+            try:
+                if symmetric:
+                    x = self._cg(apply, precondition, b)
+                else:
+                    x = self._bicgstab(apply, precondition, b)
+            except ConvergenceError:  # the solve phase refused: factorise afresh
+                return None
+            if x is None or not np.all(np.isfinite(x)):
+                return None
+            # the true residual, not the loop's recurrence
+            if not np.linalg.norm(b - apply(x)) <= self.reuse * np.linalg.norm(b):
+                return None
+        return x
+
+    def _cg(
+        self,
+        apply: Callable[[FloatArray], FloatArray],
+        precondition: Callable[[FloatArray], FloatArray],
+        b: FloatArray,
+    ) -> FloatArray | None:
+        """Preconditioned conjugate gradients from zero, at most ``reuse_iterations``.
+
+        Gives up (None) from iteration ``_GIVE_UP_AFTER`` on as soon as the residual's mean
+        rate of decrease so far would not reach ``reuse`` within ``_GIVE_UP_SLACK`` times the
+        limit: a factorisation gone stale shows in the first iterations, and a failed
+        attempt then costs a few solve phases rather than ``reuse_iterations``.
+        """
+        assert self.reuse is not None
+        limit = self.reuse_iterations
+        target = self.reuse * float(np.linalg.norm(b))
+        x = np.zeros_like(b)
+        if target == 0.0:
+            return x
+        r = b.copy()
+        z = precondition(r)
+        p = z.copy()
+        rz = float(r @ z)
+        first = float(np.linalg.norm(b))
+        self.last_iterations = 0
+        for k in range(1, limit + 1):
+            q = apply(p)
+            pq = float(p @ q)
+            if not (np.isfinite(pq) and pq != 0.0 and np.isfinite(rz) and rz != 0.0):
+                return None
+            alpha = rz / pq
+            x += alpha * p
+            r -= alpha * q
+            self.last_iterations = k
+            norm = float(np.linalg.norm(r))
+            if norm <= target:
+                return x
+            if not np.isfinite(norm):
+                return None
+            # at its mean rate so far it would need more than the limit (with some slack:
+            # CG speeds up as it goes)
+            if k >= _GIVE_UP_AFTER and (
+                norm >= first
+                or k * np.log(target / first) < _GIVE_UP_SLACK * limit * np.log(norm / first)
+            ):
+                return None
+            z = precondition(r)
+            rz_new = float(r @ z)
+            p = z + (rz_new / rz) * p
+            rz = rz_new
+        return None
+
+    def _bicgstab(
+        self,
+        apply: Callable[[FloatArray], FloatArray],
+        precondition: Callable[[FloatArray], FloatArray],
+        b: FloatArray,
+    ) -> FloatArray | None:
+        """SciPy's BiCGSTAB from zero, at most ``reuse_iterations`` iterations."""
+        assert self.reuse is not None
+        n = len(b)
         count = [0]
 
         def step(_: FloatArray) -> None:
@@ -338,24 +424,13 @@ class LinearSolver:
 
         operator = spla.LinearOperator((n, n), matvec=apply, dtype=np.float64)
         preconditioner = spla.LinearOperator((n, n), matvec=precondition, dtype=np.float64)
-        krylov = spla.cg if symmetric else spla.bicgstab
-        # a breakdown (a singular or indefinite matrix) divides by zero: non-finite values,
-        # caught below, not warnings
-        with np.errstate(all="ignore"):
-            try:
-                x, info = krylov(operator, b, rtol=self.reuse, atol=0.0,
-                                 maxiter=self.reuse_iterations, M=preconditioner,
-                                 callback=step)  # fmt: skip
-            except ConvergenceError:  # the solve phase refused: factorise afresh
-                return None
-            finally:
-                self.last_iterations = count[0]
-            if info != 0 or not np.all(np.isfinite(x)):
-                return None
-            # the true residual, not the loop's recurrence
-            if not np.linalg.norm(b - apply(x)) <= self.reuse * np.linalg.norm(b):
-                return None
-        return np.asarray(x)
+        try:
+            x, info = spla.bicgstab(operator, b, rtol=self.reuse, atol=0.0,
+                                    maxiter=self.reuse_iterations, M=preconditioner,
+                                    callback=step)  # fmt: skip
+        finally:
+            self.last_iterations = count[0]
+        return np.asarray(x) if info == 0 else None
 
     @contextlib.contextmanager
     def _mkl_threads(self) -> Iterator[None]:

@@ -41,10 +41,10 @@ from harpx.tracking.results import tracked_dataset
 from harpx.tracking.settings import SolverTuning, TrackingSettings
 
 STRATEGIES = {"penalty": track_frame_penalty, "augmented-lagrangian": track_frame_augmented}
-#: Relative accuracy of a Gauss–Newton tangent solved iteratively with the factorisation of an
-#: earlier one (PARDISO; :class:`~harpx.mechanics.linsolve.LinearSolver` ``reuse``), or None:
-#: factorise every tangent. Off: PARDISO's own iterative reuse does not return on a singular
-#: tangent (a frame whose images hold no tag pattern).
+#: Relative residual to which a Gauss–Newton tangent is solved iteratively with the
+#: factorisation of an earlier one as preconditioner (PARDISO;
+#: :class:`~harpx.mechanics.linsolve.LinearSolver` ``reuse``: a bounded Krylov loop that falls
+#: back to a fresh factorisation), or None: factorise every tangent.
 _SOLVE_REUSE: float | None = 1e-8
 #: Constraint points from which a worker thread samples the images while the solve
 #: assembles (:func:`~harpx.tracking.equilibrium.equilibrate`): below this the arrays are

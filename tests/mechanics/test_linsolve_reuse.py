@@ -32,8 +32,11 @@ def test_nearby_matrices_are_solved_with_the_earlier_factorisation_to_the_accura
         # CG preconditioned by an earlier factorisation, stopped at 1e-8: the error is that
         # of the stopping rule (a factor 10 of slack for the conditioning), not of rounding
         assert np.linalg.norm(x - exact) <= 1e-7 * np.linalg.norm(exact), k
+        # the stopping rule itself: the true relative residual
+        assert np.linalg.norm(K @ x - b) <= 1e-8 * np.linalg.norm(b), k
     assert solver.factorizations == 1
     assert solver.reused == 3
+    assert solver.reuse_failures == 0
     assert 0 < solver.last_iterations <= solver.reuse_iterations
 
 
@@ -44,6 +47,7 @@ def test_a_far_matrix_or_a_refresh_is_factorised_afresh(rng):
     x = solver.solve(_laplacian(10, 30.0), b)  # far: CG needs many iterations or fails
     exact = sparse.linalg.spsolve(_laplacian(10, 30.0).tocsc(), b)
     assert np.linalg.norm(x - exact) <= 1e-7 * np.linalg.norm(exact)
+    assert (solver.factorizations, solver.reused, solver.reuse_failures) == (2, 0, 1)
     solver.refresh()
     before = solver.factorizations
     solver.solve(_laplacian(10, 30.0), b)
@@ -67,6 +71,11 @@ def test_a_thread_count_applies_to_the_call_and_leaves_mkls_setting_as_it_was(rn
     threads.restype = ctypes.c_int
     before = threads()
     solver.solve(K, b)
+    assert threads() == before
+    reusing = LinearSolver("pardiso", reuse=1e-8, threads=1)
+    reusing.solve(K, b)
+    reusing.solve(_laplacian(8, 0.21), b)  # the Krylov loop's solve phases, on one thread
+    assert reusing.reused == 1
     assert threads() == before
     with pytest.raises(ValueError, match="threads=0"):
         LinearSolver("pardiso", threads=0)
@@ -92,3 +101,99 @@ def test_a_singular_matrix_after_a_regular_one_is_solved_as_without_reuse(rng):
     # both solve the consistent system (a solution up to a constant)
     for y in (plain, x):
         assert np.linalg.norm(neumann @ y - b) <= 1e-6 * np.linalg.norm(b)
+
+
+def _convection(n: int, speed: float, shift: float) -> sparse.csr_matrix:
+    """The Laplacian plus an upwind convection term along the first axis (non-symmetric)."""
+    upwind = sparse.diags([-1.0, 1.0], [-1, 0], shape=(n, n))
+    eye = sparse.identity(n)
+    return (_laplacian(n, shift) + speed * sparse.kron(sparse.kron(upwind, eye), eye)).tocsr()
+
+
+def test_nearby_non_symmetric_matrices_are_solved_by_bicgstab_to_the_accuracy_asked(rng):
+    b = rng.standard_normal(10**3)
+    solver = LinearSolver("pardiso", reuse=1e-8)
+    for k, speed in enumerate((1.0, 1.05, 1.1, 1.12)):
+        K = _convection(10, speed, 0.1)
+        x = solver.solve(K, b, symmetric=False)
+        exact = sparse.linalg.spsolve(K.tocsc(), b)
+        assert np.linalg.norm(K @ x - b) <= 1e-8 * np.linalg.norm(b), k
+        # the condition number of these matrices is a few hundred: 1e-8 in the residual is
+        # below 1e-6 in the solution
+        assert np.linalg.norm(x - exact) <= 1e-6 * np.linalg.norm(exact), k
+    assert (solver.factorizations, solver.reused, solver.reuse_failures) == (1, 3, 0)
+    assert 0 < solver.last_iterations <= solver.reuse_iterations
+
+
+def test_the_upper_triangle_alone_is_read_for_a_symmetric_matrix_also_when_reused(rng):
+    b = rng.standard_normal(8**3)
+    full, upper = LinearSolver("pardiso", reuse=1e-8), LinearSolver("pardiso", reuse=1e-8)
+    for shift in (0.1, 0.11):
+        K = _laplacian(8, shift)
+        x, y = full.solve(K, b), upper.solve(sparse.triu(K, format="csr"), b)
+        assert np.linalg.norm(x - y) <= 1e-7 * np.linalg.norm(x)
+    assert full.reused == upper.reused == 1
+
+
+def test_a_zero_right_hand_side_returns_zero_without_factorising(rng):
+    """PARDISO's own iterative mode (iparm(4)) never returned here: the tracker met it at a
+    frame without a tag pattern, whose Gauss-Newton right-hand side is zero."""
+    solver = LinearSolver("pardiso", reuse=1e-8)
+    solver.solve(_laplacian(8, 0.1), rng.standard_normal(8**3))
+    for symmetric in (True, False):
+        x = solver.solve(_laplacian(8, 0.12), np.zeros(8**3), symmetric=symmetric)
+        assert not np.any(x)
+    # the second call (non-symmetric) is a new pattern key: factorised
+    assert (solver.factorizations, solver.reused) == (2, 1)
+
+
+def _neumann(n: int) -> sparse.csr_matrix:
+    """The Laplacian with free ends: singular, the constants span its null space."""
+    ends = np.full(n, 2.0)
+    ends[[0, -1]] = 1.0
+    one = sparse.diags([-np.ones(n - 1), ends, -np.ones(n - 1)], [-1, 0, 1])
+    eye = sparse.identity(n)
+    return (sparse.kron(sparse.kron(one, eye), eye) + sparse.kron(sparse.kron(eye, one), eye)
+            + sparse.kron(sparse.kron(eye, eye), one)).tocsr()  # fmt: skip
+
+
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_a_singular_inconsistent_system_falls_back_to_the_plain_factorisation(rng, symmetric):
+    """No solution exists: the Krylov loop stops at its limit (the test returns), and the
+    matrix is factorised as without reuse (PARDISO perturbs the zero pivot)."""
+    n = 8
+    b = rng.standard_normal(n**3)  # with a mean: no solution
+    plain, solver = LinearSolver("pardiso"), LinearSolver("pardiso", reuse=1e-8)
+    for s in (plain, solver):  # the same sequence: the analysis (and scaling) of the first
+        s.solve(_laplacian(n, 0.1), b, symmetric=symmetric)
+    expected = plain.solve(_neumann(n), b, symmetric=symmetric)
+    x = solver.solve(_neumann(n), b, symmetric=symmetric)
+    assert (solver.factorizations, solver.reused, solver.reuse_failures) == (2, 0, 1)
+    assert solver.last_iterations <= solver.reuse_iterations
+    # the plain solver's factorisation: its (large, pivot-perturbed) answer up to rounding
+    assert np.linalg.norm(x - expected) <= 1e-6 * np.linalg.norm(expected)
+
+
+def test_a_non_finite_matrix_is_factorised_afresh_not_iterated(rng):
+    b = rng.standard_normal(8**3)
+    solver = LinearSolver("pardiso", reuse=1e-8)
+    solver.solve(_laplacian(8, 0.1), b)
+    K = _laplacian(8, 0.1)
+    K.data[5] = np.nan
+    x = solver.solve(K, b)
+    assert not np.all(np.isfinite(x))  # as PARDISO's plain answer
+    assert (solver.factorizations, solver.reused, solver.reuse_failures) == (2, 0, 1)
+    # its factors are not held: the next matrix is factorised too
+    solver.solve(_laplacian(8, 0.1), b)
+    assert (solver.factorizations, solver.reused) == (3, 0)
+
+
+def test_a_changed_pattern_is_analysed_and_factorised_afresh(rng):
+    b = rng.standard_normal(8**3)
+    solver = LinearSolver("pardiso", reuse=1e-8)
+    solver.solve(_laplacian(8, 0.1), b)
+    K = (_laplacian(8, 0.1) + sparse.diags([0.01], [3], shape=(8**3, 8**3))).tocsr()
+    K = (K + K.T).tocsr()  # symmetric, a wider pattern
+    x = solver.solve(K, b)
+    assert np.linalg.norm(K @ x - b) <= 1e-10 * np.linalg.norm(b)
+    assert (solver.analyses, solver.factorizations, solver.reused) == (2, 2, 0)
