@@ -54,6 +54,17 @@ _GIVE_UP_AFTER = 4
 _GIVE_UP_SLACK = 1.25
 
 
+def _dot(a: FloatArray, b: FloatArray) -> float:
+    """``a · b`` without BLAS: OpenBLAS runs its dot product on several threads from 10 000
+    entries, whose spinning then takes a second core beside each PARDISO solve phase."""
+    return float(np.einsum("i,i->", a, b))
+
+
+def _norm(a: FloatArray) -> float:
+    """Euclidean norm without BLAS (see :func:`_dot`)."""
+    return float(np.sqrt(_dot(a, a)))
+
+
 @functools.cache
 def _pardiso_template() -> Any:
     """One PyPardisoSolver per process: finding the MKL library is slow (~0.3 s)."""
@@ -311,7 +322,7 @@ class LinearSolver:
     def _krylov(
         self, data: FloatArray, indptr: Any, indices: Any, b: FloatArray, symmetric: bool
     ) -> FloatArray | None:
-        """Solve by CG (symmetric) or BiCGSTAB preconditioned with the held factors.
+        """Solve by CG (symmetric) or BiCGSTAB, preconditioned with the held factors.
 
         Returns None when the loop does not reach ``reuse`` in ``reuse_iterations``
         iterations, or its result or the preconditioner is not finite.
@@ -347,14 +358,31 @@ class LinearSolver:
                     x = self._cg(apply, precondition, b)
                 else:
                     x = self._bicgstab(apply, precondition, b)
-            except ConvergenceError:  # the solve phase refused: factorise afresh
+            except (ConvergenceError, ArithmeticError):  # refused or overflowed: factorise
                 return None
             if x is None or not np.all(np.isfinite(x)):
                 return None
             # the true residual, not the loop's recurrence
-            if not np.linalg.norm(b - apply(x)) <= self.reuse * np.linalg.norm(b):
+            if not _norm(b - apply(x)) <= self.reuse * _norm(b):
                 return None
         return x
+
+    def _give_up(self, k: int, norm: float, first: float, target: float) -> bool:
+        """Whether the loop stops at iteration ``k`` with residual ``norm`` (of ``first``).
+
+        From iteration ``_GIVE_UP_AFTER`` on: when the residual's mean rate of decrease so
+        far would not reach ``target`` within ``_GIVE_UP_SLACK`` times ``reuse_iterations``
+        (CG speeds up as it goes, hence the slack). A factorisation gone stale shows in the
+        first iterations, and a failed attempt then costs a few solve phases.
+        """
+        if not np.isfinite(norm):
+            return True
+        if k < _GIVE_UP_AFTER:
+            return False
+        if norm >= first:
+            return True
+        limit = _GIVE_UP_SLACK * self.reuse_iterations
+        return bool(k * np.log(target / first) < limit * np.log(norm / first))
 
     def _cg(
         self,
@@ -362,48 +390,33 @@ class LinearSolver:
         precondition: Callable[[FloatArray], FloatArray],
         b: FloatArray,
     ) -> FloatArray | None:
-        """Preconditioned conjugate gradients from zero, at most ``reuse_iterations``.
-
-        Gives up (None) from iteration ``_GIVE_UP_AFTER`` on as soon as the residual's mean
-        rate of decrease so far would not reach ``reuse`` within ``_GIVE_UP_SLACK`` times the
-        limit: a factorisation gone stale shows in the first iterations, and a failed
-        attempt then costs a few solve phases rather than ``reuse_iterations``.
-        """
+        """Preconditioned conjugate gradients from zero; None: not converged (or gave up)."""
         assert self.reuse is not None
-        limit = self.reuse_iterations
-        target = self.reuse * float(np.linalg.norm(b))
+        first = _norm(b)
+        target = self.reuse * first
         x = np.zeros_like(b)
         if target == 0.0:
             return x
         r = b.copy()
         z = precondition(r)
         p = z.copy()
-        rz = float(r @ z)
-        first = float(np.linalg.norm(b))
-        self.last_iterations = 0
-        for k in range(1, limit + 1):
+        rz = _dot(r, z)
+        for k in range(1, self.reuse_iterations + 1):
             q = apply(p)
-            pq = float(p @ q)
+            pq = _dot(p, q)
             if not (np.isfinite(pq) and pq != 0.0 and np.isfinite(rz) and rz != 0.0):
-                return None
+                return None  # a breakdown: singular or indefinite
             alpha = rz / pq
             x += alpha * p
             r -= alpha * q
             self.last_iterations = k
-            norm = float(np.linalg.norm(r))
+            norm = _norm(r)
             if norm <= target:
                 return x
-            if not np.isfinite(norm):
-                return None
-            # at its mean rate so far it would need more than the limit (with some slack:
-            # CG speeds up as it goes)
-            if k >= _GIVE_UP_AFTER and (
-                norm >= first
-                or k * np.log(target / first) < _GIVE_UP_SLACK * limit * np.log(norm / first)
-            ):
+            if self._give_up(k, norm, first, target):
                 return None
             z = precondition(r)
-            rz_new = float(r @ z)
+            rz_new = _dot(r, z)
             p = z + (rz_new / rz) * p
             rz = rz_new
         return None
@@ -414,23 +427,48 @@ class LinearSolver:
         precondition: Callable[[FloatArray], FloatArray],
         b: FloatArray,
     ) -> FloatArray | None:
-        """SciPy's BiCGSTAB from zero, at most ``reuse_iterations`` iterations."""
+        """Right-preconditioned BiCGSTAB from zero; None: not converged (or gave up)."""
         assert self.reuse is not None
-        n = len(b)
-        count = [0]
-
-        def step(_: FloatArray) -> None:
-            count[0] += 1
-
-        operator = spla.LinearOperator((n, n), matvec=apply, dtype=np.float64)
-        preconditioner = spla.LinearOperator((n, n), matvec=precondition, dtype=np.float64)
-        try:
-            x, info = spla.bicgstab(operator, b, rtol=self.reuse, atol=0.0,
-                                    maxiter=self.reuse_iterations, M=preconditioner,
-                                    callback=step)  # fmt: skip
-        finally:
-            self.last_iterations = count[0]
-        return np.asarray(x) if info == 0 else None
+        first = _norm(b)
+        target = self.reuse * first
+        x = np.zeros_like(b)
+        if target == 0.0:
+            return x
+        r = b.copy()
+        shadow = b.copy()
+        p = np.zeros_like(b)
+        v = np.zeros_like(b)
+        rho_old = alpha = omega = 1.0
+        for k in range(1, self.reuse_iterations + 1):
+            rho = _dot(shadow, r)
+            if not (np.isfinite(rho) and rho != 0.0 and omega != 0.0):
+                return None  # a breakdown
+            p = r + (rho / rho_old) * (alpha / omega) * (p - omega * v)
+            p_hat = precondition(p)
+            v = apply(p_hat)
+            sv = _dot(shadow, v)
+            if not (np.isfinite(sv) and sv != 0.0):
+                return None
+            alpha = rho / sv
+            s = r - alpha * v
+            self.last_iterations = k
+            if _norm(s) <= target:
+                return x + alpha * p_hat
+            s_hat = precondition(s)
+            t = apply(s_hat)
+            tt = _dot(t, t)
+            if not (np.isfinite(tt) and tt != 0.0):
+                return None
+            omega = _dot(t, s) / tt
+            x += alpha * p_hat + omega * s_hat
+            r = s - omega * t
+            norm = _norm(r)
+            if norm <= target:
+                return x
+            if self._give_up(k, norm, first, target):
+                return None
+            rho_old = rho
+        return None
 
     @contextlib.contextmanager
     def _mkl_threads(self) -> Iterator[None]:
