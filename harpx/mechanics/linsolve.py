@@ -8,13 +8,14 @@
   mode on the upper triangle; the symbolic analysis (ordering) is done once per sparsity
   pattern and reused: later factorisations run PARDISO phase 23 only. With ``reuse`` a
   matrix on the pattern of the last factorised one is first solved by a bounded Krylov loop
-  in Python (SciPy's conjugate gradients for symmetric matrices, BiCGSTAB otherwise, at most
-  ``reuse_iterations`` iterations), preconditioned by PARDISO's solve phase (33) with the
-  held factors of that earlier matrix; a sequence of nearby matrices (Newton or
-  Gauss–Newton tangents) converges in a few iterations. The matrix is factorised afresh when
-  the loop does not reach the relative residual ``reuse``, returns non-finite values, or the
-  pattern changed, so a singular matrix meets the same factorisation (and the same errors)
-  as without ``reuse``, after at most ``reuse_iterations`` iterations.
+  in Python (conjugate gradients for symmetric matrices, BiCGSTAB otherwise, at most
+  ``reuse_iterations`` iterations, given up early when its residual falls too slowly),
+  preconditioned by PARDISO's solve phase (33) with the held factors of that earlier
+  matrix; a sequence of nearby matrices (Newton or Gauss–Newton tangents) converges in a few
+  iterations. The matrix is factorised afresh when the loop does not reach the relative
+  residual ``reuse``, returns non-finite values, or the pattern changed, so a singular
+  matrix meets the same factorisation (and the same errors) as without ``reuse``, after at
+  most ``reuse_iterations`` iterations.
 * ``"superlu"`` — SuperLU with ``MMD_AT_PLUS_A`` ordering and symmetric mode for symmetric
   tangents (COLAMD for non-symmetric ones).
 * ``"superlu-colamd"`` — SuperLU with its default COLAMD ordering (reference).
