@@ -14,9 +14,10 @@ frame is averaged over the 17 AHA segments for
 * the truth's displacement on the same voxels, differentiated the same way (what a voxel
   method could at best reach on this grid).
 
-Phase extraction uses the library's defaults (upsample 2; band-pass radius 0.8 for these
-CSPAMM images: no DC peak, and the wider filter blurs the 10 mm wall less,
-``benchmarks/results/infarct_radius.md``); ``--radius`` and ``--upsample`` override them.
+Phase extraction: upsample 2 (the library's default) and band-pass radius 0.8 (``--radius``;
+the library's default is 0.5, which SPAMM's DC peak needs): CSPAMM has no DC peak, and the
+wider filter blurs the 10 mm wall less (``benchmarks/results/infarct_radius.md``).
+``--blur-passes`` sets the tracker's blur-correction passes (default: the tracker's, 1).
 
 Summary statistics are over segments 1-16 (the short-axis segments; HARP has no value in
 the apical cap 17, which only long-axis slices image); segment 17 is listed per segment.
@@ -215,7 +216,13 @@ def main() -> None:
         help="fixed tracking residual, rad (default: the tracker's, with the blur correction)",
     )
     parser.add_argument(
-        "--radius", type=float, default=None, help="band-pass radius (default: the library's)"
+        "--radius", type=float, default=0.8, help="band-pass radius (the library's default: 0.5)"
+    )
+    parser.add_argument(
+        "--blur-passes",
+        type=int,
+        default=None,
+        help="blur-correction passes (default: the tracker's)",
     )
     parser.add_argument(
         "--upsample", type=int, default=2, help="phase upsampling (default: the library's, 2)"
@@ -249,6 +256,8 @@ def main() -> None:
         args.element_size = 6.0 if args.size == "small" else 4.0
     command = "python benchmarks/cardiac_strain.py " + shlex.join(sys.argv[1:])
     settings = {} if args.epsilon is None else {"epsilon": args.epsilon}
+    if args.blur_passes is not None:
+        settings["blur_passes"] = args.blur_passes
 
     start = time.perf_counter()
     scene = lv(size=args.size, infarct=tuple(args.infarct), scar_activation=args.scar_activation)

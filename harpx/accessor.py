@@ -87,7 +87,7 @@ class HarpAccessor:
         self,
         *,
         upsample: int = 2,
-        radius: float | None = None,
+        radius: float = 0.5,
         threads: int | None = None,
         dtype: Literal["float32", "float64"] = "float32",
     ) -> xr.Dataset:

@@ -544,10 +544,7 @@ def build_parser() -> argparse.ArgumentParser:
     phase.add_argument("output", help="phase/1 archive to write")
     phase.add_argument("--upsample", type=int, default=2, help="in-plane upsampling factor")
     phase.add_argument(
-        "--radius",
-        type=float,
-        default=None,
-        help="band-pass radius, fraction of tag frequency (default: 0.5 SPAMM, 0.8 CSPAMM)",
+        "--radius", type=float, default=0.5, help="band-pass radius, fraction of tag frequency"
     )
     phase.set_defaults(func=_phase)
 

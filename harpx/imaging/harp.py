@@ -324,48 +324,11 @@ def slice_geometry(ds: xr.Dataset) -> dict[str, xr.Variable]:
     }
 
 
-#: Default band-pass radius (fraction of the tag frequency) per tagging sequence.
-DEFAULT_RADIUS: dict[str, float] = {"SPAMM": 0.5, "CSPAMM": 0.8}
-
-
-def default_radius(sequence: str | None) -> float:
-    """The band-pass radius :func:`extract_phase` uses by default for a tagging sequence.
-
-    Parameters
-    ----------
-    sequence : {"SPAMM", "CSPAMM"} or None
-        The ``tagged/1`` dataset's ``sequence`` attribute; None (unknown) is treated as
-        SPAMM, whose DC peak a wider disk would let in.
-
-    Returns
-    -------
-    float
-        0.5 for SPAMM (the disk stops halfway to the DC peak at the spectrum's centre),
-        0.8 for CSPAMM (no DC peak: only the neighbouring harmonics at twice the tag
-        frequency bound the disk).
-
-    Raises
-    ------
-    ValueError
-        If ``sequence`` is neither None nor one of the two names.
-
-    Examples
-    --------
-    >>> default_radius("CSPAMM"), default_radius("SPAMM")
-    (0.8, 0.5)
-    """
-    if sequence is None:
-        return DEFAULT_RADIUS["SPAMM"]
-    if sequence not in DEFAULT_RADIUS:
-        raise ValueError(f"sequence={sequence!r}; expected one of {sorted(DEFAULT_RADIUS)}")
-    return DEFAULT_RADIUS[str(sequence)]
-
-
 def extract_phase(
     ds: xr.Dataset,
     *,
     upsample: int = 2,
-    radius: float | None = None,
+    radius: float = 0.5,
     threads: int | None = None,
     dtype: Literal["float32", "float64"] = "float32",
 ) -> xr.Dataset:
@@ -392,12 +355,9 @@ def extract_phase(
         Refined spacing per axis is ``d_min / upsample`` for axes in some tag's plane (see
         :func:`refinement_factors`); the grid is refined by subdividing voxels, so the field
         of view is unchanged and the first refined centre is ``z[0] - (m-1) dz / (2m)``.
-    radius : float, optional
-        Band-pass radius as a fraction of the tag frequency (dimensionless, in (0, 1]).
-        Default (None): :func:`default_radius` of the dataset's ``sequence`` -- 0.5 for
-        SPAMM, which keeps its DC peak out of the pass band, and 0.8 for CSPAMM, whose
-        subtraction removes the DC peak, so a wider disk blurs a wall barely wider than a
-        tag period less (the radial strain it loses).
+    radius : float, default 0.5
+        Band-pass radius as a fraction of the tag frequency (dimensionless, in (0, 1]); 0.5
+        keeps the DC peak of SPAMM images out of the pass band.
     threads : int or None, default None
         Threads for the FFTs and the per-frame work. None means ``os.cpu_count()`` for
         in-memory data and 1 for dask-backed data (dask already parallelises over chunks).
@@ -454,8 +414,6 @@ def extract_phase(
     (32, 'phase/1')
     """
     validate(ds, "tagged")
-    if radius is None:
-        radius = default_radius(ds.attrs.get("sequence"))
     _check_options(upsample, radius)
     _warn_constant_frames(ds)
     if str(dtype) not in ("float32", "float64"):

@@ -184,7 +184,7 @@ SIZES: dict[str, LVSize] = {
     # truth on a mesh 4/3 finer in-plane and 5/4 across the wall (14.7 k cells)
     "paper": LVSize((48, 27, 4), (64, 36, 5), 10, 30.0, 1.25, 12, 8, 8.0, 6.0, 2),
     # reduced for tests and tutorials: same heart and physics, coarser everything
-    "small": LVSize((20, 8, 2), (24, 9, 3), 5, 60.0, 2.0, 8, 6, 8.0, 6.0, 2),
+    "small": LVSize((16, 6, 2), (24, 9, 3), 5, 60.0, 2.0, 8, 6, 8.0, 6.0, 2),
 }
 
 
@@ -524,7 +524,7 @@ def lv(
     size : {"paper", "small"}, default "paper"
         ``"paper"``: 10 frames, 12 SA + 8 LA slices of 1.25 mm pixels, a 6528-cell
         tracking model and a 14.7 k-cell truth; ``"small"``: 5 frames, 8 SA + 6 LA slices of
-        2 mm pixels, 450 and 900 cells, for tests and tutorials.
+        2 mm pixels, 256 and 900 cells, for tests and tutorials.
     snr : float or None, default 20
         Image signal-to-noise ratio (None: noise free).
     seed : int, default 0

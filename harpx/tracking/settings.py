@@ -21,9 +21,6 @@ Regularization = Literal["increment", "total"]
 METHODS: tuple[str, ...] = ("penalty", "augmented-lagrangian")
 PREDICTORS: tuple[str, ...] = ("none", "linear")
 REGULARIZATIONS: tuple[str, ...] = ("increment", "total")
-#: Default blur-correction passes when some tag's slice profile is modelled
-#: (:meth:`TrackingSettings.blur_passes_for`).
-SLICE_PROFILE_PASSES: int = 3
 
 
 def _is_number(value: Any) -> bool:
@@ -230,15 +227,8 @@ class TrackingSettings:
         tracking every frame, the phase the band-pass filter adds under the tracked motion
         is predicted, removed from the images, and every frame is tracked again, each
         started from the previous pass's result. 0 is the paper's formulation (the blurred
-        phase as it is). Default (None): none when ``epsilon`` is given (the prediction is
-        only as good as the fit it comes from); with the default target one pass when every
-        tag's blur is modelled in-plane, and :data:`SLICE_PROFILE_PASSES` when some tag's
-        slice profile is modelled too (``slice_thickness``/``slice_position`` in the phase,
-        :func:`harpx.tracking.blur.blur_models`): each pass predicts the blur from the
-        motion the previous pass tracked, and through thick slices the first prediction,
-        made from a motion whose thickening the blur itself hid, falls short; further
-        passes move the prediction towards its fixed point (the measured radial strain per
-        pass is in the guide's tracking page).
+        phase as it is). Default (None): one pass with the default target, none when
+        ``epsilon`` is given (the prediction is only as good as the fit it comes from).
         Applied only to phase images that say they come from the disk band-pass
         (``bandpass="disk"``, as :func:`~harpx.imaging.harp.extract_phase` writes); the
         result records the passes made (``blur_passes_applied``, ``iterations_per_pass``).
@@ -381,29 +371,11 @@ class TrackingSettings:
 
     @property
     def effective_blur_passes(self) -> int:
-        """Blur-correction passes with the in-plane blur model: ``blur_passes``, or 1 with
-        the default target and 0 with a user-given ``epsilon``."""
-        return self.blur_passes_for(slice_profile=False)
-
-    def blur_passes_for(self, *, slice_profile: bool) -> int:
-        """Blur-correction passes to make (``blur_passes`` if given).
-
-        Parameters
-        ----------
-        slice_profile : bool
-            Whether some tag's correction models its slice profile.
-
-        Returns
-        -------
-        int
-            ``blur_passes``; else 0 with a user-given ``epsilon``, else
-            :data:`SLICE_PROFILE_PASSES` with ``slice_profile`` and 1 without.
-        """
+        """Blur-correction passes to make: ``blur_passes``, or 1 with the default target and
+        0 with a user-given ``epsilon``."""
         if self.blur_passes is not None:
             return int(self.blur_passes)
-        if self.epsilon is not None:
-            return 0
-        return SLICE_PROFILE_PASSES if slice_profile else 1
+        return 1 if self.epsilon is None else 0
 
     def target(self, floor: float) -> float:
         """Tracking residual to reach in a frame whose noise floor is ``floor`` rad."""

@@ -297,8 +297,7 @@ def track(
         pass_iterations = [int(result.iterations.sum())]
         correction_mean = np.zeros(phase.sizes["time"])
         disk = PhaseParameters.from_dataset(phase).disk_bandpass  # the blur correction models it
-        slice_profile = "slice-profile" in blur_models(phase)
-        passes = settings.blur_passes_for(slice_profile=slice_profile) if disk else 0
+        passes = settings.effective_blur_passes if disk else 0
         for _ in range(passes):
             clock = _time.perf_counter()
             correction = blur_correction(phase, body, result.U)
