@@ -431,8 +431,8 @@ def local_cluster(n_workers: int = 2) -> Any:
     Workers get ``OMP_NUM_THREADS = MKL_NUM_THREADS = OPENBLAS_NUM_THREADS = 1`` (one BLAS,
     PARDISO and pyFFTW thread per process, so workers do not oversubscribe the cores) but
     not dask's default ``MALLOC_TRIM_THRESHOLD_=65536``: with it, glibc returns memory to
-    the system after every large temporary, and tracking a subject took twice the CPU time
-    (measured 2.2 s vs 1.1 s for a benchmark subject, ``benchmarks/bench_batch.py``).
+    the system after every large temporary, which doubles the CPU time of tracking a
+    subject (``benchmarks/results/tracking_defaults.md``, ``benchmarks/bench_batch.py``).
     Use this cluster's settings for a cluster started elsewhere too.
     """
     (LocalCluster,) = _distributed("local_cluster", "LocalCluster")

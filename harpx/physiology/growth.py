@@ -264,8 +264,8 @@ def prestretch_growth(
     in_situ : bool, default True
         Keep the *in-situ* mean fibre prestretch at ``mean`` (rescaling the fibre part of
         the growth after every update). With False, ``mean`` and ``gradient`` only set the
-        initial growth and the equilibrium relaxes most of its uniform part (measured: an
-        in-situ mean of -0.7 %, endocardium -2.9 %, epicardium +0.9 % on the small mesh).
+        initial growth and the equilibrium relaxes most of its uniform part (see
+        ``benchmarks/results/tracking_defaults.md``).
     linear_solver : str, default "auto"
         See :mod:`harpx.mechanics.linsolve`.
 
@@ -317,8 +317,8 @@ def prestretch_growth(
         Fg = np.matmul(Fg, np.linalg.inv(F))
         lam = GrowthField(Fg).fiber_prestretch(fibers)
         # over-relaxed (cubed) rescale: most of a uniform fibre compression relaxes again in
-        # the next equilibrium, so undershooting would make the updates crawl (measured: 6
-        # instead of 17 updates to 1e-3 mm on the small mesh)
+        # the next equilibrium, so undershooting would make the updates crawl
+        # (benchmarks/results/tracking_defaults.md)
         c = (float((weights * lam).sum()) / target) ** 3 if in_situ else 1.0
         grown = np.einsum("eqij,eqj->eqi", Fg, fibers)
         Fg = Fg + (c - 1.0) * np.einsum("eqi,eqj->eqij", grown, fibers)

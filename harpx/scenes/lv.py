@@ -49,7 +49,7 @@ each stack's slab (as :func:`harpx.io.dicom.read_tagged` does for scanner data).
 stack spans the cavity, from its apex to the base; the apical cap below it (AHA segment 17,
 which short-axis analyses leave out) is imaged by the LA slices only. There SA slices would
 cut the nearly horizontal wall obliquely: averaged over the slice thickness, its x and y
-tag phases are off by 0.6--1.4 rad at end systole (measured at paper size), enough to fold
+tag phases are off by about a radian at end systole, enough to fold
 the model's apex under a high penalty. The model's apical cap is then pulled by the
 long-axis tag alone where LA slices image it (a constraint point keeps the tags whose masks
 hold it) and otherwise follows the mechanics. The

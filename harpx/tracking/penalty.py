@@ -11,12 +11,10 @@ floor of the data, and raising λ would only fit noise: a plateau within the acc
 λ_max that worked starts the next frame.
 
 A doubling refines a fit that has converged at the λ before it, so it moves the body little
-(measured: at most 0.09 tag period on the phantom, tongue and short-axis scenes, 0.28 with
-voxels ×2, 0.43 on the small left ventricle at ε = 0.2 rad). One that moves a constraint
-point by ``tuning.raise_move`` (half a tag period) or more has pulled it into another tag's
-basin: the data overpower the model (the small phantom turning 0.5 rad, edge steps of
-1.0–1.3 tag periods per frame: 0.57 period in one doubling, after which the raise went on
-to crush cells to J = 0.04 and meet the target 9.8 mm off). The raise then stops at the
+(well under half a tag period on every scene; ``benchmarks/results/tracking_defaults.md``).
+One that moves a constraint point by ``tuning.raise_move`` (half a tag period) or more has
+pulled it into another tag's basin: the data overpower the model, and raising further
+crushes cells and meets the target far from the true motion. The raise then stops at the
 state before that doubling and the frame is a miss, never a fit reached by dragging the
 body across a wrap.
 """

@@ -92,8 +92,8 @@ class SolverTuning:
         Relative decrease of ε (dimensionless, in [0, 1)) by which a factor that carries
         less of the last velocity must beat the one chosen so far. Wrapped phase repeats
         every tag period, so a start a quarter period short of the motion and one a
-        quarter period beyond it have the same ε: such a tie (measured within 1 % on a
-        uniform translation) carries no information, and the steady motion decides.
+        quarter period beyond it have the same ε: such a tie carries no information, and
+        the steady motion decides.
     raise_move : float, default 0.5
         Largest move of a constraint point, in tag periods of phase along a tag that sees
         it, that one doubling of the penalty may make (> 0). A doubling refines a converged

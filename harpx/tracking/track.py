@@ -382,9 +382,8 @@ def _track_frames(
     A later pass (``earlier`` given) starts each frame from the earlier pass's result and
     penalty for it, which the blur correction moves only a little. A frame the earlier pass
     missed keeps that pass's result and stays a miss: its correction is predicted from the
-    missed fit, and tracking the corrected images would only confirm that fit (measured on
-    the small phantom turning 0.5 rad: the frame whose penalty raise stopped at a tag jump
-    met its target after the correction, 6.2 mm off at the edge).
+    missed fit, and tracking the corrected images would only confirm that fit, meeting the
+    target far from the true motion (``benchmarks/results/tracking_defaults.md``).
     """
     body, constraint, settings = problem.body, problem.constraint, problem.settings
     timings, terms = problem.timings, problem.terms
