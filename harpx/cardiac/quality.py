@@ -50,11 +50,26 @@ its cells with data is at least :data:`OBSERVED_MIN`, *inferred* (the model's gu
 the in-plane motion of material points at the basal and apical levels; which material sits
 in an imaged plane depends on the through-plane (longitudinal) motion, so they count as
 observed only where both the circumferential and the longitudinal directions are.
+
+Radial strain and the band-pass blur
+------------------------------------
+The harmonic phase is the angle of a band-passed image, an average over a disk of radius
+``radius`` × the tag frequency in k-space, i.e. over about a tag period in the image, and
+(in thick short-axis slices) over the slice profile. Across a wall barely wider than a tag
+period, whose inner layers move more than its outer ones, that average pulls the phase of
+each layer towards its neighbours: the wall seems to thicken less than it does. The
+tracker's blur correction (:mod:`harpx.tracking.blur`) predicts and removes that bias; its
+fixed point needs a few passes, and a wider band-pass (which CSPAMM allows, having no DC
+peak) leaves less to remove. :func:`radial_strain_caution` therefore names the settings of
+a result below :data:`THICKENING_RADIUS` or :data:`THICKENING_PASSES`, and any conventional
+HARP result (which has no correction): their radial strain (wall thickening) is
+under-reported. The measured biases are in the user guide ("Wall thickening").
 """
 
 from __future__ import annotations
 
 import sys
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -68,10 +83,13 @@ __all__ = [
     "INFERRED_BELOW",
     "IN_WALL_FRACTION",
     "OBSERVED_MIN",
+    "THICKENING_PASSES",
+    "THICKENING_RADIUS",
     "WALL_TOLERANCE",
     "VentricleShapeError",
     "check_body",
     "check_template",
+    "radial_strain_caution",
     "seen_fraction",
     "source_labels",
     "template_segment_volume",
@@ -87,6 +105,10 @@ IN_WALL_FRACTION = 0.8
 OBSERVED_MIN = 0.9
 #: below this mean seen fraction a component is the model's inference
 INFERRED_BELOW = 0.5
+#: least band-pass radius (fraction of the tag frequency) for an unbiased radial strain
+THICKENING_RADIUS = 0.8
+#: least blur-correction passes for an unbiased radial strain
+THICKENING_PASSES = 3
 
 
 class VentricleShapeError(HarpxError, ValueError):
@@ -289,3 +311,60 @@ def source_labels(fraction: ArrayLike, has_data: BoolArray | None = None) -> Any
     if has_data is not None:
         out = np.where(np.broadcast_to(has_data, out.shape), out, "no data")
     return out
+
+
+def radial_strain_caution(attrs: Mapping[str, Any]) -> str:
+    """Why a tracked result's radial strain (wall thickening) is likely under-reported.
+
+    Parameters
+    ----------
+    attrs : mapping
+        The attributes of a ``tracked/1`` dataset: ``method`` (``"harp"`` for
+        conventional HARP), ``phase_radius`` and ``sequence`` (the phase extraction's,
+        recorded by the trackers), ``blur_passes_applied`` (finite-element tracking).
+
+    Returns
+    -------
+    str
+        Empty when the settings meet :data:`THICKENING_RADIUS` and
+        :data:`THICKENING_PASSES`, or when the dataset does not record its phase
+        extraction (a displacement from elsewhere, e.g. a synthetic truth); otherwise the
+        reasons and the settings that remove the bias (module notes).
+
+    Examples
+    --------
+    >>> radial_strain_caution({"phase_radius": 0.8, "blur_passes_applied": 3})
+    ''
+    >>> radial_strain_caution({"method": "harp", "phase_radius": 0.8})[:34]
+    'conventional HARP has no blur corr'
+    """
+    if "phase_radius" not in attrs:
+        return ""
+    radius = float(attrs["phase_radius"])
+    if attrs.get("method") == "harp":
+        return (
+            "conventional HARP has no blur correction: the band-pass (radius "
+            f"{radius:g} of the tag frequency) averages the phase across the wall, so its "
+            "radial strain (wall thickening) is under-reported; use finite-element "
+            f"tracking with blur_passes={THICKENING_PASSES} for it"
+        )
+    reasons = []
+    if radius < THICKENING_RADIUS:
+        fix = (
+            "SPAMM's DC peak limits the radius; use CSPAMM images where thickening matters"
+            if str(attrs.get("sequence", "")).upper() == "SPAMM"
+            else f"CSPAMM has no DC peak: ds.harp.phase(radius={THICKENING_RADIUS:g})"
+        )
+        reasons.append(f"band-pass radius {radius:g} < {THICKENING_RADIUS:g} ({fix})")
+    passes = int(attrs.get("blur_passes_applied", 0))
+    if passes < THICKENING_PASSES:
+        reasons.append(
+            f"{passes} blur-correction pass(es) < {THICKENING_PASSES} "
+            f"(track(..., blur_passes={THICKENING_PASSES}))"
+        )
+    if not reasons:
+        return ""
+    return (
+        "the radial strain (wall thickening) is likely under-reported: the band-pass blur "
+        "across the wall is not fully removed with " + " and ".join(reasons)
+    )

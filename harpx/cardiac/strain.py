@@ -65,6 +65,7 @@ from harpx.cardiac.quality import (
     HEART_SIZE_MM,
     check_body,
     check_template,
+    radial_strain_caution,
     seen_fraction,
     source_labels,
     template_segment_volume,
@@ -525,7 +526,11 @@ def cardiac_strain(
     -----
     HarpxWarning
         Segments without data (NaN), components the tags did not observe, an unknown
-        anterior direction, or a dataset that does not record what its tags observed.
+        anterior direction, a dataset that does not record what its tags observed, or
+        settings that under-report radial strain (conventional HARP; a band-pass radius
+        or blur-correction passes below what removes the blur across the wall:
+        :func:`~harpx.cardiac.quality.radial_strain_caution`, kept in
+        ``attrs["radial_strain_caution"]``, empty when none).
     """
     if "time" not in tracked.coords:
         raise ValueError(
@@ -578,7 +583,7 @@ def cardiac_strain(
             aha_segments(centres, template, anterior=measures.attrs["anterior_deg"]),
             dims="cell", attrs={"units": "1", "long_name": "AHA segment"},
         )  # fmt: skip
-        return out
+        return _flag_radial(out)
     name = next((n for n in ("displacement_grid", "displacement_true") if n in tracked), None)
     if name is None:
         raise ValueError(
@@ -612,4 +617,17 @@ def cardiac_strain(
         seg.reshape(shape), dims=("z", "y", "x"),
         attrs={"units": "1", "long_name": "AHA segment of voxels used (0: none)"},
     )  # fmt: skip
+    return _flag_radial(out)
+
+
+def _flag_radial(out: xr.Dataset) -> xr.Dataset:
+    """Record (and warn) when the result's settings under-report radial strain."""
+    caution = radial_strain_caution(out.attrs)
+    out.attrs["radial_strain_caution"] = caution
+    if caution:
+        warnings.warn(
+            f"{caution}; attrs['radial_strain_caution'] keeps this note",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
     return out

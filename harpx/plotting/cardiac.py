@@ -141,7 +141,8 @@ def bullseye(
     :func:`segment_wedges`); segment numbers in every segment, values in % for
     dimensionless quantities, blank segments without data, hatched segments whose
     component the model inferred, a colour bar with units, a title naming the quantity and
-    the frame (or the peak).
+    the frame (or the peak). The radial component of a result whose
+    ``attrs["radial_strain_caution"]`` is set says "under-reported" in its caption.
 
     Parameters
     ----------
@@ -238,6 +239,8 @@ def bullseye(
     ax.axis("off")
     heading = title if title is not None else "\n".join(p for p in (quantity, when) if p)
     ax.set_title(heading, fontsize=10)
+    if component == "radial" and _radial_caution(values):
+        notes.add("under-reported: see attrs['radial_strain_caution']")
     caption = "; ".join([*sorted(notes), *([anterior] if anterior else [])])
     if caption:
         ax.text(0.5, -0.02, caption, transform=ax.transAxes, ha="center", va="top",
@@ -271,7 +274,8 @@ def segment_curves(
     matplotlib.figure.Figure
         Four panels sharing the value axis (in % for strains); segments the model inferred
         are dashed and labelled "inferred", partly inferred ones dotted; segments without
-        data are not drawn and are named in their panel's title.
+        data are not drawn and are named in their panel's title. The radial component of
+        a result whose ``attrs["radial_strain_caution"]`` is set says so in the title.
 
     Raises
     ------
@@ -317,5 +321,13 @@ def segment_curves(
             ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
     quantity = _TITLES.get(variable, str(da.attrs.get("long_name", variable)))
     axes[0].set_ylabel(f"{quantity.format(c=component)} ({unit})")
-    fig.suptitle(f"{quantity.format(c=component)} per AHA segment", fontsize=11)
+    caution = component == "radial" and _radial_caution(ds)
+    fig.suptitle(f"{quantity.format(c=component)} per AHA segment"
+                 + (" (likely under-reported: attrs['radial_strain_caution'])" if caution else ""),
+                 fontsize=11)  # fmt: skip
     return fig
+
+
+def _radial_caution(values: Any) -> bool:
+    """Whether a cardiac_strain result flags its radial strain as under-reported."""
+    return isinstance(values, xr.Dataset) and bool(values.attrs.get("radial_strain_caution"))

@@ -134,7 +134,9 @@ def tracked_dataset(
     diagnostics : mapping of str to ndarray or (dims, ndarray)
         Per-frame arrays (time,) or (time, cell), or ``(dims, values)`` pairs.
     settings : mapping
-        Settings recorded in ``attrs``.
+        Settings recorded in ``attrs``; a ``phase/1`` dataset's ``sequence``,
+        ``upsample`` and ``radius`` are recorded too (as ``sequence``, ``phase_upsample``
+        and ``phase_radius``, as conventional HARP records them).
 
     Returns
     -------
@@ -195,6 +197,10 @@ def tracked_dataset(
         U, dims=("time", "dof"), attrs={"units": "mm", "long_name": "displacement of each dof"}
     )
     ds.attrs.update({"harpx_schema": "tracked/1", **{k: v for k, v in settings.items()}})
+    if phase.attrs.get("harpx_schema") == "phase/1":  # how the tracked phase was extracted
+        for key in ("sequence", "upsample", "radius"):
+            if key in phase.attrs:
+                ds.attrs[key if key == "sequence" else f"phase_{key}"] = phase.attrs[key]
     assert ds.sizes["time"] == ntime
     return fill_standard_attrs(ds)
 

@@ -150,3 +150,17 @@ def test_segment_curves_by_ring(partial):
     solid = segment_curves(partial, component="circumferential").axes[0].get_lines()[0]
     assert solid.get_linestyle() == "-"
     assert "%" in basal.get_ylabel()
+
+
+def test_under_reported_radial_strain_says_so_on_the_radial_plots(partial):
+    flagged = partial.copy()
+    flagged.attrs["radial_strain_caution"] = "the radial strain is likely under-reported"
+    texts = [t.get_text() for t in bullseye(flagged, component="radial").axes[0].texts]
+    assert any("under-reported" in t for t in texts)
+    assert "under-reported" in segment_curves(flagged, component="radial").get_suptitle()
+    # the other components, and a result without the flag, carry no such note
+    texts = [t.get_text() for t in bullseye(flagged, component="circumferential").axes[0].texts]
+    assert not any("under-reported" in t for t in texts)
+    texts = [t.get_text() for t in bullseye(partial, component="radial").axes[0].texts]
+    assert not any("under-reported" in t for t in texts)
+    assert "under-reported" not in segment_curves(partial, component="radial").get_suptitle()

@@ -165,3 +165,46 @@ def test_a_dataset_that_does_not_record_what_the_tags_saw_says_so():
         out = cardiac_strain(fe_dataset(_shrink, seen=None), TEMPLATE, anterior=0.0)
     assert set(out.strain_source.values.ravel()) == {"not recorded"}
     assert out.twist.attrs["source"] == "not recorded"
+
+
+@pytest.mark.parametrize(
+    ("attrs", "names"),
+    [
+        # the settings that remove the blur across the wall: nothing to say
+        ({"sequence": "CSPAMM", "phase_radius": 0.8, "blur_passes_applied": 3}, []),
+        # a displacement that does not record its phase extraction (a synthetic truth)
+        ({"sequence": "CSPAMM", "blur_passes_applied": 0}, []),
+        # the library's defaults on CSPAMM images: both settings named, with their fix
+        (
+            {"sequence": "CSPAMM", "phase_radius": 0.5, "blur_passes_applied": 1},
+            ["band-pass radius 0.5 < 0.8", "radius=0.8", "1 blur-correction pass(es) < 3"],
+        ),
+        # SPAMM cannot widen its band-pass: the DC peak is named instead of radius=0.8
+        (
+            {"sequence": "SPAMM", "phase_radius": 0.5, "blur_passes_applied": 3},
+            ["band-pass radius 0.5 < 0.8", "DC peak"],
+        ),
+        # conventional HARP never corrects the blur, whatever its radius
+        ({"method": "harp", "sequence": "CSPAMM", "phase_radius": 0.8}, ["conventional HARP"]),
+    ],
+)
+def test_radial_strain_caution_names_the_settings_that_under_report_thickening(attrs, names):
+    from harpx.cardiac.quality import radial_strain_caution
+
+    caution = radial_strain_caution(attrs)
+    assert bool(caution) == bool(names), caution
+    for name in names:
+        assert name in caution, caution
+    if attrs.get("sequence") == "SPAMM":
+        assert "radius=0.8" not in caution
+
+
+def test_cardiac_strain_warns_and_flags_under_reported_thickening():
+    ds = fe_dataset(_shrink)
+    ds.attrs.update(sequence="CSPAMM", phase_radius=0.5, blur_passes_applied=1)
+    with pytest.warns(HarpxWarning, match=r"radial strain \(wall thickening\) is likely under"):
+        out = cardiac_strain(ds, TEMPLATE, anterior=0.0)
+    assert "1 blur-correction pass(es) < 3" in out.attrs["radial_strain_caution"]
+    ds.attrs.update(phase_radius=0.8, blur_passes_applied=3)
+    out = cardiac_strain(ds, TEMPLATE, anterior=0.0)  # no warning (they are errors here)
+    assert out.attrs["radial_strain_caution"] == ""

@@ -36,7 +36,8 @@ def fe(scene):
     tracked = track(phase, scene.body(), dirichlet=scene.dirichlet())
     # the apical cap (17) has long-axis data only: its Ecc and Ell come from the model
     with pytest.warns(HarpxWarning, match=r"partly inferred in segment\(s\) 17;"):
-        return cardiac_strain(tracked, scene.template())
+        with pytest.warns(HarpxWarning, match=r"wall thickening\) is likely under-reported"):
+            return cardiac_strain(tracked, scene.template())
 
 
 def _ecc(ds):
@@ -110,6 +111,10 @@ def test_fe_tracking_finds_the_infarct_and_its_ecc(truth, fe):
     true_err = truth.peak_strain.sel(component="radial").values[SHORT_AXIS]
     ratio = np.abs(err - true_err).mean() / np.abs(true_err).mean()
     assert ratio < 1.2 * 0.176, ratio
+    # ... and the result says so (one blur-correction pass), where the truth has no note
+    assert ratio > 0.10
+    assert "1 blur-correction pass(es) < 3" in fe.attrs["radial_strain_caution"]
+    assert truth.attrs["radial_strain_caution"] == ""
 
 
 @pytest.mark.parametrize(
