@@ -17,7 +17,9 @@ frame is averaged over the 17 AHA segments for
 Phase extraction: upsample 2 (the library's default) and band-pass radius 0.8 (``--radius``;
 the library's default is 0.5, which SPAMM's DC peak needs): CSPAMM has no DC peak, and the
 wider filter blurs the 10 mm wall less (``benchmarks/results/infarct_radius.md``).
-``--blur-passes`` sets the tracker's blur-correction passes (default: the tracker's, 1).
+``--blur-passes`` sets the tracker's blur-correction passes (default: the tracker's, 1);
+``--set NAME=VALUE ...`` any other numeric tracker setting (e.g. ``epsilon_factor=1.0``);
+``--divisions NC NL NT`` a template tracking mesh other than the scene's.
 
 Summary statistics are over segments 1-16 (the short-axis segments; HARP has no value in
 the apical cap 17, which only long-axis slices image); segment 17 is listed per segment.
@@ -57,6 +59,7 @@ from pathlib import Path
 import numpy as np
 
 from harpx.anatomy.segmentation import mesh_from_labels
+from harpx.anatomy.ventricle import ventricle
 from harpx.anatomy.ventricle_fit import fit_ventricle_to_mask
 from harpx.cardiac.strain import COMPONENTS, cardiac_strain
 from harpx.imaging.harp import extract_phase
@@ -233,6 +236,22 @@ def main() -> None:
         help="drop the slice geometry from the phase: the blur correction models the in-plane "
         "band-pass only (the model before the slice profile; harpx.tracking.blur)",
     )
+    parser.add_argument(
+        "--divisions",
+        type=int,
+        nargs=3,
+        default=None,
+        metavar=("NC", "NL", "NT"),
+        help="template tracking mesh (circumferential, longitudinal, transmural cells; "
+        "default: the scene's)",
+    )
+    parser.add_argument(
+        "--set",
+        nargs="*",
+        default=[],
+        metavar="NAME=VALUE",
+        help="further tracker settings (harpx.tracking.settings.TrackingSettings), numbers",
+    )
     parser.add_argument("--infarct", type=int, nargs="*", default=[])
     parser.add_argument("--scar-activation", type=float, default=0.0)
     parser.add_argument(
@@ -258,6 +277,9 @@ def main() -> None:
     settings = {} if args.epsilon is None else {"epsilon": args.epsilon}
     if args.blur_passes is not None:
         settings["blur_passes"] = args.blur_passes
+    for item in args.set:
+        name, value = item.split("=", 1)
+        settings[name] = None if value == "None" else float(value)
 
     start = time.perf_counter()
     scene = lv(size=args.size, infarct=tuple(args.infarct), scar_activation=args.scar_activation)
@@ -273,7 +295,14 @@ def main() -> None:
     if args.in_plane_blur:
         phase = phase.drop_vars(["slice_thickness", "slice_position"], errors="ignore")
     start = time.perf_counter()
-    tracked = track(phase, scene.body("stress-free"), dirichlet=scene.dirichlet(), **settings)
+    body = scene.body("stress-free")
+    if args.divisions is not None:
+        g = scene.geometry
+        nc, nl, nt = args.divisions
+        spec = ventricle(inner=g.inner, outer=g.outer, truncation=g.truncation,
+                         n_circumferential=nc, n_longitudinal=nl, n_transmural=nt)  # fmt: skip
+        body = Body(spec, scene.material)
+    tracked = track(phase, body, dirichlet=scene.dirichlet(), **settings)
     t_fe = time.perf_counter() - start
     start = time.perf_counter()
     segmented = mesh_from_labels(
