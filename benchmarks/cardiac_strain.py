@@ -250,7 +250,7 @@ def main() -> None:
         nargs="*",
         default=[],
         metavar="NAME=VALUE",
-        help="further tracker settings (harpx.tracking.settings.TrackingSettings), numbers",
+        help="further tracker settings (harpx.tracking.settings.TrackingSettings)",
     )
     parser.add_argument("--infarct", type=int, nargs="*", default=[])
     parser.add_argument("--scar-activation", type=float, default=0.0)
@@ -279,7 +279,10 @@ def main() -> None:
         settings["blur_passes"] = args.blur_passes
     for item in args.set:
         name, value = item.split("=", 1)
-        settings[name] = None if value == "None" else float(value)
+        try:
+            settings[name] = None if value == "None" else float(value)
+        except ValueError:  # a named choice, e.g. regularization=increment
+            settings[name] = value
 
     start = time.perf_counter()
     scene = lv(size=args.size, infarct=tuple(args.infarct), scar_activation=args.scar_activation)
