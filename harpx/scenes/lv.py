@@ -103,7 +103,7 @@ import xarray as xr
 
 from harpx._typing import FloatArray, IntArray
 from harpx.anatomy.aha import segments_local
-from harpx.anatomy.ventricle import VentricleGeometry, ventricle
+from harpx.anatomy.ventricle import VentricleGeometry
 from harpx.anatomy.ventricle_fit import VentricleTemplate
 from harpx.imaging.synth import AcquisitionOptions, synthesize_tagged
 from harpx.mechanics.body import Body
@@ -480,14 +480,8 @@ def _ventricle_mesh(
 ) -> MeshSpec:
     """The scene's ventricle meshed with (circumferential, longitudinal, transmural) cells."""
     nc, nl, nt = divisions
-    return ventricle(
-        inner=geometry.inner,
-        outer=geometry.outer,
-        truncation=geometry.truncation,
-        n_circumferential=nc,
-        n_longitudinal=nl,
-        n_transmural=nt,
-        segments=segments,
+    return geometry.mesh(
+        n_circumferential=nc, n_longitudinal=nl, n_transmural=nt, segments=segments
     )
 
 
