@@ -64,7 +64,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import skfem
@@ -326,6 +326,22 @@ class VentricleGeometry:
     def wall_volume(self) -> float:
         """Analytic wall volume below the base plane, mm³."""
         return self._truncated_volume(*self.outer, self.truncation) - self.cavity_volume()
+
+    def mesh(self, **options: Any) -> MeshSpec:
+        """This geometry meshed by :func:`ventricle`.
+
+        Parameters
+        ----------
+        **options
+            Keywords of :func:`ventricle` other than the geometry (``n_circumferential``,
+            ``n_longitudinal``, ``n_transmural``, ``fiber_endo``, ``fiber_epi``,
+            ``segments``, ``curved``).
+
+        Returns
+        -------
+        MeshSpec
+        """
+        return ventricle(inner=self.inner, outer=self.outer, truncation=self.truncation, **options)
 
 
 # ------------------------------------------------------------------------------ mesh

@@ -49,7 +49,7 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from harpx._typing import FloatArray, IntArray
-from harpx.anatomy.ventricle import VentricleGeometry, ventricle
+from harpx.anatomy.ventricle import VentricleGeometry
 from harpx.errors import HarpxWarning
 from harpx.mechanics.mesh import MeshSpec, hex_mesh, labelled_spec
 
@@ -252,8 +252,7 @@ class VentricleTemplate:
             Regions, boundaries ``endo``/``epi``/``base`` and helical fibres of the
             template mesh, moved rigidly into the image.
         """
-        g = self.geometry
-        spec = ventricle(inner=g.inner, outer=g.outer, truncation=g.truncation, **options)
+        spec = self.geometry.mesh(**options)
         points = self.to_image(spec.mesh.p.T)
         moved = hex_mesh(points, _vtk_cells(spec.mesh))
         fibers = None if spec.fibers is None else spec.fibers @ self.rotation.T

@@ -76,7 +76,8 @@ class ActiveContraction:
     Raises
     ------
     ValueError
-        If a parameter is out of range (the message names it).
+        If ``t_max`` is negative, ``law`` is neither of its values, or another parameter
+        is not a finite positive number (the message names it).
 
     Notes
     -----

@@ -180,17 +180,10 @@ def right_cauchy_green(F: ArrayLike) -> FloatArray:
 
 
 def green_strain(F: ArrayLike) -> FloatArray:
-    """Green--Lagrange strain ``E = (F^T F - I) / 2``.
+    """Green--Lagrange strain ``E = (C - I) / 2``, ``C`` the :func:`right_cauchy_green` tensor.
 
-    Parameters
-    ----------
-    F : array_like, shape (..., 3, 3)
-        Deformation gradients (dimensionless).
-
-    Returns
-    -------
-    ndarray, shape (..., 3, 3)
-        ``E`` (dimensionless, symmetric).
+    Parameters and shapes as in :func:`right_cauchy_green`; ``E`` is dimensionless and
+    symmetric.
 
     Examples
     --------

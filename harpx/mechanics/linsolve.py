@@ -138,6 +138,111 @@ def rigid_body_modes(points: FloatArray) -> FloatArray:
     return B.reshape(3 * n, 6)
 
 
+class _Stop:
+    """The stopping rule of the Krylov loops of ``reuse`` for one right-hand side ``b``.
+
+    The loop has converged when its residual norm is at most ``target = reuse |b|``, runs at
+    most ``limit`` iterations, and gives up early (:meth:`give_up`); it records in
+    ``iterations`` how many it ran.
+    """
+
+    def __init__(self, b: FloatArray, reuse: float, limit: int) -> None:
+        self.first = _norm(b)
+        self.target = reuse * self.first
+        self.limit = limit
+        self.iterations = 0
+
+    def give_up(self, k: int, norm: float) -> bool:
+        """Whether the loop stops at iteration ``k`` with residual ``norm`` (of ``first``).
+
+        From iteration ``_GIVE_UP_AFTER`` on: when the residual's mean rate of decrease so
+        far would not reach ``target`` within ``_GIVE_UP_SLACK`` times ``limit`` iterations
+        (CG speeds up as it goes, hence the slack). A factorisation gone stale shows in the
+        first iterations, and a failed attempt then costs a few solve phases.
+        """
+        if not np.isfinite(norm):
+            return True
+        if k < _GIVE_UP_AFTER:
+            return False
+        if norm >= self.first:
+            return True
+        limit = _GIVE_UP_SLACK * self.limit
+        return bool(k * np.log(self.target / self.first) < limit * np.log(norm / self.first))
+
+
+_Operator = Callable[[FloatArray], FloatArray]
+
+
+def _cg(apply: _Operator, precondition: _Operator, b: FloatArray, stop: _Stop) -> FloatArray | None:
+    """Preconditioned conjugate gradients from zero; None: not converged (or gave up)."""
+    x = np.zeros_like(b)
+    r = b.copy()
+    z = precondition(r)
+    p = z.copy()
+    rz = _dot(r, z)
+    for k in range(1, stop.limit + 1):
+        q = apply(p)
+        pq = _dot(p, q)
+        if not (np.isfinite(pq) and pq != 0.0 and np.isfinite(rz) and rz != 0.0):
+            return None  # a breakdown: singular or indefinite
+        alpha = rz / pq
+        x += alpha * p
+        r -= alpha * q
+        stop.iterations = k
+        norm = _norm(r)
+        if norm <= stop.target:
+            return x
+        if stop.give_up(k, norm):
+            return None
+        z = precondition(r)
+        rz_new = _dot(r, z)
+        p = z + (rz_new / rz) * p
+        rz = rz_new
+    return None
+
+
+def _bicgstab(
+    apply: _Operator, precondition: _Operator, b: FloatArray, stop: _Stop
+) -> FloatArray | None:
+    """Right-preconditioned BiCGSTAB from zero; None: not converged (or gave up)."""
+    x = np.zeros_like(b)
+    r = b.copy()
+    shadow = b.copy()
+    p = np.zeros_like(b)
+    v = np.zeros_like(b)
+    rho_old = alpha = omega = 1.0
+    for k in range(1, stop.limit + 1):
+        rho = _dot(shadow, r)
+        if not (np.isfinite(rho) and rho != 0.0 and omega != 0.0):
+            return None  # a breakdown
+        p = r + (rho / rho_old) * (alpha / omega) * (p - omega * v)
+        p_hat = precondition(p)
+        v = apply(p_hat)
+        sv = _dot(shadow, v)
+        if not (np.isfinite(sv) and sv != 0.0):
+            return None
+        alpha = rho / sv
+        s = r - alpha * v
+        stop.iterations = k
+        if _norm(s) <= stop.target:
+            return x + alpha * p_hat
+        s_hat = precondition(s)
+        t = apply(s_hat)
+        tt = _dot(t, t)
+        if not (np.isfinite(tt) and tt != 0.0):
+            return None
+        omega = _dot(t, s) / tt
+        x += alpha * p_hat + omega * s_hat
+        r = s - omega * t
+        norm = _norm(r)
+        if norm <= stop.target:
+            return x
+        if stop.give_up(k, norm):
+            return None
+        rho_old = rho
+    return None
+
+
 class LinearSolver:
     """Solve ``K x = b`` repeatedly for matrices on a fixed sparsity pattern.
 
@@ -353,123 +458,22 @@ class LinearSolver:
 
         # a breakdown (a singular or indefinite matrix) divides by zero: non-finite values,
         # caught below, not warnings
+        stop = _Stop(b, self.reuse, self.reuse_iterations)
+        if stop.target == 0.0:
+            return np.zeros_like(b)
         with np.errstate(all="ignore"):
             try:
-                if symmetric:
-                    x = self._cg(apply, precondition, b)
-                else:
-                    x = self._bicgstab(apply, precondition, b)
+                x = (_cg if symmetric else _bicgstab)(apply, precondition, b, stop)
             except (ConvergenceError, ArithmeticError):  # refused or overflowed: factorise
                 return None
+            finally:
+                self.last_iterations = stop.iterations
             if x is None or not np.all(np.isfinite(x)):
                 return None
             # the true residual, not the loop's recurrence
-            if not _norm(b - apply(x)) <= self.reuse * _norm(b):
+            if not _norm(b - apply(x)) <= stop.target:
                 return None
         return x
-
-    def _give_up(self, k: int, norm: float, first: float, target: float) -> bool:
-        """Whether the loop stops at iteration ``k`` with residual ``norm`` (of ``first``).
-
-        From iteration ``_GIVE_UP_AFTER`` on: when the residual's mean rate of decrease so
-        far would not reach ``target`` within ``_GIVE_UP_SLACK`` times ``reuse_iterations``
-        (CG speeds up as it goes, hence the slack). A factorisation gone stale shows in the
-        first iterations, and a failed attempt then costs a few solve phases.
-        """
-        if not np.isfinite(norm):
-            return True
-        if k < _GIVE_UP_AFTER:
-            return False
-        if norm >= first:
-            return True
-        limit = _GIVE_UP_SLACK * self.reuse_iterations
-        return bool(k * np.log(target / first) < limit * np.log(norm / first))
-
-    def _cg(
-        self,
-        apply: Callable[[FloatArray], FloatArray],
-        precondition: Callable[[FloatArray], FloatArray],
-        b: FloatArray,
-    ) -> FloatArray | None:
-        """Preconditioned conjugate gradients from zero; None: not converged (or gave up)."""
-        assert self.reuse is not None
-        first = _norm(b)
-        target = self.reuse * first
-        x = np.zeros_like(b)
-        if target == 0.0:
-            return x
-        r = b.copy()
-        z = precondition(r)
-        p = z.copy()
-        rz = _dot(r, z)
-        for k in range(1, self.reuse_iterations + 1):
-            q = apply(p)
-            pq = _dot(p, q)
-            if not (np.isfinite(pq) and pq != 0.0 and np.isfinite(rz) and rz != 0.0):
-                return None  # a breakdown: singular or indefinite
-            alpha = rz / pq
-            x += alpha * p
-            r -= alpha * q
-            self.last_iterations = k
-            norm = _norm(r)
-            if norm <= target:
-                return x
-            if self._give_up(k, norm, first, target):
-                return None
-            z = precondition(r)
-            rz_new = _dot(r, z)
-            p = z + (rz_new / rz) * p
-            rz = rz_new
-        return None
-
-    def _bicgstab(
-        self,
-        apply: Callable[[FloatArray], FloatArray],
-        precondition: Callable[[FloatArray], FloatArray],
-        b: FloatArray,
-    ) -> FloatArray | None:
-        """Right-preconditioned BiCGSTAB from zero; None: not converged (or gave up)."""
-        assert self.reuse is not None
-        first = _norm(b)
-        target = self.reuse * first
-        x = np.zeros_like(b)
-        if target == 0.0:
-            return x
-        r = b.copy()
-        shadow = b.copy()
-        p = np.zeros_like(b)
-        v = np.zeros_like(b)
-        rho_old = alpha = omega = 1.0
-        for k in range(1, self.reuse_iterations + 1):
-            rho = _dot(shadow, r)
-            if not (np.isfinite(rho) and rho != 0.0 and omega != 0.0):
-                return None  # a breakdown
-            p = r + (rho / rho_old) * (alpha / omega) * (p - omega * v)
-            p_hat = precondition(p)
-            v = apply(p_hat)
-            sv = _dot(shadow, v)
-            if not (np.isfinite(sv) and sv != 0.0):
-                return None
-            alpha = rho / sv
-            s = r - alpha * v
-            self.last_iterations = k
-            if _norm(s) <= target:
-                return x + alpha * p_hat
-            s_hat = precondition(s)
-            t = apply(s_hat)
-            tt = _dot(t, t)
-            if not (np.isfinite(tt) and tt != 0.0):
-                return None
-            omega = _dot(t, s) / tt
-            x += alpha * p_hat + omega * s_hat
-            r = s - omega * t
-            norm = _norm(r)
-            if norm <= target:
-                return x
-            if self._give_up(k, norm, first, target):
-                return None
-            rho_old = rho
-        return None
 
     @contextlib.contextmanager
     def _mkl_threads(self) -> Iterator[None]:

@@ -388,7 +388,8 @@ class Guccione(_Uncoupled):
     Raises
     ------
     ValueError
-        If a parameter is out of range (the message names it).
+        If ``c`` or ``kappa`` is not a finite positive number, or ``bf``, ``bt`` or ``bfs``
+        not a finite non-negative one (the message names it).
 
     Notes
     -----

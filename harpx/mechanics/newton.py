@@ -479,10 +479,8 @@ def equilibrate(
 
     Parameters
     ----------
-    body : Body
-        The body.
-    loads : iterable
-        Dirichlet conditions and residual terms (see :mod:`harpx.mechanics.loads`).
+    body, loads
+        As in :func:`solve`.
     u0 : array_like, shape (ndof,), optional
         Starting displacement (mm); zeros by default. Its Dirichlet values need not match:
         the remaining increment is applied through the linearised predictor.
@@ -554,7 +552,7 @@ def solve(
     Parameters
     ----------
     body : Body
-        The body.
+        The model; unchanged unless ``t_max`` is given (its activation level is then set).
     loads : iterable
         Dirichlet conditions (:class:`~harpx.mechanics.loads.Fixed`,
         :class:`~harpx.mechanics.loads.Prescribed`) and residual terms

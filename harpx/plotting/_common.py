@@ -66,8 +66,9 @@ def _map_doc(
     """Append the shared ``ax``, Returns and Raises sections to a plot's docstring; the
     Raises entry names the dataset ``kind`` and the ``variables`` the plot needs, and for a
     map that picks the nearest frame and slice (``slices``) what that raises and warns.
-    ``slice_params``: also document ``time`` and ``z`` as the image-grid maps take them
-    (after the plot's own parameters, before ``ax``)."""
+    ``slice_params``: also document ``ds`` (first: the ``kind`` dataset with ``variables``)
+    and ``time`` and ``z`` as the image-grid maps take them (after the plot's own
+    parameters, before ``ax``)."""
     quoted = [f"``{v}``" for v in variables]
     names = quoted[-1] if len(quoted) == 1 else ", ".join(quoted[:-1]) + " or " + quoted[-1]
 
@@ -76,9 +77,16 @@ def _map_doc(
         tail = _MAP_DOC_TAIL.format(kind=kind, names=names)
         if slices:
             tail = tail.rstrip() + "\n" + _SLICE_DOC_TAIL
+        doc = func.__doc__.rstrip()
         if slice_params:
             tail = _SLICE_PARAM_DOC + tail
-        func.__doc__ = func.__doc__.rstrip() + tail
+            header = "\n    Parameters\n    ----------\n"
+            assert header in doc
+            ds = (
+                f"    ds : xarray.Dataset\n        ``{kind}/1`` dataset with {', '.join(quoted)}.\n"
+            )
+            doc = doc.replace(header, header + ds, 1)
+        func.__doc__ = doc + tail
         return func
 
     return decorate

@@ -162,7 +162,7 @@ def error_vs_runtime(
         Dataset with ``displacement_true`` (a synthetic ``tagged/1`` scene); needed with
         datasets.
     path : path-like, optional
-        Write the figure here (PNG).
+        As in :func:`displacement_maps`.
 
     Returns
     -------

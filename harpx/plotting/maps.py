@@ -57,8 +57,6 @@ def tag_image(
 
     Parameters
     ----------
-    ds : xarray.Dataset
-        ``tagged/1`` dataset.
     tag : str, optional
         Tag label.
     """
@@ -82,8 +80,6 @@ def phase_map(
 
     Parameters
     ----------
-    ds : xarray.Dataset
-        ``phase/1`` dataset.
     tag : str, optional
         Tag label (default: the first).
     mask : {"tissue"} or xarray.DataArray or None, default "tissue"
@@ -152,8 +148,6 @@ def displacement_map(
 
     Parameters
     ----------
-    ds : xarray.Dataset
-        ``tracked/1`` dataset with ``displacement_grid``.
     component : {"x", "y", "z"}, optional
         Component to show; default the magnitude.
     """

@@ -5,10 +5,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, ClassVar
 
+import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike
 
-from harpx.imaging.stacks import tagged_dataset
+from harpx.imaging.stacks import resample_stacks, tagged_dataset
 from harpx.mechanics.body import Body, ElementName
 from harpx.mechanics.meshspec import MeshSpec
 
@@ -43,33 +44,37 @@ class MeshScene:
 
 
 def cspamm_dataset(
-    image: ArrayLike,
-    mask: ArrayLike,
+    stacks: Sequence[xr.Dataset],
+    grid: tuple[ArrayLike, ArrayLike, ArrayLike],
     truth: ArrayLike,
     attrs: dict[str, Any],
     snr: float | None,
     *,
-    tag: Sequence[str],
-    tag_period: float,
-    slice_axis: Sequence[str],
-    times: ArrayLike,
-    grid: tuple[ArrayLike, ArrayLike, ArrayLike],
     body: ArrayLike,
 ) -> xr.Dataset:
-    """The ``tagged/1`` dataset of a CSPAMM scene resampled to the grid ``(z, y, x)``, mm.
+    """The ``tagged/1`` dataset of a CSPAMM scene: its ``stacks`` resampled to the grid
+    ``(z, y, x)``, mm (:func:`~harpx.imaging.stacks.resample_stacks`).
 
-    ``truth`` is the true displacement (mm), ``body`` the body density on the grid; ``attrs``
-    gains ``snr`` when one is given (``None``: noise-free).
+    The tags (labels, directions, frequencies, slice axes) are those of the stacks, in order,
+    and the frame times those of the first. ``truth`` is the true displacement (mm) and
+    ``body`` the body density on the grid; ``attrs`` gains ``snr`` when one is given
+    (``None``: noise-free).
     """
     if snr is not None:
         attrs["snr"] = float(snr)
     z, y, x = grid
+    image, mask = resample_stacks(stacks, x, y, z)
+
+    def per_tag(name: str) -> Any:
+        return np.concatenate([np.asarray(ds[name].values) for ds in stacks])
+
     return tagged_dataset(
         image,
-        tag=list(tag),
-        tag_frequency=1.0 / tag_period,
-        slice_axis=list(slice_axis),
-        time=times,
+        tag=[str(t) for t in per_tag("tag")],
+        tag_direction=per_tag("tag_direction"),
+        tag_frequency=per_tag("tag_frequency"),
+        slice_axis=[str(a) for a in per_tag("slice_axis")],
+        time=stacks[0]["time"].values,
         z=z,
         y=y,
         x=x,

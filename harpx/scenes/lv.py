@@ -103,9 +103,8 @@ import xarray as xr
 
 from harpx._typing import FloatArray, IntArray
 from harpx.anatomy.aha import segments_local
-from harpx.anatomy.ventricle import VentricleGeometry, ventricle
+from harpx.anatomy.ventricle import VentricleGeometry
 from harpx.anatomy.ventricle_fit import VentricleTemplate
-from harpx.imaging.stacks import resample_stacks
 from harpx.imaging.synth import AcquisitionOptions, synthesize_tagged
 from harpx.mechanics.body import Body
 from harpx.mechanics.fiber_laws import ActiveContraction
@@ -316,7 +315,6 @@ def _acquire(
         slice_thickness=h_la,
         **common,
     )
-    image, mask = resample_stacks([sa, la], xy, xy, z)
     shape = (n_z, n_xy, n_xy)
     Zg, Yg, Xg = np.meshgrid(z, xy, xy, indexing="ij")
     voxels = np.stack([Xg.ravel(), Yg.ravel(), Zg.ravel()], axis=1)
@@ -333,17 +331,7 @@ def _acquire(
         "la_slice_thickness_mm": h_la,
     }
     return cspamm_dataset(
-        image,
-        mask,
-        truth,
-        attrs,
-        snr,
-        tag=["x", "y", "z"],
-        tag_period=size.tag_period,
-        slice_axis=["z", "z", "y"],
-        times=times,
-        grid=(z, xy, xy),
-        body=np.isfinite(truth[0, 0]).astype(np.float64),
+        [sa, la], (z, xy, xy), truth, attrs, snr, body=np.isfinite(truth[0, 0]).astype(np.float64)
     )
 
 
@@ -492,14 +480,8 @@ def _ventricle_mesh(
 ) -> MeshSpec:
     """The scene's ventricle meshed with (circumferential, longitudinal, transmural) cells."""
     nc, nl, nt = divisions
-    return ventricle(
-        inner=geometry.inner,
-        outer=geometry.outer,
-        truncation=geometry.truncation,
-        n_circumferential=nc,
-        n_longitudinal=nl,
-        n_transmural=nt,
-        segments=segments,
+    return geometry.mesh(
+        n_circumferential=nc, n_longitudinal=nl, n_transmural=nt, segments=segments
     )
 
 

@@ -52,7 +52,7 @@ import numpy as np
 import xarray as xr
 
 from harpx._typing import FloatArray
-from harpx.imaging.stacks import SliceStack, common_grid, resample_stacks
+from harpx.imaging.stacks import SliceStack, common_grid
 from harpx.imaging.synth import synthesize_tagged, voxel_density
 from harpx.mechanics.loads import Fixed
 from harpx.mechanics.materials import NeoHookean
@@ -338,7 +338,6 @@ def short_axis(size: Size = "paper", *, snr: float | None = 20.0, seed: int = 0)
         rng=np.random.default_rng(seed),
     )
     x, y, z = common_grid([SliceStack.axis_aligned(stack, "z")], g.pixel)
-    image, mask = resample_stacks([stack], x, y, z)
     body = voxel_density(density, (z, y, x), (g.pixel,) * 3, oversample=g.oversample)
     Z, Y, X = np.meshgrid(z, y, x, indexing="ij")
     voxels = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
@@ -353,19 +352,7 @@ def short_axis(size: Size = "paper", *, snr: float | None = 20.0, seed: int = 0)
         "sa_slice_positions_mm": z_sa,
         "sa_slice_thickness_mm": float(g.slice_thickness),
     }
-    tagged = cspamm_dataset(
-        image,
-        mask,
-        truth,
-        attrs,
-        snr,
-        tag=["x", "y"],
-        tag_period=g.tag_period,
-        slice_axis=["z", "z"],
-        times=times,
-        grid=(z, y, x),
-        body=body,
-    )
+    tagged = cspamm_dataset([stack], (z, y, x), truth, attrs, snr, body=body)
     mesh = tube(
         g.inner_radius,
         g.outer_radius,

@@ -38,7 +38,6 @@ from harpx._typing import FloatArray
 from harpx.anatomy.tongue_mesh import MUSCLES, tongue_inside
 from harpx.anatomy.tongue_mesh import tongue as tongue_mesh
 from harpx.imaging.harp import extract_phase
-from harpx.imaging.stacks import resample_stacks
 from harpx.imaging.synth import AcquisitionOptions, synthesize_tagged, voxel_density
 from harpx.mechanics.body import Body, ElementName
 from harpx.mechanics.fiber_laws import ActiveContraction
@@ -435,7 +434,6 @@ def _acquire(
         slice_axis="y",
         **common,
     )
-    image, mask = resample_stacks([sagittal, coronal], x, y, z)  # tags x, y, z
     rho = voxel_density(density, (z, y, x), (g.pixel,) * 3, oversample=2)
     Z, Y, X = np.meshgrid(z, y, x, indexing="ij")
     vox = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
@@ -450,19 +448,7 @@ def _acquire(
         "coronal_slice_spacing": float(dx_cor),
         "sagittal_slice_spacing": float(dy_sag),
     }
-    return cspamm_dataset(
-        image,
-        mask,
-        truth,
-        attrs,
-        snr,
-        tag=["x", "y", "z"],
-        tag_period=g.tag_period,
-        slice_axis=["y", "x", "x"],
-        times=times,
-        grid=(z, y, x),
-        body=rho,
-    )
+    return cspamm_dataset([sagittal, coronal], (z, y, x), truth, attrs, snr, body=rho)
 
 
 def tongue(

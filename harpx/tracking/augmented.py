@@ -27,17 +27,11 @@ def track_frame_augmented(
 
     Parameters
     ----------
-    problem : FrameProblem
-        Body, constraint (targeted at the frame), loads, solver and settings
-        (``multiplier_tolerance``, ``max_updates``, ``penalty_limit``).
-    u : ndarray, shape (ndof,)
-        Starting displacement, mm.
-    target : float
-        Tracking residual ε to reach, rad.
+    problem, u, target, plateau
+        As in :func:`~harpx.tracking.penalty.track_frame_penalty`; of the settings, this
+        method also reads ``multiplier_tolerance`` and ``max_updates``.
     penalty : float
         Relative penalty λ (dimensionless).
-    plateau : float, optional
-        Highest ε at which a levelled-off raise counts as reached, rad (default: the target).
     warm : bool, default False
         ``u`` is an earlier pass's result for this frame; accepted for the strategies' common
         signature (this method has no ramp to skip: it starts at ``penalty`` anyway).

@@ -161,6 +161,18 @@ def test_inside_indicator():
     np.testing.assert_array_equal(GEOM.inside(pts), [1.0, 0.0, 0.0, 0.0, 1.0])
 
 
+def test_geometry_mesh_is_ventricle_with_its_three_fields():
+    geometry = VentricleGeometry(inner=(20.0, 50.0), outer=(30.0, 60.0), truncation=0.0)
+    options = dict(n_circumferential=8, n_longitudinal=3, n_transmural=1, segments=False)
+    spec = geometry.mesh(**options)
+    direct = ventricle(inner=(20.0, 50.0), outer=(30.0, 60.0), truncation=0.0, **options)
+    assert spec.mesh.p[2].max() == pytest.approx(0.0, abs=1e-12)  # the base plane z = 0
+    assert spec.mesh.p[2].min() == pytest.approx(-60.0)  # the epicardial apex, -c_epi
+    np.testing.assert_array_equal(spec.mesh.p, direct.mesh.p)
+    np.testing.assert_array_equal(spec.mesh.t, direct.mesh.t)
+    assert set(spec.regions) == set(direct.regions)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
