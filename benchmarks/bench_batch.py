@@ -17,7 +17,8 @@ write, by :func:`harpx.batch.track_subject`.
 
 Each variant runs ``--repeats`` times (default 3) into fresh output directories
 (``overwrite=True``); medians are reported with the wall-time ratio serial / cohort. Run
-``python benchmarks/bench_batch.py`` (``--quick``: 4 subjects, 2 repeats). Timings are
+``python benchmarks/bench_batch.py`` (``--quick``: 4 subjects, 2 repeats; ``--scaling``:
+only warm clusters of one and ``--workers`` workers, alternated, with their ratio). Timings are
 wall-clock seconds on this machine; ``os.cpu_count()``, the load average and the machine's
 *parallel ceiling* (the speed-up it gives right now to the same number of pure-CPU
 processes, measured before and after) are printed with them, since a shared machine caps
@@ -149,6 +150,56 @@ def _plot(times: dict[str, list[float]], path: Path, args: argparse.Namespace) -
     plt.close(fig)
 
 
+def scaling(args: argparse.Namespace) -> None:
+    """Warm clusters of 1 and ``args.workers`` workers, alternated repeat by repeat."""
+    from distributed import Client
+
+    from harpx.batch import local_cluster, track_many
+
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        (root / "in").mkdir()
+        paths = make_cohort(root / "in", args.subjects)
+        ceiling_before = parallel_ceiling(args.workers)
+        counts = (1, args.workers)
+        times: dict[int, list[float]] = {n: [] for n in counts}
+        clusters = [local_cluster(n) for n in counts]
+        clients = [Client(c) for c in clusters]
+        try:
+            for n, client in zip(counts, clients, strict=True):  # worker imports: not timed
+                track_many(paths[:n], body_factory, output_dir=root / f"warm-up{n}",
+                           client=client, track_kwargs=TRACK_KWARGS, progress=False)  # fmt: skip
+            for r in range(args.repeats):
+                for n, client in zip(counts, clients, strict=True):
+                    start = time.perf_counter()
+                    track_many(paths, body_factory, output_dir=root / f"w{n}-{r}",
+                               client=client, track_kwargs=TRACK_KWARGS, overwrite=True,
+                               progress=False)  # fmt: skip
+                    times[n].append(time.perf_counter() - start)
+        finally:
+            for client, cluster in zip(clients, clusters, strict=True):
+                client.close()
+                cluster.close()
+        ceiling_after = parallel_ceiling(args.workers)
+    med = {n: statistics.median(v) for n, v in times.items()}
+    lines = [
+        f"{args.subjects} subjects, warm local clusters, median of {args.repeats} alternated "
+        "repeats (wall-clock s)",
+        "",
+        "| workers | median s | runs (s) | speed-up vs 1 worker |",
+        "|---|---|---|---|",
+    ]
+    for n in counts:
+        runs = ", ".join(f"{t:.2f}" for t in times[n])
+        lines.append(f"| {n} | {med[n]:.2f} | {runs} | {med[1] / med[n]:.2f} |")
+    lines += [
+        "",
+        f"parallel ceiling of the machine for {args.workers} pure-CPU processes: "
+        f"{ceiling_before:.2f} before, {ceiling_after:.2f} after",
+    ]
+    print("\n".join(lines))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--subjects", type=int, default=8)
@@ -156,9 +207,17 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--quick", action="store_true", help="4 subjects, 2 repeats")
     parser.add_argument("--out", default=".", help="folder of bench_batch.md and .png")
+    parser.add_argument(
+        "--scaling",
+        action="store_true",
+        help="only compare warm clusters of 1 and --workers workers (alternated)",
+    )
     args = parser.parse_args()
     if args.quick:
         args.subjects, args.repeats = 4, 2
+    if args.scaling:
+        scaling(args)
+        return
 
     from distributed import Client
 
