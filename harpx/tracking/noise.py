@@ -11,8 +11,8 @@ iterations. The floor is estimated from the data, before any tracking:
    constraint points, after fitting :math:`k_t` and :math:`c_t` (starting from the nominal
    wave vector :math:`2\pi f_t \hat d_t`), is that frame's phase noise and edge error.
 2. **Later frames.** Phase noise scales as :math:`\sigma/|H|` (for a harmonic image with
-   additive complex noise σ, the phase error is σ/|H| to first order), so as the tags fade
-   the floor grows with the mean harmonic magnitude :math:`\bar m` at the tissue:
+   additive complex noise σ, the phase error is :math:`\sigma/|H|` to first order), so as the
+   tags fade the floor grows with the mean harmonic magnitude :math:`\bar m` at the tissue:
 
    .. math::
 
@@ -83,7 +83,7 @@ def reference_residual(
     Returns
     -------
     ndarray, shape (ntag,)
-        Weighted mean |W(φ0 − k·X − c)| per tag, rad (NaN for a tag without data).
+        Weighted mean :math:`|W(\phi_0 - k \cdot X - c)|` per tag, rad (NaN for a tag without data).
 
     Examples
     --------
@@ -172,7 +172,7 @@ def noise_floor(
     sigma : ndarray, shape (ntag,)
         Noise standard deviation σ_H of each tag's complex harmonic image (magnitude units).
     reference_magnitude, magnitude : ndarray, shape (n, ntag)
-        Harmonic magnitude |H| at the points in the reference and in the current frame.
+        Harmonic magnitude :math:`|H|` at the points in the reference and in the current frame.
     weight : ndarray, shape (n,)
         Weights of the points (quadrature volumes), mm³.
     valid : ndarray of bool, shape (n, ntag)

@@ -118,7 +118,7 @@ class Observability:
     cell_rank : ndarray of int, shape (ncell,)
         Seen directions in each cell: the span of the tags with data at any of its points.
     cell_seen : ndarray, shape (ncell, 3)
-        Fraction of each axis (x, y, z) that the cell's tags see, |P e_a|² (0 to 1).
+        Fraction of each axis (x, y, z) that the cell's tags see, :math:`|P e_a|^2` (0 to 1).
     unseen_modes : ndarray, shape (m, ndof)
         Rigid-body modes that neither the tags nor a Dirichlet condition hold (m = 0 to 6),
         mass-orthonormal, mm per unit amplitude.
