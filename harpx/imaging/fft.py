@@ -33,7 +33,7 @@ import numpy as np
 import pyfftw
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["default_threads", "fft2", "get_plan", "ifft2", "irfft2", "rfft2"]
+__all__ = ["default_threads", "fft2", "get_plan", "ifft2", "inplace_plans", "irfft2", "rfft2"]
 
 #: FFTW planner effort of cached plans with at least MEASURE_MIN_SIZE elements.
 PLANNER_EFFORT = "FFTW_MEASURE"
@@ -154,6 +154,63 @@ def get_plan(
     while len(cache) > MAX_PLANS_PER_THREAD:
         cache.popitem(last=False)
     return plan
+
+
+def inplace_plans(
+    shape: Sequence[int],
+    dtype: np.dtype | type,
+    axes: Sequence[int],
+    *,
+    threads: int | None = None,
+) -> tuple[NDArray[np.complexfloating], pyfftw.FFTW, pyfftw.FFTW]:
+    """One aligned complex buffer with a forward and a backward plan that transform it in place.
+
+    Not cached: the caller holds the buffer (and its two plans) for as long as it needs them,
+    a third of the memory of :func:`get_plan`'s forward and backward plans, which own an
+    input and an output buffer each and stay in the cache. Planned like :func:`get_plan`
+    (``FFTW_MEASURE`` from ``MEASURE_MIN_SIZE`` elements; FFTW's wisdom makes a second
+    planning of the same problem cheap).
+
+    Parameters
+    ----------
+    shape : sequence of int
+        Shape of the buffer.
+    dtype : numpy dtype
+        ``complex64`` or ``complex128``.
+    axes : sequence of int
+        Axes transformed (negative values allowed).
+    threads : int or None
+        FFTW threads of both plans; None means ``os.cpu_count()``.
+
+    Returns
+    -------
+    buffer : ndarray of ``dtype``, shape ``shape``
+        Fill it, call ``forward.execute()`` or ``backward.execute()`` (unnormalised) and read
+        it.
+    forward, backward : pyfftw.FFTW
+        The plans.
+
+    Raises
+    ------
+    ValueError
+        If ``dtype`` is not complex.
+    """
+    shape = tuple(int(s) for s in shape)
+    dtype = np.dtype(dtype)
+    if dtype.kind != "c":
+        raise ValueError(f"in-place plans need a complex dtype, got {dtype!r}")
+    axes = tuple(int(a) % len(shape) for a in axes)
+    nthreads = default_threads(threads)
+    effort = PLANNER_EFFORT if int(np.prod(shape)) >= MEASURE_MIN_SIZE else "FFTW_ESTIMATE"
+    with _PLAN_LOCK:  # the FFTW planner is not thread safe
+        buffer = pyfftw.empty_aligned(shape, dtype=dtype)
+        forward, backward = (
+            pyfftw.FFTW(
+                buffer, buffer, axes=axes, direction=direction, flags=(effort,), threads=nthreads
+            )  # fmt: skip
+            for direction in ("FFTW_FORWARD", "FFTW_BACKWARD")
+        )
+    return buffer, forward, backward
 
 
 def _run(

@@ -72,19 +72,21 @@ at that border is too small.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from typing import Any
 
+import dask
+import dask.array as da
 import numpy as np
 import xarray as xr
 from scipy import sparse
 
 from harpx._typing import FloatArray
-from harpx.imaging.fft import get_plan
+from harpx.imaging.fft import inplace_plans
 from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.imaging.sample import wrap
+from harpx.mechanics.locate import _shape_values, locate
 from harpx.schema import GRID_DIMS
-from harpx.tracking.resample import interpolate_displacement
-from harpx.tracking.results import grid_points
 
 #: Splatted signal below this fraction of its largest modulus counts as outside the tissue.
 SIGNAL_FLOOR = 1e-3
@@ -300,30 +302,149 @@ def _filtered_phase(
     disk: np.ndarray,
     normal: int,
     out: np.ndarray,
+    plans: Callable[[tuple[int, ...]], tuple[np.ndarray, Any, Any]],
     profile: np.ndarray | None = None,
 ) -> None:
     """Write ``arg((K * T S) conj S)`` into ``out`` where ``S`` carries signal (module notes).
 
     ``T S`` (``profile`` applied along grid axis ``normal``; ``S`` itself when None) is
     low-passed slice by slice (planes normal to ``normal``) with ``disk`` in single precision
-    (the correction is a fraction of a radian; float32 keeps it to ~1e-6 rad); the inverse
-    transform is left unnormalised, which the angle ignores.
+    (the correction is a fraction of a radian; float32 keeps it to ~1e-6 rad), in place in
+    the buffer of ``plans(shape)`` (buffer, forward, backward); the inverse transform is left
+    unnormalised, which the angle ignores.
     """
     stack = np.moveaxis(S, normal, 0)  # (slices, plane 1, plane 2): the plane axes keep order
-    forward = get_plan(stack.shape, np.complex64, (-2, -1), direction="forward")
-    backward = get_plan(stack.shape, np.complex64, (-2, -1), direction="backward")
+    buffer, forward, backward = plans(stack.shape)
     if profile is None:
-        np.copyto(forward.input_array, stack)
+        np.copyto(buffer, stack)
     else:
-        np.copyto(forward.input_array, np.tensordot(profile.astype(np.complex64), stack, 1))
+        np.copyto(buffer, np.tensordot(profile.astype(np.complex64), stack, 1))
     forward.execute()
-    np.multiply(forward.output_array, disk, out=backward.input_array)
+    buffer *= disk
     backward.execute()
     power = stack.real * stack.real + stack.imag * stack.imag  # |S|², no square roots
     has = power > SIGNAL_FLOOR**2 * power.max()
-    product = backward.output_array * np.conj(stack)
-    angle = np.arctan2(product.imag, product.real)
+    del power
+    buffer *= np.conj(stack)
+    angle = np.arctan2(buffer.imag, buffer.real)
     np.copyto(np.moveaxis(out, normal, 0), angle, where=has)
+
+
+def _interpolation(body: Any, points: FloatArray) -> tuple[np.ndarray, sparse.csr_matrix]:
+    """Which ``points`` (n, 3) lie in the body's reference mesh, and the sparse matrix that
+    interpolates nodal displacements (nnode, 3) at those points (as
+    :func:`harpx.mechanics.locate.displacement_at`, frame by frame)."""
+    chunk = 1 << 16  # points located at once: bounds the locator's temporaries
+    found = [locate(body.mesh, points[a : a + chunk]) for a in range(0, len(points), chunk)]
+    cells = np.concatenate([c for c, _ in found]) if found else np.empty(0, np.int64)
+    xi = np.concatenate([x for _, x in found]) if found else np.empty((0, 3))
+    inside = cells >= 0
+    vals, _ = _shape_values(body.scalar_element, xi[inside].T, body.nbasis)
+    nodes = body.element_dofs[cells[inside], :, 0] // 3  # (m, nb): dof 3 s + i of node s
+    m, nb = nodes.shape
+    matrix = sparse.csr_matrix(
+        (vals.ravel(), nodes.ravel(), np.arange(0, m * nb + 1, nb)), shape=(m, body.ndof // 3)
+    )
+    return inside, matrix
+
+
+def _correction_frames(
+    phase: xr.Dataset, body: Any, U: FloatArray, model: str = "slice-profile"
+) -> Iterator[tuple[int, np.ndarray]]:
+    """The correction of :func:`blur_correction` frame by frame: ``(n, c)`` for every frame
+    ``n >= 1``, ``c`` float32 (tag, z, y, x) in rad, one buffer overwritten by the next frame.
+
+    Holds one frame's work arrays, never the grid-sized result of every frame.
+    """
+    nz, ny, nx = (phase.sizes[d] for d in GRID_DIMS)
+    shape = (nz, ny, nx)
+    coords = [np.asarray(phase[d].values, dtype=np.float64) for d in GRID_DIMS]
+    origin = np.array([c[0] for c in coords])
+    spacing = _grid_spacing(phase)
+    models = blur_models(phase, model)
+    lo = body.dof_points.min(axis=0) - 1e-9  # (x, y, z)
+    hi = body.dof_points.max(axis=0) + 1e-9
+    # the voxel centres in the body's bounding box, C order over (z, y, x): the grid is
+    # separable, so the box is found axis by axis (harpx.tracking.results.grid_points order)
+    inbox = [np.flatnonzero((c >= lo[2 - a]) & (c <= hi[2 - a])) for a, c in enumerate(coords)]
+    voxels = np.ravel_multi_index(np.meshgrid(*inbox, indexing="ij"), shape).ravel()
+    Z, Y, X = np.meshgrid(*(c[i] for c, i in zip(coords, inbox, strict=True)), indexing="ij")
+    points = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
+    del X, Y, Z
+    if "body" in phase.variables:
+        density = np.asarray(phase["body"].transpose(*GRID_DIMS).values, dtype=np.float64)
+        keep = density.reshape(-1)[voxels] > 0
+        voxels, points = voxels[keep], points[keep]
+        density = density.reshape(-1)[voxels]
+    else:
+        density = np.ones(voxels.size)
+    tissue, interpolate = _interpolation(body, points)  # centres inside the reference body
+    reference, density = points[tissue], density[tissue]
+    del points, voxels
+    nnode = body.ndof // 3
+    wavevector = (
+        2.0
+        * np.pi
+        * np.asarray(phase["tag_frequency"].values, dtype=np.float64)[:, None]
+        * np.asarray(phase["tag_direction"].transpose("tag", "axis").sel(axis=["x", "y", "z"]))
+    )  # (tag, 3) rad/mm
+    tags = list(phase["tag"].values)
+    disks = [_disk(phase, tag, shape, spacing) for tag in tags]
+    profiles: list[np.ndarray | None] = []
+    for t, (_, normal) in enumerate(disks):
+        slab = _slab(phase, t, spacing) if models[t] == "slice-profile" else None
+        # k_ζ in the grid's (z, y, x) order: wavevector is (x, y, z)
+        profiles.append(
+            None
+            if slab is None
+            else slice_operator(coords[normal], *slab, float(wavevector[t, 2 - normal]))
+        )
+    # a tag's images hold only the tissue inside its acquisition (slab, field of view)
+    acquired = (
+        np.asarray(phase["mask"].transpose("tag", *GRID_DIMS).values, dtype=bool)
+        if "mask" in phase.variables
+        else np.ones((len(tags), *shape), dtype=bool)
+    )
+    outside = [None if a.all() else ~a for a in acquired]
+    del acquired
+    cached: dict[tuple[int, ...], tuple[np.ndarray, Any, Any]] = {}
+
+    def plans(stack: tuple[int, ...]) -> tuple[np.ndarray, Any, Any]:
+        if stack not in cached:  # one in-place buffer per slice orientation, for this call
+            cached[stack] = inplace_plans(stack, np.complex64, (-2, -1))
+        return cached[stack]
+
+    out = np.empty((len(tags), *shape), dtype=np.float32)
+    S = np.empty(shape, dtype=np.complex64)
+    U = np.asarray(U, dtype=np.float64)
+    for n in range(1, U.shape[0]):  # one splat of every tag and one filter per tag and frame
+        out[...] = 0.0
+        un = np.asarray(interpolate @ U[n].reshape(nnode, 3))  # (voxel, 3) mm
+        here, rho = reference, density
+        ok = np.isfinite(un).all(axis=1)
+        if not ok.all():
+            un, here, rho = un[ok], here[ok], rho[ok]
+        moved = (here + un)[:, ::-1]  # (z, y, x)
+        angle = np.einsum("pi,ti->pt", un, wavevector)  # (point, tag) rad
+        del un
+        # ρ0 e^{-ik·u} as real and imaginary columns: one real sparse product spreads all
+        # (in single precision, as S is filtered: the correction keeps ~1e-6 rad)
+        signals = np.empty((angle.shape[0], 2 * len(tags)), dtype=np.float32)
+        np.cos(angle, out=signals[:, : len(tags)])
+        np.sin(angle, out=signals[:, len(tags) :])
+        del angle
+        signals[:, len(tags) :] *= -1.0
+        signals *= rho[:, None]
+        spread = splat_operator(moved, origin, spacing, shape, np.float32) @ signals
+        del moved, signals
+        for t, (disk, normal) in enumerate(disks):  # ≤ 3 tags
+            S.real = spread[:, t].reshape(shape)
+            S.imag = spread[:, len(tags) + t].reshape(shape)
+            if outside[t] is not None:
+                np.copyto(S, 0.0, where=outside[t])
+            _filtered_phase(S, disk, normal, out[t], plans, profiles[t])
+        del spread
+        yield n, out
 
 
 def blur_correction(
@@ -350,74 +471,10 @@ def blur_correction(
         Correction c in rad (0 in frame 0 and outside the tissue): subtract it from
         ``phase`` before tracking again.
     """
-    nz, ny, nx = (phase.sizes[d] for d in GRID_DIMS)
-    shape = (nz, ny, nx)
-    coords = [np.asarray(phase[d].values, dtype=np.float64) for d in GRID_DIMS]
-    origin = np.array([c[0] for c in coords])
-    spacing = _grid_spacing(phase)
-    models = blur_models(phase, model)
-    points = grid_points(phase)  # (n, 3) x, y, z of the voxel centres
-    lo = body.dof_points.min(axis=0) - 1e-9
-    hi = body.dof_points.max(axis=0) + 1e-9
-    voxels = np.nonzero(np.all((points >= lo) & (points <= hi), axis=1))[0]
-    if "body" in phase.variables:
-        density = np.asarray(phase["body"].transpose(*GRID_DIMS).values, dtype=np.float64)
-        voxels = voxels[density.reshape(-1)[voxels] > 0]
-        density = density.reshape(-1)[voxels]
-    else:
-        density = np.ones(voxels.size)
-    u = np.zeros((U.shape[0], 0, 3))
-    if voxels.size:
-        u, _ = interpolate_displacement(body, U, points[voxels])  # (time, voxel, 3)
-    tissue = np.isfinite(u[0]).all(axis=1)  # voxel centres inside the body's reference
-    reference, u, density = points[voxels[tissue]], u[:, tissue], density[tissue]
-    wavevector = (
-        2.0
-        * np.pi
-        * np.asarray(phase["tag_frequency"].values, dtype=np.float64)[:, None]
-        * np.asarray(phase["tag_direction"].transpose("tag", "axis").sel(axis=["x", "y", "z"]))
-    )  # (tag, 3) rad/mm
-    tags = list(phase["tag"].values)
-    disks = [_disk(phase, tag, shape, spacing) for tag in tags]
-    profiles: list[np.ndarray | None] = []
-    for t, (_, normal) in enumerate(disks):
-        slab = _slab(phase, t, spacing) if models[t] == "slice-profile" else None
-        # k_ζ in the grid's (z, y, x) order: wavevector is (x, y, z)
-        profiles.append(
-            None
-            if slab is None
-            else slice_operator(coords[normal], *slab, float(wavevector[t, 2 - normal]))
-        )
-    # a tag's images hold only the tissue inside its acquisition (slab, field of view)
-    acquired = (
-        np.asarray(phase["mask"].transpose("tag", *GRID_DIMS).values, dtype=bool)
-        if "mask" in phase.variables
-        else np.ones((len(tags), *shape), dtype=bool)
-    )
-    out = np.zeros((len(tags), phase.sizes["time"], *shape), dtype=np.float32)
-    outside = [None if a.all() else ~a for a in acquired]
-    for n in range(1, U.shape[0]):  # one splat of every tag and one filter per tag and frame
-        un, here, rho = u[n], reference, density
-        ok = np.isfinite(un).all(axis=1)
-        if not ok.all():
-            un, here, rho = un[ok], here[ok], rho[ok]
-        moved = (here + un)[:, ::-1]  # (z, y, x)
-        angle = np.einsum("pi,ti->pt", un, wavevector)  # (point, tag) rad
-        # ρ0 e^{-ik·u} as real and imaginary columns: one real sparse product spreads all
-        # (in single precision, as S is filtered: the correction keeps ~1e-6 rad)
-        signals = np.empty((angle.shape[0], 2 * len(tags)), dtype=np.float32)
-        np.cos(angle, out=signals[:, : len(tags)])
-        np.sin(angle, out=signals[:, len(tags) :])
-        signals[:, len(tags) :] *= -1.0
-        signals *= rho[:, None]
-        spread = splat_operator(moved, origin, spacing, shape, np.float32) @ signals
-        for t, (disk, normal) in enumerate(disks):  # ≤ 3 tags
-            S = np.empty(shape, dtype=np.complex64)
-            S.real = spread[:, t].reshape(shape)
-            S.imag = spread[:, len(tags) + t].reshape(shape)
-            if outside[t] is not None:
-                np.copyto(S, 0.0, where=outside[t])
-            _filtered_phase(S, disk, normal, out[t, n], profiles[t])
+    out = np.zeros((phase.sizes["tag"], phase.sizes["time"], *(phase.sizes[d] for d in GRID_DIMS)),
+                   dtype=np.float32)  # fmt: skip
+    for n, frame in _correction_frames(phase, body, U, model):
+        out[:, n] = frame
     return out
 
 
@@ -433,3 +490,64 @@ def deblurred(phase: xr.Dataset, correction: np.ndarray) -> xr.Dataset:
     out = phase.copy()
     out["phase"] = (("tag", "time", *GRID_DIMS), corrected, phase["phase"].attrs)
     return out
+
+
+def _corrected_frame(
+    source: np.ndarray, blocks: list[tuple[int, tuple[slice, ...], np.ndarray]]
+) -> np.ndarray:
+    """A copy of one frame (tag, 1, z, y, x) of the phase with its corrected boxes written in."""
+    frame = np.array(source)
+    for t, box, block in blocks:
+        frame[t, 0][box] = block
+    return frame
+
+
+def _deblurred_lazily(
+    phase: xr.Dataset, body: Any, U: FloatArray, model: str = "slice-profile"
+) -> tuple[xr.Dataset, np.ndarray]:
+    """``deblurred(phase, blur_correction(phase, body, U, model))`` without a grid-sized copy,
+    and the mean |correction| per frame (rad, over the voxels that carry one).
+
+    The corrected phase is dask-backed, one chunk per frame, built when a frame is read from
+    ``phase`` and the corrected values, which are held only in the box of the voxels each
+    tag's correction moves in each frame (the tissue). Values equal :func:`deblurred`'s.
+    """
+    ntag, ntime = phase.sizes["tag"], phase.sizes["time"]
+    blocks: list[list[tuple[int, tuple[slice, ...], np.ndarray]]] = [[] for _ in range(ntime)]
+    mean = np.zeros(ntime)
+    for n, correction in _correction_frames(phase, body, U, model):
+        total = np.count_nonzero(correction)
+        if total:
+            mean[n] = float(np.abs(correction).sum(dtype=np.float64)) / total
+        values = np.asarray(phase["phase"].isel(time=n).transpose("tag", *GRID_DIMS).values)
+        for t in range(ntag):  # ≤ 3 tags
+            moved = correction[t] != 0  # the correction is zero outside the tissue
+            if not moved.any():
+                continue
+            box = tuple(
+                slice(int(i[0]), int(i[-1]) + 1)
+                for i in (
+                    np.flatnonzero(moved.any(axis=other)) for other in ((1, 2), (0, 2), (0, 1))
+                )
+            )
+            block = np.array(values[t][box])
+            inside = moved[box]
+            block[inside] = wrap(block[inside] - correction[t][box][inside])
+            blocks[n].append((t, box, block))
+    source = phase["phase"].transpose("tag", "time", *GRID_DIMS).data  # numpy or dask
+    shape = (ntag, 1, *(phase.sizes[d] for d in GRID_DIMS))
+    frames = [
+        da.from_delayed(  # pure=False: keys without hashing the data
+            dask.delayed(_corrected_frame, pure=False)(source[:, n : n + 1], blocks[n]),
+            shape,
+            dtype=source.dtype,
+        )
+        for n in range(ntime)
+    ]
+    out = phase.copy()
+    out["phase"] = (
+        ("tag", "time", *GRID_DIMS),
+        da.concatenate(frames, axis=1),
+        phase["phase"].attrs,
+    )
+    return out, mean
