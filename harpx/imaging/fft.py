@@ -1,7 +1,9 @@
 """FFTs through pyfftw with a cache of plans that own aligned buffers.
 
-Every transform goes through :func:`get_plan`, which returns a :class:`pyfftw.FFTW` object
-for one exact ``(shape, dtype, axes, threads, direction)``. Plans are created once, with
+Every transform goes through :func:`get_plan` (or, for grid-sized transforms whose buffers
+should not outlive their use, the uncached :func:`make_plan` and :func:`inplace_plans`),
+which returns a :class:`pyfftw.FFTW` object for one exact ``(shape, dtype, axes, threads,
+direction)``. Plans are created once, with
 ``FFTW_MEASURE`` for arrays of at least ``MEASURE_MIN_SIZE`` elements and ``FFTW_ESTIMATE``
 below (measuring a small plan costs more than it saves; FFTW's wisdom is kept for the life
 of the process), and cached per calling thread, so that threads of a pool never share a
@@ -33,7 +35,16 @@ import numpy as np
 import pyfftw
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["default_threads", "fft2", "get_plan", "ifft2", "inplace_plans", "irfft2", "rfft2"]
+__all__ = [
+    "default_threads",
+    "fft2",
+    "get_plan",
+    "ifft2",
+    "inplace_plans",
+    "irfft2",
+    "make_plan",
+    "rfft2",
+]
 
 #: FFTW planner effort of cached plans with at least MEASURE_MIN_SIZE elements.
 PLANNER_EFFORT = "FFTW_MEASURE"
@@ -125,6 +136,31 @@ def get_plan(
     if plan is not None:
         cache.move_to_end(key)
         return plan
+    plan = make_plan(shape, dtype, axes, direction=direction, threads=nthreads)
+    cache[key] = plan
+    while len(cache) > MAX_PLANS_PER_THREAD:
+        cache.popitem(last=False)
+    return plan
+
+
+def make_plan(
+    shape: Sequence[int],
+    dtype: np.dtype | type,
+    axes: Sequence[int],
+    *,
+    direction: Direction,
+    threads: int | None = None,
+) -> pyfftw.FFTW:
+    """A new plan of :func:`get_plan`'s kind, not cached: its buffers live as long as it does.
+
+    For a transform too large to keep in the cache between calls: a second planning of the
+    same problem takes FFTW's wisdom and costs little. Parameters and return value as for
+    :func:`get_plan`.
+    """
+    shape = tuple(int(s) for s in shape)
+    dtype = np.dtype(dtype)
+    axes = tuple(int(a) % len(shape) for a in axes)
+    nthreads = default_threads(threads)
     real = dtype.kind == "f"
     half = list(shape)
     half[axes[-1]] = shape[axes[-1]] // 2 + 1
@@ -142,7 +178,7 @@ def get_plan(
     with _PLAN_LOCK:  # the FFTW planner is not thread safe
         inp = pyfftw.empty_aligned(in_shape, dtype=in_dtype)
         out = pyfftw.empty_aligned(out_shape, dtype=out_dtype)
-        plan = pyfftw.FFTW(
+        return pyfftw.FFTW(
             inp,
             out,
             axes=axes,
@@ -150,10 +186,6 @@ def get_plan(
             flags=(effort,),
             threads=nthreads,
         )
-    cache[key] = plan
-    while len(cache) > MAX_PLANS_PER_THREAD:
-        cache.popitem(last=False)
-    return plan
 
 
 def inplace_plans(

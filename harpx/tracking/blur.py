@@ -317,8 +317,12 @@ def _filtered_phase(
     buffer, forward, backward = plans(stack.shape)
     if profile is None:
         np.copyto(buffer, stack)
-    else:
-        np.copyto(buffer, np.tensordot(profile.astype(np.complex64), stack, 1))
+    else:  # T along the slices, written straight into the buffer
+        np.matmul(
+            profile.astype(np.complex64),
+            stack.reshape(stack.shape[0], -1),
+            out=buffer.reshape(stack.shape[0], -1),
+        )
     forward.execute()
     buffer *= disk
     backward.execute()

@@ -312,6 +312,7 @@ def track(
             pass_iterations.append(int(result.iterations.sum()))
     wall[0] = timings.setup + timings.blur  # frame 0: every pass's set-up and the corrections
     _warn_frames(phase, result.reached, result.converged, result.eps, result.target, result.floor)
+    constraint.release_frame()  # the last frame's sampler buffers, before the output's
     clock = _time.perf_counter()
     attrs = {
         "method": settings.method,
