@@ -194,6 +194,7 @@ def inplace_plans(
     axes: Sequence[int],
     *,
     threads: int | None = None,
+    memory: NDArray[np.complexfloating] | None = None,
 ) -> tuple[NDArray[np.complexfloating], pyfftw.FFTW, pyfftw.FFTW]:
     """One aligned complex buffer with a forward and a backward plan that transform it in place.
 
@@ -213,6 +214,10 @@ def inplace_plans(
         Axes transformed (negative values allowed).
     threads : int or None
         FFTW threads of both plans; None means ``os.cpu_count()``.
+    memory : ndarray, optional
+        A C-contiguous, SIMD-aligned array of ``dtype`` (from an earlier call) whose memory
+        the buffer takes, reshaped, so that transforms of several shapes of one size share
+        it; planning overwrites its content.
 
     Returns
     -------
@@ -225,7 +230,7 @@ def inplace_plans(
     Raises
     ------
     ValueError
-        If ``dtype`` is not complex.
+        If ``dtype`` is not complex, or ``memory`` does not fit.
     """
     shape = tuple(int(s) for s in shape)
     dtype = np.dtype(dtype)
@@ -234,8 +239,17 @@ def inplace_plans(
     axes = tuple(int(a) % len(shape) for a in axes)
     nthreads = default_threads(threads)
     effort = PLANNER_EFFORT if int(np.prod(shape)) >= MEASURE_MIN_SIZE else "FFTW_ESTIMATE"
+    if memory is not None and (
+        memory.dtype != dtype or memory.size != int(np.prod(shape)) or not memory.flags.c_contiguous
+    ):
+        raise ValueError(
+            f"'memory' must be a C-contiguous {dtype} array of {int(np.prod(shape))} elements, "
+            f"got {memory.dtype} of shape {memory.shape!r}"
+        )
     with _PLAN_LOCK:  # the FFTW planner is not thread safe
-        buffer = pyfftw.empty_aligned(shape, dtype=dtype)
+        buffer = (
+            pyfftw.empty_aligned(shape, dtype=dtype) if memory is None else memory.reshape(shape)
+        )
         forward, backward = (
             pyfftw.FFTW(
                 buffer, buffer, axes=axes, direction=direction, flags=(effort,), threads=nthreads

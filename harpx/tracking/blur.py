@@ -303,6 +303,8 @@ def _filtered_phase(
     normal: int,
     out: np.ndarray,
     plans: Callable[[tuple[int, ...]], tuple[np.ndarray, Any, Any]],
+    work: np.ndarray,
+    has: np.ndarray,
     profile: np.ndarray | None = None,
 ) -> None:
     """Write ``arg((K * T S) conj S)`` into ``out`` where ``S`` carries signal (module notes).
@@ -311,7 +313,8 @@ def _filtered_phase(
     low-passed slice by slice (planes normal to ``normal``) with ``disk`` in single precision
     (the correction is a fraction of a radian; float32 keeps it to ~1e-6 rad), in place in
     the buffer of ``plans(shape)`` (buffer, forward, backward); the inverse transform is left
-    unnormalised, which the angle ignores.
+    unnormalised, which the angle ignores. ``S`` is conjugated in place; ``work`` (float32)
+    and ``has`` (bool), of ``S``'s size, are work arrays.
     """
     stack = np.moveaxis(S, normal, 0)  # (slices, plane 1, plane 2): the plane axes keep order
     buffer, forward, backward = plans(stack.shape)
@@ -326,19 +329,22 @@ def _filtered_phase(
     forward.execute()
     buffer *= disk
     backward.execute()
-    power = stack.real * stack.real + stack.imag * stack.imag  # |S|², no square roots
-    has = power > SIGNAL_FLOOR**2 * power.max()
-    del power
-    buffer *= np.conj(stack)
-    angle = np.arctan2(buffer.imag, buffer.real)
-    np.copyto(np.moveaxis(out, normal, 0), angle, where=has)
+    power = work.reshape(stack.shape)
+    np.multiply(stack.real, stack.real, out=power)  # |S|², no square roots
+    power += stack.imag * stack.imag
+    mask = has.reshape(stack.shape)
+    np.greater(power, SIGNAL_FLOOR**2 * power.max(), out=mask)
+    np.conjugate(stack, out=stack)
+    buffer *= stack
+    angle = np.arctan2(buffer.imag, buffer.real, out=power)
+    np.copyto(np.moveaxis(out, normal, 0), angle, where=mask)
 
 
 def _interpolation(body: Any, points: FloatArray) -> tuple[np.ndarray, sparse.csr_matrix]:
     """Which ``points`` (n, 3) lie in the body's reference mesh, and the sparse matrix that
     interpolates nodal displacements (nnode, 3) at those points (as
     :func:`harpx.mechanics.locate.displacement_at`, frame by frame)."""
-    chunk = 1 << 16  # points located at once: bounds the locator's temporaries
+    chunk = 1 << 14  # points located at once: bounds the locator's temporaries
     found = [locate(body.mesh, points[a : a + chunk]) for a in range(0, len(points), chunk)]
     cells = np.concatenate([c for c, _ in found]) if found else np.empty(0, np.int64)
     xi = np.concatenate([x for _, x in found]) if found else np.empty((0, 3))
@@ -352,103 +358,136 @@ def _interpolation(body: Any, points: FloatArray) -> tuple[np.ndarray, sparse.cs
     return inside, matrix
 
 
-def _correction_frames(
-    phase: xr.Dataset, body: Any, U: FloatArray, model: str = "slice-profile"
-) -> Iterator[tuple[int, np.ndarray]]:
-    """The correction of :func:`blur_correction` frame by frame: ``(n, c)`` for every frame
-    ``n >= 1``, ``c`` float32 (tag, z, y, x) in rad, one buffer overwritten by the next frame.
+class _CorrectionFrames:
+    """The correction of :func:`blur_correction` frame by frame.
 
-    Holds one frame's work arrays, never the grid-sized result of every frame.
+    Iterating yields ``(n, c)`` for every frame ``n >= 1``, ``c`` float32 (tag, z, y, x) in
+    rad, one buffer overwritten by the next frame: one frame's work arrays are held, never
+    the grid-sized result of every frame. ``support`` is the box (z, y, x slices) of the
+    voxels the splatted tissue reaches in some frame, outside which every correction is 0.
     """
-    nz, ny, nx = (phase.sizes[d] for d in GRID_DIMS)
-    shape = (nz, ny, nx)
-    coords = [np.asarray(phase[d].values, dtype=np.float64) for d in GRID_DIMS]
-    origin = np.array([c[0] for c in coords])
-    spacing = _grid_spacing(phase)
-    models = blur_models(phase, model)
-    lo = body.dof_points.min(axis=0) - 1e-9  # (x, y, z)
-    hi = body.dof_points.max(axis=0) + 1e-9
-    # the voxel centres in the body's bounding box, C order over (z, y, x): the grid is
-    # separable, so the box is found axis by axis (harpx.tracking.results.grid_points order)
-    inbox = [np.flatnonzero((c >= lo[2 - a]) & (c <= hi[2 - a])) for a, c in enumerate(coords)]
-    voxels = np.ravel_multi_index(np.meshgrid(*inbox, indexing="ij"), shape).ravel()
-    Z, Y, X = np.meshgrid(*(c[i] for c, i in zip(coords, inbox, strict=True)), indexing="ij")
-    points = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
-    del X, Y, Z
-    if "body" in phase.variables:
-        density = np.asarray(phase["body"].transpose(*GRID_DIMS).values, dtype=np.float64)
-        keep = density.reshape(-1)[voxels] > 0
-        voxels, points = voxels[keep], points[keep]
-        density = density.reshape(-1)[voxels]
-    else:
-        density = np.ones(voxels.size)
-    tissue, interpolate = _interpolation(body, points)  # centres inside the reference body
-    reference, density = points[tissue], density[tissue]
-    del points, voxels
-    nnode = body.ndof // 3
-    wavevector = (
-        2.0
-        * np.pi
-        * np.asarray(phase["tag_frequency"].values, dtype=np.float64)[:, None]
-        * np.asarray(phase["tag_direction"].transpose("tag", "axis").sel(axis=["x", "y", "z"]))
-    )  # (tag, 3) rad/mm
-    tags = list(phase["tag"].values)
-    disks = [_disk(phase, tag, shape, spacing) for tag in tags]
-    profiles: list[np.ndarray | None] = []
-    for t, (_, normal) in enumerate(disks):
-        slab = _slab(phase, t, spacing) if models[t] == "slice-profile" else None
-        # k_ζ in the grid's (z, y, x) order: wavevector is (x, y, z)
-        profiles.append(
-            None
-            if slab is None
-            else slice_operator(coords[normal], *slab, float(wavevector[t, 2 - normal]))
+
+    def __init__(
+        self, phase: xr.Dataset, body: Any, U: FloatArray, model: str = "slice-profile"
+    ) -> None:
+        nz, ny, nx = (phase.sizes[d] for d in GRID_DIMS)
+        shape = (nz, ny, nx)
+        coords = [np.asarray(phase[d].values, dtype=np.float64) for d in GRID_DIMS]
+        origin = np.array([c[0] for c in coords])
+        spacing = _grid_spacing(phase)
+        models = blur_models(phase, model)
+        lo = body.dof_points.min(axis=0) - 1e-9  # (x, y, z)
+        hi = body.dof_points.max(axis=0) + 1e-9
+        # the voxel centres in the body's bounding box, C order over (z, y, x): the grid is
+        # separable, so the box is found axis by axis (harpx.tracking.results.grid_points order)
+        inbox = [np.flatnonzero((c >= lo[2 - a]) & (c <= hi[2 - a])) for a, c in enumerate(coords)]
+        voxels = np.ravel_multi_index(np.meshgrid(*inbox, indexing="ij"), shape).ravel()
+        Z, Y, X = np.meshgrid(*(c[i] for c, i in zip(coords, inbox, strict=True)), indexing="ij")
+        points = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
+        del X, Y, Z
+        if "body" in phase.variables:
+            density = np.asarray(phase["body"].transpose(*GRID_DIMS).values, dtype=np.float64)
+            keep = density.reshape(-1)[voxels] > 0
+            voxels, points = voxels[keep], points[keep]
+            density = density.reshape(-1)[voxels]
+        else:
+            density = np.ones(voxels.size)
+        tissue, self.interpolate = _interpolation(body, points)  # centres in the reference
+        self.reference, self.density = points[tissue], density[tissue]
+        del points, voxels
+        self.wavevector = (
+            2.0
+            * np.pi
+            * np.asarray(phase["tag_frequency"].values, dtype=np.float64)[:, None]
+            * np.asarray(phase["tag_direction"].transpose("tag", "axis").sel(axis=["x", "y", "z"]))
+        )  # (tag, 3) rad/mm
+        tags = list(phase["tag"].values)
+        self.disks = [_disk(phase, tag, shape, spacing) for tag in tags]
+        self.profiles: list[np.ndarray | None] = []
+        for t, (_, normal) in enumerate(self.disks):
+            slab = _slab(phase, t, spacing) if models[t] == "slice-profile" else None
+            # k_ζ in the grid's (z, y, x) order: wavevector is (x, y, z)
+            self.profiles.append(
+                None
+                if slab is None
+                else slice_operator(coords[normal], *slab, float(self.wavevector[t, 2 - normal]))
+            )
+        # a tag's images hold only the tissue inside its acquisition (slab, field of view)
+        self.outside = (
+            [~a if not a.all() else None
+             for a in np.asarray(phase["mask"].transpose("tag", *GRID_DIMS).values, dtype=bool)]
+            if "mask" in phase.variables
+            else [None] * len(tags)
+        )  # fmt: skip
+        self.shape, self.origin, self.spacing = shape, origin, spacing
+        self.U = np.asarray(U, dtype=np.float64)
+        self.ntag = len(tags)
+        # the splat reaches the 8 voxels around each moved point (module notes)
+        low, high = np.array(shape), np.zeros(3, dtype=np.int64)
+        for n in range(1, self.U.shape[0]):
+            moved = self._moved(n)[0]
+            if moved.shape[0]:
+                f = np.floor((moved - origin) / spacing)
+                low = np.minimum(low, f.min(axis=0).astype(np.int64))
+                high = np.maximum(high, f.max(axis=0).astype(np.int64) + 2)
+        low, high = np.clip(low, 0, shape), np.clip(high, 0, shape)
+        self.support: tuple[slice, ...] = tuple(
+            slice(int(a), int(max(a, b))) for a, b in zip(low, high, strict=True)
         )
-    # a tag's images hold only the tissue inside its acquisition (slab, field of view)
-    acquired = (
-        np.asarray(phase["mask"].transpose("tag", *GRID_DIMS).values, dtype=bool)
-        if "mask" in phase.variables
-        else np.ones((len(tags), *shape), dtype=bool)
-    )
-    outside = [None if a.all() else ~a for a in acquired]
-    del acquired
-    cached: dict[tuple[int, ...], tuple[np.ndarray, Any, Any]] = {}
 
-    def plans(stack: tuple[int, ...]) -> tuple[np.ndarray, Any, Any]:
-        if stack not in cached:  # one in-place buffer per slice orientation, for this call
-            cached[stack] = inplace_plans(stack, np.complex64, (-2, -1))
-        return cached[stack]
-
-    out = np.empty((len(tags), *shape), dtype=np.float32)
-    S = np.empty(shape, dtype=np.complex64)
-    U = np.asarray(U, dtype=np.float64)
-    for n in range(1, U.shape[0]):  # one splat of every tag and one filter per tag and frame
-        out[...] = 0.0
-        un = np.asarray(interpolate @ U[n].reshape(nnode, 3))  # (voxel, 3) mm
-        here, rho = reference, density
+    def _moved(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions (z, y, x) of the tissue's voxel centres in frame ``n``, mm, with their
+        displacement (x, y, z) and density; points without a finite displacement left out."""
+        nnode = self.U.shape[1] // 3
+        un = np.asarray(self.interpolate @ self.U[n].reshape(nnode, 3))  # (voxel, 3) mm
+        here, rho = self.reference, self.density
         ok = np.isfinite(un).all(axis=1)
         if not ok.all():
             un, here, rho = un[ok], here[ok], rho[ok]
-        moved = (here + un)[:, ::-1]  # (z, y, x)
-        angle = np.einsum("pi,ti->pt", un, wavevector)  # (point, tag) rad
-        del un
-        # ρ0 e^{-ik·u} as real and imaginary columns: one real sparse product spreads all
-        # (in single precision, as S is filtered: the correction keeps ~1e-6 rad)
-        signals = np.empty((angle.shape[0], 2 * len(tags)), dtype=np.float32)
-        np.cos(angle, out=signals[:, : len(tags)])
-        np.sin(angle, out=signals[:, len(tags) :])
-        del angle
-        signals[:, len(tags) :] *= -1.0
-        signals *= rho[:, None]
-        spread = splat_operator(moved, origin, spacing, shape, np.float32) @ signals
-        del moved, signals
-        for t, (disk, normal) in enumerate(disks):  # ≤ 3 tags
-            S.real = spread[:, t].reshape(shape)
-            S.imag = spread[:, len(tags) + t].reshape(shape)
-            if outside[t] is not None:
-                np.copyto(S, 0.0, where=outside[t])
-            _filtered_phase(S, disk, normal, out[t], plans, profiles[t])
-        del spread
-        yield n, out
+        return (here + un)[:, ::-1], un, rho
+
+    def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
+        shape, ntag = self.shape, self.ntag
+        size = int(np.prod(shape))
+        cached: dict[tuple[int, ...], tuple[np.ndarray, Any, Any]] = {}
+
+        def plans(stack: tuple[int, ...]) -> tuple[np.ndarray, Any, Any]:
+            if stack not in cached:  # every slice orientation transforms in one buffer
+                memory = next(iter(cached.values()))[0] if cached else None
+                cached[stack] = inplace_plans(stack, np.complex64, (-2, -1), memory=memory)
+            return cached[stack]
+
+        out = np.empty((ntag, *shape), dtype=np.float32)
+        S = np.zeros(shape, dtype=np.complex64)
+        # the signal is splatted onto the support box only (zero elsewhere)
+        box = self.support
+        inner = tuple(b.stop - b.start for b in box)
+        corner = self.origin + self.spacing * np.array([b.start for b in box])
+        work, has = np.empty(size, dtype=np.float32), np.empty(size, dtype=bool)
+        for n in range(1, self.U.shape[0]):  # one splat of every tag and one filter per tag
+            out[...] = 0.0
+            moved, un, rho = self._moved(n)
+            angle = np.einsum("pi,ti->pt", un, self.wavevector)  # (point, tag) rad
+            del un
+            # ρ0 e^{-ik·u} as real and imaginary columns: one real sparse product spreads all
+            # (in single precision, as S is filtered: the correction keeps ~1e-6 rad)
+            signals = np.empty((angle.shape[0], 2 * ntag), dtype=np.float32)
+            np.cos(angle, out=signals[:, :ntag])
+            np.sin(angle, out=signals[:, ntag:])
+            del angle
+            signals[:, ntag:] *= -1.0
+            signals *= rho[:, None]
+            spread = splat_operator(moved, corner, self.spacing, inner, np.float32) @ signals
+            del moved, signals
+            for t, (disk, normal) in enumerate(self.disks):  # ≤ 3 tags
+                S[...] = 0.0
+                S[box].real = spread[:, t].reshape(inner)
+                S[box].imag = spread[:, ntag + t].reshape(inner)
+                if self.outside[t] is not None:
+                    np.copyto(S, 0.0, where=self.outside[t])
+                _filtered_phase(S, disk, normal, out[t], plans, work, has, self.profiles[t])
+            del spread
+            yield n, out
 
 
 def blur_correction(
@@ -477,7 +516,7 @@ def blur_correction(
     """
     out = np.zeros((phase.sizes["tag"], phase.sizes["time"], *(phase.sizes[d] for d in GRID_DIMS)),
                    dtype=np.float32)  # fmt: skip
-    for n, frame in _correction_frames(phase, body, U, model):
+    for n, frame in _CorrectionFrames(phase, body, U, model):
         out[:, n] = frame
     return out
 
@@ -497,12 +536,12 @@ def deblurred(phase: xr.Dataset, correction: np.ndarray) -> xr.Dataset:
 
 
 def _corrected_frame(
-    source: np.ndarray, blocks: list[tuple[int, tuple[slice, ...], np.ndarray]]
+    source: np.ndarray, box: tuple[slice, ...], block: np.ndarray | None
 ) -> np.ndarray:
-    """A copy of one frame (tag, 1, z, y, x) of the phase with its corrected boxes written in."""
+    """A copy of one frame (tag, 1, z, y, x) of the phase with its corrected box written in."""
     frame = np.array(source)
-    for t, box, block in blocks:
-        frame[t, 0][box] = block
+    if block is not None:
+        frame[:, 0][(slice(None), *box)] = block
     return frame
 
 
@@ -513,45 +552,41 @@ def _deblurred_lazily(
     and the mean |correction| per frame (rad, over the voxels that carry one).
 
     The corrected phase is dask-backed, one chunk per frame, built when a frame is read from
-    ``phase`` and the corrected values, which are held only in the box of the voxels each
-    tag's correction moves in each frame (the tissue). Values equal :func:`deblurred`'s.
+    ``phase`` and the corrected values, which are held only in the box of the voxels the
+    splatted tissue reaches (:class:`_CorrectionFrames`), in one array. Values equal
+    :func:`deblurred`'s.
     """
     ntag, ntime = phase.sizes["tag"], phase.sizes["time"]
-    blocks: list[list[tuple[int, tuple[slice, ...], np.ndarray]]] = [[] for _ in range(ntime)]
+    frames = _CorrectionFrames(phase, body, U, model)
+    box = frames.support
+    blocks = np.empty(
+        (max(ntime - 1, 0), ntag, *(b.stop - b.start for b in box)), dtype=phase["phase"].dtype
+    )
     mean = np.zeros(ntime)
-    for n, correction in _correction_frames(phase, body, U, model):
+    for n, correction in frames:
         total = np.count_nonzero(correction)
         if total:
             mean[n] = float(np.abs(correction).sum(dtype=np.float64)) / total
-        values = np.asarray(phase["phase"].isel(time=n).transpose("tag", *GRID_DIMS).values)
-        for t in range(ntag):  # ≤ 3 tags
-            moved = correction[t] != 0  # the correction is zero outside the tissue
-            if not moved.any():
-                continue
-            box = tuple(
-                slice(int(i[0]), int(i[-1]) + 1)
-                for i in (
-                    np.flatnonzero(moved.any(axis=other)) for other in ((1, 2), (0, 2), (0, 1))
-                )
-            )
-            block = np.array(values[t][box])
-            inside = moved[box]
-            block[inside] = wrap(block[inside] - correction[t][box][inside])
-            blocks[n].append((t, box, block))
+        block = blocks[n - 1]
+        block[...] = (
+            phase["phase"].isel(time=n).transpose("tag", *GRID_DIMS).values[(slice(None), *box)]
+        )
+        inner = correction[(slice(None), *box)]
+        moved = inner != 0  # the correction is zero outside the tissue (and the box)
+        block[moved] = wrap(block[moved] - inner[moved])
+    del frames
     source = phase["phase"].transpose("tag", "time", *GRID_DIMS).data  # numpy or dask
     shape = (ntag, 1, *(phase.sizes[d] for d in GRID_DIMS))
-    frames = [
+    lazy = [
         da.from_delayed(  # pure=False: keys without hashing the data
-            dask.delayed(_corrected_frame, pure=False)(source[:, n : n + 1], blocks[n]),
+            dask.delayed(_corrected_frame, pure=False)(
+                source[:, n : n + 1], box, blocks[n - 1] if n else None
+            ),
             shape,
             dtype=source.dtype,
         )
         for n in range(ntime)
     ]
     out = phase.copy()
-    out["phase"] = (
-        ("tag", "time", *GRID_DIMS),
-        da.concatenate(frames, axis=1),
-        phase["phase"].attrs,
-    )
+    out["phase"] = (("tag", "time", *GRID_DIMS), da.concatenate(lazy, axis=1), phase["phase"].attrs)
     return out, mean
