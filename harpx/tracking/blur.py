@@ -305,6 +305,7 @@ def _filtered_phase(
     plans: Callable[[tuple[int, ...]], tuple[np.ndarray, Any, Any]],
     work: np.ndarray,
     has: np.ndarray,
+    box: tuple[slice, ...],
     profile: np.ndarray | None = None,
 ) -> None:
     """Write ``arg((K * T S) conj S)`` into ``out`` where ``S`` carries signal (module notes).
@@ -313,8 +314,9 @@ def _filtered_phase(
     low-passed slice by slice (planes normal to ``normal``) with ``disk`` in single precision
     (the correction is a fraction of a radian; float32 keeps it to ~1e-6 rad), in place in
     the buffer of ``plans(shape)`` (buffer, forward, backward); the inverse transform is left
-    unnormalised, which the angle ignores. ``S`` is conjugated in place; ``work`` (float32)
-    and ``has`` (bool), of ``S``'s size, are work arrays.
+    unnormalised, which the angle ignores. ``out`` is the box ``box`` (z, y, x slices) of
+    the grid, outside which ``S`` is 0. ``S`` is conjugated in place; ``work`` (float32) and
+    ``has`` (bool), of ``S``'s size, are work arrays.
     """
     stack = np.moveaxis(S, normal, 0)  # (slices, plane 1, plane 2): the plane axes keep order
     buffer, forward, backward = plans(stack.shape)
@@ -337,7 +339,7 @@ def _filtered_phase(
     np.conjugate(stack, out=stack)
     buffer *= stack
     angle = np.arctan2(buffer.imag, buffer.real, out=power)
-    np.copyto(np.moveaxis(out, normal, 0), angle, where=mask)
+    np.copyto(out, np.moveaxis(angle, 0, normal)[box], where=np.moveaxis(mask, 0, normal)[box])
 
 
 def _interpolation(body: Any, points: FloatArray) -> tuple[np.ndarray, sparse.csr_matrix]:
@@ -361,10 +363,11 @@ def _interpolation(body: Any, points: FloatArray) -> tuple[np.ndarray, sparse.cs
 class _CorrectionFrames:
     """The correction of :func:`blur_correction` frame by frame.
 
-    Iterating yields ``(n, c)`` for every frame ``n >= 1``, ``c`` float32 (tag, z, y, x) in
-    rad, one buffer overwritten by the next frame: one frame's work arrays are held, never
-    the grid-sized result of every frame. ``support`` is the box (z, y, x slices) of the
-    voxels the splatted tissue reaches in some frame, outside which every correction is 0.
+    ``support`` is the box (z, y, x slices) of the voxels the splatted tissue reaches in some
+    frame, outside which every correction is 0. Iterating yields ``(n, c)`` for every frame
+    ``n >= 1``, ``c`` float32 (tag, box z, box y, box x) in rad, the correction in that box,
+    one buffer overwritten by the next frame: one frame's work arrays are held, never the
+    grid-sized result of every frame.
     """
 
     def __init__(
@@ -457,11 +460,11 @@ class _CorrectionFrames:
                 cached[stack] = inplace_plans(stack, np.complex64, (-2, -1), memory=memory)
             return cached[stack]
 
-        out = np.empty((ntag, *shape), dtype=np.float32)
         S = np.zeros(shape, dtype=np.complex64)
         # the signal is splatted onto the support box only (zero elsewhere)
         box = self.support
         inner = tuple(b.stop - b.start for b in box)
+        out = np.empty((ntag, *inner), dtype=np.float32)
         corner = self.origin + self.spacing * np.array([b.start for b in box])
         work, has = np.empty(size, dtype=np.float32), np.empty(size, dtype=bool)
         for n in range(1, self.U.shape[0]):  # one splat of every tag and one filter per tag
@@ -485,7 +488,7 @@ class _CorrectionFrames:
                 S[box].imag = spread[:, ntag + t].reshape(inner)
                 if self.outside[t] is not None:
                     np.copyto(S, 0.0, where=self.outside[t])
-                _filtered_phase(S, disk, normal, out[t], plans, work, has, self.profiles[t])
+                _filtered_phase(S, disk, normal, out[t], plans, work, has, box, self.profiles[t])
             del spread
             yield n, out
 
@@ -516,8 +519,9 @@ def blur_correction(
     """
     out = np.zeros((phase.sizes["tag"], phase.sizes["time"], *(phase.sizes[d] for d in GRID_DIMS)),
                    dtype=np.float32)  # fmt: skip
-    for n, frame in _CorrectionFrames(phase, body, U, model):
-        out[:, n] = frame
+    frames = _CorrectionFrames(phase, body, U, model)
+    for n, frame in frames:
+        out[:, n][(slice(None), *frames.support)] = frame
     return out
 
 
@@ -571,9 +575,8 @@ def _deblurred_lazily(
         block[...] = (
             phase["phase"].isel(time=n).transpose("tag", *GRID_DIMS).values[(slice(None), *box)]
         )
-        inner = correction[(slice(None), *box)]
-        moved = inner != 0  # the correction is zero outside the tissue (and the box)
-        block[moved] = wrap(block[moved] - inner[moved])
+        moved = correction != 0  # the correction is zero outside the tissue
+        block[moved] = wrap(block[moved] - correction[moved])
     del frames
     source = phase["phase"].transpose("tag", "time", *GRID_DIMS).data  # numpy or dask
     shape = (ntag, 1, *(phase.sizes[d] for d in GRID_DIMS))
