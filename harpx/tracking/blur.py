@@ -75,11 +75,11 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 from typing import Any
 
-import dask
-import dask.array as da
 import numpy as np
 import xarray as xr
 from scipy import sparse
+from xarray.backends import BackendArray
+from xarray.core import indexing
 
 from harpx._typing import FloatArray
 from harpx.imaging.fft import inplace_plans
@@ -539,14 +539,36 @@ def deblurred(phase: xr.Dataset, correction: np.ndarray) -> xr.Dataset:
     return out
 
 
-def _corrected_frame(
-    source: np.ndarray, box: tuple[slice, ...], block: np.ndarray | None
-) -> np.ndarray:
-    """A copy of one frame (tag, 1, z, y, x) of the phase with its corrected box written in."""
-    frame = np.array(source)
-    if block is not None:
-        frame[:, 0][(slice(None), *box)] = block
-    return frame
+class _CorrectedPhase(BackendArray):
+    """Phase (tag, time, z, y, x) of ``source`` with each frame ``n >= 1``'s box ``box``
+    (z, y, x slices) replaced by ``blocks[n - 1]``, built frame by frame when read (xarray
+    indexes it lazily: a frame read costs one copy of that frame)."""
+
+    def __init__(self, source: Any, box: tuple[slice, ...], blocks: np.ndarray) -> None:
+        self.source, self.box, self.blocks = source, box, blocks
+        self.shape = tuple(int(n) for n in source.shape)
+        self.dtype = np.dtype(source.dtype)
+
+    def __getitem__(self, key: indexing.ExplicitIndexer) -> np.ndarray:
+        return indexing.explicit_indexing_adapter(
+            key, self.shape, indexing.IndexingSupport.BASIC, self._read
+        )
+
+    def _frame(self, n: int) -> np.ndarray:
+        frame = np.array(self.source[:, n])  # a copy (computed, if dask-backed)
+        if n:
+            frame[(slice(None), *self.box)] = self.blocks[n - 1]
+        return frame
+
+    def _read(self, key: tuple) -> np.ndarray:
+        key = (*key, *(slice(None),) * (len(self.shape) - len(key)))
+        rest = (key[0], *key[2:])
+        if isinstance(key[1], int | np.integer):
+            return self._frame(int(key[1]))[rest]
+        frames = [self._frame(n)[rest] for n in range(self.shape[1])[key[1]]]
+        if not frames:  # an empty selection: its shape, no data
+            return np.broadcast_to(np.zeros((), self.dtype), self.shape)[key].copy()
+        return np.stack(frames, axis=1)
 
 
 def _deblurred_lazily(
@@ -555,7 +577,7 @@ def _deblurred_lazily(
     """``deblurred(phase, blur_correction(phase, body, U, model))`` without a grid-sized copy,
     and the mean |correction| per frame (rad, over the voxels that carry one).
 
-    The corrected phase is dask-backed, one chunk per frame, built when a frame is read from
+    The corrected phase is lazy (:class:`_CorrectedPhase`): a frame is built when read from
     ``phase`` and the corrected values, which are held only in the box of the voxels the
     splatted tissue reaches (:class:`_CorrectionFrames`), in one array. Values equal
     :func:`deblurred`'s.
@@ -579,17 +601,10 @@ def _deblurred_lazily(
         block[moved] = wrap(block[moved] - correction[moved])
     del frames
     source = phase["phase"].transpose("tag", "time", *GRID_DIMS).data  # numpy or dask
-    shape = (ntag, 1, *(phase.sizes[d] for d in GRID_DIMS))
-    lazy = [
-        da.from_delayed(  # pure=False: keys without hashing the data
-            dask.delayed(_corrected_frame, pure=False)(
-                source[:, n : n + 1], box, blocks[n - 1] if n else None
-            ),
-            shape,
-            dtype=source.dtype,
-        )
-        for n in range(ntime)
-    ]
     out = phase.copy()
-    out["phase"] = (("tag", "time", *GRID_DIMS), da.concatenate(lazy, axis=1), phase["phase"].attrs)
+    out["phase"] = xr.Variable(
+        ("tag", "time", *GRID_DIMS),
+        indexing.LazilyIndexedArray(_CorrectedPhase(source, box, blocks)),
+        phase["phase"].attrs,
+    )
     return out, mean
