@@ -91,6 +91,9 @@ from harpx.schema import GRID_DIMS
 #: Splatted signal below this fraction of its largest modulus counts as outside the tissue.
 SIGNAL_FLOOR = 1e-3
 
+#: Tissue points splatted at once (their work arrays are a few MB).
+_SPLAT_PART = 1 << 16
+
 #: Forward models of the blur (module notes): the in-plane band-pass alone, or with each
 #: tag's slice profile where the phase carries its slice geometry.
 BLUR_MODELS = ("in-plane", "slice-profile")
@@ -347,15 +350,22 @@ def _interpolation(body: Any, points: FloatArray) -> tuple[np.ndarray, sparse.cs
     interpolates nodal displacements (nnode, 3) at those points (as
     :func:`harpx.mechanics.locate.displacement_at`, frame by frame)."""
     chunk = 1 << 14  # points located at once: bounds the locator's temporaries
-    found = [locate(body.mesh, points[a : a + chunk]) for a in range(0, len(points), chunk)]
-    cells = np.concatenate([c for c, _ in found]) if found else np.empty(0, np.int64)
-    xi = np.concatenate([x for _, x in found]) if found else np.empty((0, 3))
-    inside = cells >= 0
-    vals, _ = _shape_values(body.scalar_element, xi[inside].T, body.nbasis)
-    nodes = body.element_dofs[cells[inside], :, 0] // 3  # (m, nb): dof 3 s + i of node s
-    m, nb = nodes.shape
+    insides, values, nodes = [], [], []
+    for a in range(0, len(points), chunk):
+        cells, xi = locate(body.mesh, points[a : a + chunk])
+        here = cells >= 0
+        vals, _ = _shape_values(body.scalar_element, xi[here].T, body.nbasis)
+        insides.append(here)
+        values.append(vals)
+        nodes.append(body.element_dofs[cells[here], :, 0] // 3)  # (m, nb): dof 3 s + i of s
+    inside = np.concatenate(insides) if insides else np.zeros(0, dtype=bool)
+    nb = body.nbasis
+    nodes_all = np.concatenate(nodes) if nodes else np.zeros((0, nb), dtype=np.int64)
+    vals_all = np.concatenate(values) if values else np.zeros((0, nb))
+    m = nodes_all.shape[0]
     matrix = sparse.csr_matrix(
-        (vals.ravel(), nodes.ravel(), np.arange(0, m * nb + 1, nb)), shape=(m, body.ndof // 3)
+        (vals_all.ravel(), nodes_all.ravel(), np.arange(0, m * nb + 1, nb)),
+        shape=(m, body.ndof // 3),
     )
     return inside, matrix
 
@@ -395,9 +405,15 @@ class _CorrectionFrames:
             density = density.reshape(-1)[voxels]
         else:
             density = np.ones(voxels.size)
-        tissue, self.interpolate = _interpolation(body, points)  # centres in the reference
+        tissue, interpolate = _interpolation(body, points)  # centres in the reference
         self.reference, self.density = points[tissue], density[tissue]
         del points, voxels
+        # the tissue's points in parts: one part's work arrays at a time
+        self.parts = [
+            (slice(a, a + _SPLAT_PART), interpolate[a : a + _SPLAT_PART])
+            for a in range(0, self.reference.shape[0], _SPLAT_PART)
+        ]
+        del interpolate
         self.wavevector = (
             2.0
             * np.pi
@@ -428,22 +444,25 @@ class _CorrectionFrames:
         # the splat reaches the 8 voxels around each moved point (module notes)
         low, high = np.array(shape), np.zeros(3, dtype=np.int64)
         for n in range(1, self.U.shape[0]):
-            moved = self._moved(n)[0]
-            if moved.shape[0]:
-                f = np.floor((moved - origin) / spacing)
-                low = np.minimum(low, f.min(axis=0).astype(np.int64))
-                high = np.maximum(high, f.max(axis=0).astype(np.int64) + 2)
+            for part in range(len(self.parts)):
+                moved = self._moved(n, part)[0]
+                if moved.shape[0]:
+                    f = np.floor((moved - origin) / spacing)
+                    low = np.minimum(low, f.min(axis=0).astype(np.int64))
+                    high = np.maximum(high, f.max(axis=0).astype(np.int64) + 2)
         low, high = np.clip(low, 0, shape), np.clip(high, 0, shape)
         self.support: tuple[slice, ...] = tuple(
             slice(int(a), int(max(a, b))) for a, b in zip(low, high, strict=True)
         )
 
-    def _moved(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Positions (z, y, x) of the tissue's voxel centres in frame ``n``, mm, with their
-        displacement (x, y, z) and density; points without a finite displacement left out."""
+    def _moved(self, n: int, part: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions (z, y, x) in frame ``n`` of the tissue's voxel centres of one part, mm,
+        with their displacement (x, y, z) and density; points without a finite displacement
+        left out."""
         nnode = self.U.shape[1] // 3
-        un = np.asarray(self.interpolate @ self.U[n].reshape(nnode, 3))  # (voxel, 3) mm
-        here, rho = self.reference, self.density
+        rows, interpolate = self.parts[part]
+        un = np.asarray(interpolate @ self.U[n].reshape(nnode, 3))  # (voxel, 3) mm
+        here, rho = self.reference[rows], self.density[rows]
         ok = np.isfinite(un).all(axis=1)
         if not ok.all():
             un, here, rho = un[ok], here[ok], rho[ok]
@@ -469,19 +488,21 @@ class _CorrectionFrames:
         work, has = np.empty(size, dtype=np.float32), np.empty(size, dtype=bool)
         for n in range(1, self.U.shape[0]):  # one splat of every tag and one filter per tag
             out[...] = 0.0
-            moved, un, rho = self._moved(n)
-            angle = np.einsum("pi,ti->pt", un, self.wavevector)  # (point, tag) rad
-            del un
-            # ρ0 e^{-ik·u} as real and imaginary columns: one real sparse product spreads all
-            # (in single precision, as S is filtered: the correction keeps ~1e-6 rad)
-            signals = np.empty((angle.shape[0], 2 * ntag), dtype=np.float32)
-            np.cos(angle, out=signals[:, :ntag])
-            np.sin(angle, out=signals[:, ntag:])
-            del angle
-            signals[:, ntag:] *= -1.0
-            signals *= rho[:, None]
-            spread = splat_operator(moved, corner, self.spacing, inner, np.float32) @ signals
-            del moved, signals
+            spread = np.zeros((int(np.prod(inner)), 2 * ntag), dtype=np.float32)
+            for part in range(len(self.parts)):
+                moved, un, rho = self._moved(n, part)
+                angle = np.einsum("pi,ti->pt", un, self.wavevector)  # (point, tag) rad
+                del un
+                # ρ0 e^{-ik·u} as real and imaginary columns: one real sparse product spreads
+                # all (in single precision, as S is filtered: the correction keeps ~1e-6 rad)
+                signals = np.empty((angle.shape[0], 2 * ntag), dtype=np.float32)
+                np.cos(angle, out=signals[:, :ntag])
+                np.sin(angle, out=signals[:, ntag:])
+                del angle
+                signals[:, ntag:] *= -1.0
+                signals *= rho[:, None]
+                spread += splat_operator(moved, corner, self.spacing, inner, np.float32) @ signals
+                del moved, signals
             for t, (disk, normal) in enumerate(self.disks):  # ≤ 3 tags
                 S[...] = 0.0
                 S[box].real = spread[:, t].reshape(inner)
