@@ -39,7 +39,7 @@ from harpx.imaging._kernels import (
     _pool,
     _spline_transfer,
 )
-from harpx.imaging.fft import default_threads, get_plan
+from harpx.imaging.fft import default_threads, get_plan, make_plan
 
 __all__ = ["bandpass_mask", "harmonic_images", "harmonic_phase"]
 
@@ -212,7 +212,9 @@ class _Bandpass:
         self.p1 = get_plan(
             shape(b1, len(band.cols)), cplx, (a,), direction="backward", threads=threads
         )
-        self.p2 = get_plan(
+        # the refined volume: not cached (a grid-sized pair of buffers per thread would stay
+        # allocated for the life of the process); FFTW's wisdom makes planning it again cheap
+        self.p2 = make_plan(
             shape(b1, b2, batch * slice_factor),
             cplx,
             (b,),

@@ -1,7 +1,9 @@
 """FFTs through pyfftw with a cache of plans that own aligned buffers.
 
-Every transform goes through :func:`get_plan`, which returns a :class:`pyfftw.FFTW` object
-for one exact ``(shape, dtype, axes, threads, direction)``. Plans are created once, with
+Every transform goes through :func:`get_plan` (or, for grid-sized transforms whose buffers
+should not outlive their use, the uncached :func:`make_plan` and :func:`inplace_plans`),
+which returns a :class:`pyfftw.FFTW` object for one exact ``(shape, dtype, axes, threads,
+direction)``. Plans are created once, with
 ``FFTW_MEASURE`` for arrays of at least ``MEASURE_MIN_SIZE`` elements and ``FFTW_ESTIMATE``
 below (measuring a small plan costs more than it saves; FFTW's wisdom is kept for the life
 of the process), and cached per calling thread, so that threads of a pool never share a
@@ -33,7 +35,16 @@ import numpy as np
 import pyfftw
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["default_threads", "fft2", "get_plan", "ifft2", "irfft2", "rfft2"]
+__all__ = [
+    "default_threads",
+    "fft2",
+    "get_plan",
+    "ifft2",
+    "inplace_plans",
+    "irfft2",
+    "make_plan",
+    "rfft2",
+]
 
 #: FFTW planner effort of cached plans with at least MEASURE_MIN_SIZE elements.
 PLANNER_EFFORT = "FFTW_MEASURE"
@@ -125,6 +136,31 @@ def get_plan(
     if plan is not None:
         cache.move_to_end(key)
         return plan
+    plan = make_plan(shape, dtype, axes, direction=direction, threads=nthreads)
+    cache[key] = plan
+    while len(cache) > MAX_PLANS_PER_THREAD:
+        cache.popitem(last=False)
+    return plan
+
+
+def make_plan(
+    shape: Sequence[int],
+    dtype: np.dtype | type,
+    axes: Sequence[int],
+    *,
+    direction: Direction,
+    threads: int | None = None,
+) -> pyfftw.FFTW:
+    """A new plan of :func:`get_plan`'s kind, not cached: its buffers live as long as it does.
+
+    For a transform too large to keep in the cache between calls: a second planning of the
+    same problem takes FFTW's wisdom and costs little. Parameters and return value as for
+    :func:`get_plan`.
+    """
+    shape = tuple(int(s) for s in shape)
+    dtype = np.dtype(dtype)
+    axes = tuple(int(a) % len(shape) for a in axes)
+    nthreads = default_threads(threads)
     real = dtype.kind == "f"
     half = list(shape)
     half[axes[-1]] = shape[axes[-1]] // 2 + 1
@@ -142,7 +178,7 @@ def get_plan(
     with _PLAN_LOCK:  # the FFTW planner is not thread safe
         inp = pyfftw.empty_aligned(in_shape, dtype=in_dtype)
         out = pyfftw.empty_aligned(out_shape, dtype=out_dtype)
-        plan = pyfftw.FFTW(
+        return pyfftw.FFTW(
             inp,
             out,
             axes=axes,
@@ -150,10 +186,77 @@ def get_plan(
             flags=(effort,),
             threads=nthreads,
         )
-    cache[key] = plan
-    while len(cache) > MAX_PLANS_PER_THREAD:
-        cache.popitem(last=False)
-    return plan
+
+
+def inplace_plans(
+    shape: Sequence[int],
+    dtype: np.dtype | type,
+    axes: Sequence[int],
+    *,
+    threads: int | None = None,
+    memory: NDArray[np.complexfloating] | None = None,
+) -> tuple[NDArray[np.complexfloating], pyfftw.FFTW, pyfftw.FFTW]:
+    """One aligned complex buffer with a forward and a backward plan that transform it in place.
+
+    Not cached: the caller holds the buffer (and its two plans) for as long as it needs them,
+    a third of the memory of :func:`get_plan`'s forward and backward plans, which own an
+    input and an output buffer each and stay in the cache. Planned like :func:`get_plan`
+    (``FFTW_MEASURE`` from ``MEASURE_MIN_SIZE`` elements; FFTW's wisdom makes a second
+    planning of the same problem cheap).
+
+    Parameters
+    ----------
+    shape : sequence of int
+        Shape of the buffer.
+    dtype : numpy dtype
+        ``complex64`` or ``complex128``.
+    axes : sequence of int
+        Axes transformed (negative values allowed).
+    threads : int or None
+        FFTW threads of both plans; None means ``os.cpu_count()``.
+    memory : ndarray, optional
+        A C-contiguous, SIMD-aligned array of ``dtype`` (from an earlier call) whose memory
+        the buffer takes, reshaped, so that transforms of several shapes of one size share
+        it; planning overwrites its content.
+
+    Returns
+    -------
+    buffer : ndarray of ``dtype``, shape ``shape``
+        Fill it, call ``forward.execute()`` or ``backward.execute()`` (unnormalised) and read
+        it.
+    forward, backward : pyfftw.FFTW
+        The plans.
+
+    Raises
+    ------
+    ValueError
+        If ``dtype`` is not complex, or ``memory`` does not fit.
+    """
+    shape = tuple(int(s) for s in shape)
+    dtype = np.dtype(dtype)
+    if dtype.kind != "c":
+        raise ValueError(f"in-place plans need a complex dtype, got {dtype!r}")
+    axes = tuple(int(a) % len(shape) for a in axes)
+    nthreads = default_threads(threads)
+    effort = PLANNER_EFFORT if int(np.prod(shape)) >= MEASURE_MIN_SIZE else "FFTW_ESTIMATE"
+    if memory is not None and (
+        memory.dtype != dtype or memory.size != int(np.prod(shape)) or not memory.flags.c_contiguous
+    ):
+        raise ValueError(
+            f"'memory' must be a C-contiguous {dtype} array of {int(np.prod(shape))} elements, "
+            f"got {memory.dtype} of shape {memory.shape!r}"
+        )
+    with _PLAN_LOCK:  # the FFTW planner is not thread safe
+        buffer = (
+            pyfftw.empty_aligned(shape, dtype=dtype) if memory is None else memory.reshape(shape)
+        )
+        forward, backward = (
+            pyfftw.FFTW(
+                buffer, buffer, axes=axes, direction=direction, flags=(effort,), threads=nthreads
+            )  # fmt: skip
+            for direction in ("FFTW_FORWARD", "FFTW_BACKWARD")
+        )
+    return buffer, forward, backward
 
 
 def _run(

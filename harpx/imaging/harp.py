@@ -373,10 +373,14 @@ def extract_phase(
         ``phase/1``: ``phase`` (rad, in [-π, π)) and ``magnitude`` (image units), of ``dtype``, with
         dims (tag, time, z, y, x) on the refined grid; the tag coords and ``time``; ``mask``
         (nearest native voxel), ``body`` and ``displacement_true`` (linear interpolation, NaN where
-        a neighbour is NaN) when present; ``harmonic_noise`` (tag), the noise standard deviation of
-        each harmonic image (:mod:`harpx.imaging.noise`); ``slice_thickness`` (tag) and
-        ``slice_position`` (tag, slice) when :func:`slice_geometry` finds them. Attributes:
-        ``harpx_schema="phase/1"``, ``sequence``, ``upsample``, ``radius``, ``bandpass="disk"``
+        a neighbour is NaN) when present, ``displacement_true`` always dask-backed (one chunk
+        per frame for in-memory data, refined when read: it is the synthetic truth, read to
+        evaluate a tracking, and refined it holds three float64 components per voxel and
+        frame, more than ``phase`` and ``magnitude`` together); ``harmonic_noise`` (tag), the
+        noise standard deviation of each harmonic image (:mod:`harpx.imaging.noise`);
+        ``slice_thickness`` (tag) and ``slice_position`` (tag, slice) when
+        :func:`slice_geometry` finds them. Attributes: ``harpx_schema="phase/1"``,
+        ``sequence``, ``upsample``, ``radius``, ``bandpass="disk"``
         (the filter the tracker's blur correction models) and ``upsample_factors`` (z, y, x).
 
     Raises
@@ -479,7 +483,12 @@ def extract_phase(
         data_vars["mask"] = mask
     for name in ("body", "displacement_true"):
         if name in ds.variables:
-            var = _refine_linear(ds[name].variable.astype(np.float64), factors, nthreads)
+            source = ds[name].variable
+            if name == "displacement_true" and source.chunks is None:
+                # the synthetic truth, read for evaluation only: refined frame by frame when
+                # read, not held (three float64 components per refined voxel and frame)
+                source = source.chunk({d: 1 for d in source.dims if d == "time"})
+            var = _refine_linear(source.astype(np.float64), factors, nthreads)
             var.attrs = {**standard_attrs(name), **ds[name].attrs}
             data_vars[name] = var
     attrs = {k: v for k, v in ds.attrs.items() if k != "harpx_schema"}

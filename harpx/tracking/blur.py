@@ -72,22 +72,27 @@ at that border is too small.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
 import xarray as xr
 from scipy import sparse
+from xarray.backends import BackendArray
+from xarray.core import indexing
 
 from harpx._typing import FloatArray
-from harpx.imaging.fft import get_plan
+from harpx.imaging.fft import inplace_plans
 from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.imaging.sample import wrap
+from harpx.mechanics.locate import _shape_values, locate
 from harpx.schema import GRID_DIMS
-from harpx.tracking.resample import interpolate_displacement
-from harpx.tracking.results import grid_points
 
 #: Splatted signal below this fraction of its largest modulus counts as outside the tissue.
 SIGNAL_FLOOR = 1e-3
+
+#: Tissue points splatted at once (their work arrays are a few MB).
+_SPLAT_PART = 1 << 16
 
 #: Forward models of the blur (module notes): the in-plane band-pass alone, or with each
 #: tag's slice profile where the phase carries its slice geometry.
@@ -300,30 +305,213 @@ def _filtered_phase(
     disk: np.ndarray,
     normal: int,
     out: np.ndarray,
+    plans: Callable[[tuple[int, ...]], tuple[np.ndarray, Any, Any]],
+    work: np.ndarray,
+    has: np.ndarray,
+    box: tuple[slice, ...],
     profile: np.ndarray | None = None,
 ) -> None:
     """Write ``arg((K * T S) conj S)`` into ``out`` where ``S`` carries signal (module notes).
 
     ``T S`` (``profile`` applied along grid axis ``normal``; ``S`` itself when None) is
     low-passed slice by slice (planes normal to ``normal``) with ``disk`` in single precision
-    (the correction is a fraction of a radian; float32 keeps it to ~1e-6 rad); the inverse
-    transform is left unnormalised, which the angle ignores.
+    (the correction is a fraction of a radian; float32 keeps it to ~1e-6 rad), in place in
+    the buffer of ``plans(shape)`` (buffer, forward, backward); the inverse transform is left
+    unnormalised, which the angle ignores. ``out`` is the box ``box`` (z, y, x slices) of
+    the grid, outside which ``S`` is 0. ``S`` is conjugated in place; ``work`` (float32) and
+    ``has`` (bool), of ``S``'s size, are work arrays.
     """
     stack = np.moveaxis(S, normal, 0)  # (slices, plane 1, plane 2): the plane axes keep order
-    forward = get_plan(stack.shape, np.complex64, (-2, -1), direction="forward")
-    backward = get_plan(stack.shape, np.complex64, (-2, -1), direction="backward")
+    buffer, forward, backward = plans(stack.shape)
     if profile is None:
-        np.copyto(forward.input_array, stack)
-    else:
-        np.copyto(forward.input_array, np.tensordot(profile.astype(np.complex64), stack, 1))
+        np.copyto(buffer, stack)
+    else:  # T along the slices, written straight into the buffer
+        np.matmul(
+            profile.astype(np.complex64),
+            stack.reshape(stack.shape[0], -1),
+            out=buffer.reshape(stack.shape[0], -1),
+        )
     forward.execute()
-    np.multiply(forward.output_array, disk, out=backward.input_array)
+    buffer *= disk
     backward.execute()
-    power = stack.real * stack.real + stack.imag * stack.imag  # |S|², no square roots
-    has = power > SIGNAL_FLOOR**2 * power.max()
-    product = backward.output_array * np.conj(stack)
-    angle = np.arctan2(product.imag, product.real)
-    np.copyto(np.moveaxis(out, normal, 0), angle, where=has)
+    power = work.reshape(stack.shape)
+    np.multiply(stack.real, stack.real, out=power)  # |S|², no square roots
+    power += stack.imag * stack.imag
+    mask = has.reshape(stack.shape)
+    np.greater(power, SIGNAL_FLOOR**2 * power.max(), out=mask)
+    np.conjugate(stack, out=stack)
+    buffer *= stack
+    angle = np.arctan2(buffer.imag, buffer.real, out=power)
+    np.copyto(out, np.moveaxis(angle, 0, normal)[box], where=np.moveaxis(mask, 0, normal)[box])
+
+
+def _interpolation(body: Any, points: FloatArray) -> tuple[np.ndarray, sparse.csr_matrix]:
+    """Which ``points`` (n, 3) lie in the body's reference mesh, and the sparse matrix that
+    interpolates nodal displacements (nnode, 3) at those points (as
+    :func:`harpx.mechanics.locate.displacement_at`, frame by frame)."""
+    chunk = 1 << 14  # points located at once: bounds the locator's temporaries
+    insides, values, nodes = [], [], []
+    for a in range(0, len(points), chunk):
+        cells, xi = locate(body.mesh, points[a : a + chunk])
+        here = cells >= 0
+        vals, _ = _shape_values(body.scalar_element, xi[here].T, body.nbasis)
+        insides.append(here)
+        values.append(vals)
+        nodes.append(body.element_dofs[cells[here], :, 0] // 3)  # (m, nb): dof 3 s + i of s
+    inside = np.concatenate(insides) if insides else np.zeros(0, dtype=bool)
+    nb = body.nbasis
+    nodes_all = np.concatenate(nodes) if nodes else np.zeros((0, nb), dtype=np.int64)
+    vals_all = np.concatenate(values) if values else np.zeros((0, nb))
+    m = nodes_all.shape[0]
+    matrix = sparse.csr_matrix(
+        (vals_all.ravel(), nodes_all.ravel(), np.arange(0, m * nb + 1, nb)),
+        shape=(m, body.ndof // 3),
+    )
+    return inside, matrix
+
+
+class _CorrectionFrames:
+    """The correction of :func:`blur_correction` frame by frame.
+
+    ``support`` is the box (z, y, x slices) of the voxels the splatted tissue reaches in some
+    frame, outside which every correction is 0. Iterating yields ``(n, c)`` for every frame
+    ``n >= 1``, ``c`` float32 (tag, box z, box y, box x) in rad, the correction in that box,
+    one buffer overwritten by the next frame: one frame's work arrays are held, never the
+    grid-sized result of every frame.
+    """
+
+    def __init__(
+        self, phase: xr.Dataset, body: Any, U: FloatArray, model: str = "slice-profile"
+    ) -> None:
+        nz, ny, nx = (phase.sizes[d] for d in GRID_DIMS)
+        shape = (nz, ny, nx)
+        coords = [np.asarray(phase[d].values, dtype=np.float64) for d in GRID_DIMS]
+        origin = np.array([c[0] for c in coords])
+        spacing = _grid_spacing(phase)
+        models = blur_models(phase, model)
+        lo = body.dof_points.min(axis=0) - 1e-9  # (x, y, z)
+        hi = body.dof_points.max(axis=0) + 1e-9
+        # the voxel centres in the body's bounding box, C order over (z, y, x): the grid is
+        # separable, so the box is found axis by axis (harpx.tracking.results.grid_points order)
+        inbox = [np.flatnonzero((c >= lo[2 - a]) & (c <= hi[2 - a])) for a, c in enumerate(coords)]
+        voxels = np.ravel_multi_index(np.meshgrid(*inbox, indexing="ij"), shape).ravel()
+        Z, Y, X = np.meshgrid(*(c[i] for c, i in zip(coords, inbox, strict=True)), indexing="ij")
+        points = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
+        del X, Y, Z
+        if "body" in phase.variables:
+            density = np.asarray(phase["body"].transpose(*GRID_DIMS).values, dtype=np.float64)
+            keep = density.reshape(-1)[voxels] > 0
+            voxels, points = voxels[keep], points[keep]
+            density = density.reshape(-1)[voxels]
+        else:
+            density = np.ones(voxels.size)
+        tissue, interpolate = _interpolation(body, points)  # centres in the reference
+        self.reference, self.density = points[tissue], density[tissue]
+        del points, voxels
+        # the tissue's points in parts: one part's work arrays at a time
+        self.parts = [
+            (slice(a, a + _SPLAT_PART), interpolate[a : a + _SPLAT_PART])
+            for a in range(0, self.reference.shape[0], _SPLAT_PART)
+        ]
+        del interpolate
+        self.wavevector = (
+            2.0
+            * np.pi
+            * np.asarray(phase["tag_frequency"].values, dtype=np.float64)[:, None]
+            * np.asarray(phase["tag_direction"].transpose("tag", "axis").sel(axis=["x", "y", "z"]))
+        )  # (tag, 3) rad/mm
+        tags = list(phase["tag"].values)
+        self.disks = [_disk(phase, tag, shape, spacing) for tag in tags]
+        self.profiles: list[np.ndarray | None] = []
+        for t, (_, normal) in enumerate(self.disks):
+            slab = _slab(phase, t, spacing) if models[t] == "slice-profile" else None
+            # k_ζ in the grid's (z, y, x) order: wavevector is (x, y, z)
+            self.profiles.append(
+                None
+                if slab is None
+                else slice_operator(coords[normal], *slab, float(self.wavevector[t, 2 - normal]))
+            )
+        # a tag's images hold only the tissue inside its acquisition (slab, field of view)
+        self.outside = (
+            [~a if not a.all() else None
+             for a in np.asarray(phase["mask"].transpose("tag", *GRID_DIMS).values, dtype=bool)]
+            if "mask" in phase.variables
+            else [None] * len(tags)
+        )  # fmt: skip
+        self.shape, self.origin, self.spacing = shape, origin, spacing
+        self.U = np.asarray(U, dtype=np.float64)
+        self.ntag = len(tags)
+        # the splat reaches the 8 voxels around each moved point (module notes)
+        low, high = np.array(shape), np.zeros(3, dtype=np.int64)
+        for n in range(1, self.U.shape[0]):
+            for part in range(len(self.parts)):
+                moved = self._moved(n, part)[0]
+                if moved.shape[0]:
+                    f = np.floor((moved - origin) / spacing)
+                    low = np.minimum(low, f.min(axis=0).astype(np.int64))
+                    high = np.maximum(high, f.max(axis=0).astype(np.int64) + 2)
+        low, high = np.clip(low, 0, shape), np.clip(high, 0, shape)
+        self.support: tuple[slice, ...] = tuple(
+            slice(int(a), int(max(a, b))) for a, b in zip(low, high, strict=True)
+        )
+
+    def _moved(self, n: int, part: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions (z, y, x) in frame ``n`` of the tissue's voxel centres of one part, mm,
+        with their displacement (x, y, z) and density; points without a finite displacement
+        left out."""
+        nnode = self.U.shape[1] // 3
+        rows, interpolate = self.parts[part]
+        un = np.asarray(interpolate @ self.U[n].reshape(nnode, 3))  # (voxel, 3) mm
+        here, rho = self.reference[rows], self.density[rows]
+        ok = np.isfinite(un).all(axis=1)
+        if not ok.all():
+            un, here, rho = un[ok], here[ok], rho[ok]
+        return (here + un)[:, ::-1], un, rho
+
+    def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
+        shape, ntag = self.shape, self.ntag
+        size = int(np.prod(shape))
+        cached: dict[tuple[int, ...], tuple[np.ndarray, Any, Any]] = {}
+
+        def plans(stack: tuple[int, ...]) -> tuple[np.ndarray, Any, Any]:
+            if stack not in cached:  # every slice orientation transforms in one buffer
+                memory = next(iter(cached.values()))[0] if cached else None
+                cached[stack] = inplace_plans(stack, np.complex64, (-2, -1), memory=memory)
+            return cached[stack]
+
+        S = np.zeros(shape, dtype=np.complex64)
+        # the signal is splatted onto the support box only (zero elsewhere)
+        box = self.support
+        inner = tuple(b.stop - b.start for b in box)
+        out = np.empty((ntag, *inner), dtype=np.float32)
+        corner = self.origin + self.spacing * np.array([b.start for b in box])
+        work, has = np.empty(size, dtype=np.float32), np.empty(size, dtype=bool)
+        for n in range(1, self.U.shape[0]):  # one splat of every tag and one filter per tag
+            out[...] = 0.0
+            spread = np.zeros((int(np.prod(inner)), 2 * ntag), dtype=np.float32)
+            for part in range(len(self.parts)):
+                moved, un, rho = self._moved(n, part)
+                angle = np.einsum("pi,ti->pt", un, self.wavevector)  # (point, tag) rad
+                del un
+                # ρ0 e^{-ik·u} as real and imaginary columns: one real sparse product spreads
+                # all (in single precision, as S is filtered: the correction keeps ~1e-6 rad)
+                signals = np.empty((angle.shape[0], 2 * ntag), dtype=np.float32)
+                np.cos(angle, out=signals[:, :ntag])
+                np.sin(angle, out=signals[:, ntag:])
+                del angle
+                signals[:, ntag:] *= -1.0
+                signals *= rho[:, None]
+                spread += splat_operator(moved, corner, self.spacing, inner, np.float32) @ signals
+                del moved, signals
+            for t, (disk, normal) in enumerate(self.disks):  # ≤ 3 tags
+                S[...] = 0.0
+                S[box].real = spread[:, t].reshape(inner)
+                S[box].imag = spread[:, ntag + t].reshape(inner)
+                if self.outside[t] is not None:
+                    np.copyto(S, 0.0, where=self.outside[t])
+                _filtered_phase(S, disk, normal, out[t], plans, work, has, box, self.profiles[t])
+            del spread
+            yield n, out
 
 
 def blur_correction(
@@ -350,74 +538,11 @@ def blur_correction(
         Correction c in rad (0 in frame 0 and outside the tissue): subtract it from
         ``phase`` before tracking again.
     """
-    nz, ny, nx = (phase.sizes[d] for d in GRID_DIMS)
-    shape = (nz, ny, nx)
-    coords = [np.asarray(phase[d].values, dtype=np.float64) for d in GRID_DIMS]
-    origin = np.array([c[0] for c in coords])
-    spacing = _grid_spacing(phase)
-    models = blur_models(phase, model)
-    points = grid_points(phase)  # (n, 3) x, y, z of the voxel centres
-    lo = body.dof_points.min(axis=0) - 1e-9
-    hi = body.dof_points.max(axis=0) + 1e-9
-    voxels = np.nonzero(np.all((points >= lo) & (points <= hi), axis=1))[0]
-    if "body" in phase.variables:
-        density = np.asarray(phase["body"].transpose(*GRID_DIMS).values, dtype=np.float64)
-        voxels = voxels[density.reshape(-1)[voxels] > 0]
-        density = density.reshape(-1)[voxels]
-    else:
-        density = np.ones(voxels.size)
-    u = np.zeros((U.shape[0], 0, 3))
-    if voxels.size:
-        u, _ = interpolate_displacement(body, U, points[voxels])  # (time, voxel, 3)
-    tissue = np.isfinite(u[0]).all(axis=1)  # voxel centres inside the body's reference
-    reference, u, density = points[voxels[tissue]], u[:, tissue], density[tissue]
-    wavevector = (
-        2.0
-        * np.pi
-        * np.asarray(phase["tag_frequency"].values, dtype=np.float64)[:, None]
-        * np.asarray(phase["tag_direction"].transpose("tag", "axis").sel(axis=["x", "y", "z"]))
-    )  # (tag, 3) rad/mm
-    tags = list(phase["tag"].values)
-    disks = [_disk(phase, tag, shape, spacing) for tag in tags]
-    profiles: list[np.ndarray | None] = []
-    for t, (_, normal) in enumerate(disks):
-        slab = _slab(phase, t, spacing) if models[t] == "slice-profile" else None
-        # k_ζ in the grid's (z, y, x) order: wavevector is (x, y, z)
-        profiles.append(
-            None
-            if slab is None
-            else slice_operator(coords[normal], *slab, float(wavevector[t, 2 - normal]))
-        )
-    # a tag's images hold only the tissue inside its acquisition (slab, field of view)
-    acquired = (
-        np.asarray(phase["mask"].transpose("tag", *GRID_DIMS).values, dtype=bool)
-        if "mask" in phase.variables
-        else np.ones((len(tags), *shape), dtype=bool)
-    )
-    out = np.zeros((len(tags), phase.sizes["time"], *shape), dtype=np.float32)
-    outside = [None if a.all() else ~a for a in acquired]
-    for n in range(1, U.shape[0]):  # one splat of every tag and one filter per tag and frame
-        un, here, rho = u[n], reference, density
-        ok = np.isfinite(un).all(axis=1)
-        if not ok.all():
-            un, here, rho = un[ok], here[ok], rho[ok]
-        moved = (here + un)[:, ::-1]  # (z, y, x)
-        angle = np.einsum("pi,ti->pt", un, wavevector)  # (point, tag) rad
-        # ρ0 e^{-ik·u} as real and imaginary columns: one real sparse product spreads all
-        # (in single precision, as S is filtered: the correction keeps ~1e-6 rad)
-        signals = np.empty((angle.shape[0], 2 * len(tags)), dtype=np.float32)
-        np.cos(angle, out=signals[:, : len(tags)])
-        np.sin(angle, out=signals[:, len(tags) :])
-        signals[:, len(tags) :] *= -1.0
-        signals *= rho[:, None]
-        spread = splat_operator(moved, origin, spacing, shape, np.float32) @ signals
-        for t, (disk, normal) in enumerate(disks):  # ≤ 3 tags
-            S = np.empty(shape, dtype=np.complex64)
-            S.real = spread[:, t].reshape(shape)
-            S.imag = spread[:, len(tags) + t].reshape(shape)
-            if outside[t] is not None:
-                np.copyto(S, 0.0, where=outside[t])
-            _filtered_phase(S, disk, normal, out[t, n], profiles[t])
+    out = np.zeros((phase.sizes["tag"], phase.sizes["time"], *(phase.sizes[d] for d in GRID_DIMS)),
+                   dtype=np.float32)  # fmt: skip
+    frames = _CorrectionFrames(phase, body, U, model)
+    for n, frame in frames:
+        out[:, n][(slice(None), *frames.support)] = frame
     return out
 
 
@@ -433,3 +558,74 @@ def deblurred(phase: xr.Dataset, correction: np.ndarray) -> xr.Dataset:
     out = phase.copy()
     out["phase"] = (("tag", "time", *GRID_DIMS), corrected, phase["phase"].attrs)
     return out
+
+
+class _CorrectedPhase(BackendArray):
+    """Phase (tag, time, z, y, x) of ``source`` with each frame ``n >= 1``'s box ``box``
+    (z, y, x slices) replaced by ``blocks[n - 1]``, built frame by frame when read (xarray
+    indexes it lazily: a frame read costs one copy of that frame)."""
+
+    def __init__(self, source: Any, box: tuple[slice, ...], blocks: np.ndarray) -> None:
+        self.source, self.box, self.blocks = source, box, blocks
+        self.shape = tuple(int(n) for n in source.shape)
+        self.dtype = np.dtype(source.dtype)
+
+    def __getitem__(self, key: indexing.ExplicitIndexer) -> np.ndarray:
+        return indexing.explicit_indexing_adapter(
+            key, self.shape, indexing.IndexingSupport.BASIC, self._read
+        )
+
+    def _frame(self, n: int) -> np.ndarray:
+        frame = np.array(self.source[:, n])  # a copy (computed, if dask-backed)
+        if n:
+            frame[(slice(None), *self.box)] = self.blocks[n - 1]
+        return frame
+
+    def _read(self, key: tuple) -> np.ndarray:
+        key = (*key, *(slice(None),) * (len(self.shape) - len(key)))
+        rest = (key[0], *key[2:])
+        if isinstance(key[1], int | np.integer):
+            return self._frame(int(key[1]))[rest]
+        frames = [self._frame(n)[rest] for n in range(self.shape[1])[key[1]]]
+        if not frames:  # an empty selection: its shape, no data
+            return np.broadcast_to(np.zeros((), self.dtype), self.shape)[key].copy()
+        return np.stack(frames, axis=1)
+
+
+def _deblurred_lazily(
+    phase: xr.Dataset, body: Any, U: FloatArray, model: str = "slice-profile"
+) -> tuple[xr.Dataset, np.ndarray]:
+    """``deblurred(phase, blur_correction(phase, body, U, model))`` without a grid-sized copy,
+    and the mean |correction| per frame (rad, over the voxels that carry one).
+
+    The corrected phase is lazy (:class:`_CorrectedPhase`): a frame is built when read from
+    ``phase`` and the corrected values, which are held only in the box of the voxels the
+    splatted tissue reaches (:class:`_CorrectionFrames`), in one array. Values equal
+    :func:`deblurred`'s.
+    """
+    ntag, ntime = phase.sizes["tag"], phase.sizes["time"]
+    frames = _CorrectionFrames(phase, body, U, model)
+    box = frames.support
+    blocks = np.empty(
+        (max(ntime - 1, 0), ntag, *(b.stop - b.start for b in box)), dtype=phase["phase"].dtype
+    )
+    mean = np.zeros(ntime)
+    for n, correction in frames:
+        total = np.count_nonzero(correction)
+        if total:
+            mean[n] = float(np.abs(correction).sum(dtype=np.float64)) / total
+        block = blocks[n - 1]
+        block[...] = (
+            phase["phase"].isel(time=n).transpose("tag", *GRID_DIMS).values[(slice(None), *box)]
+        )
+        moved = correction != 0  # the correction is zero outside the tissue
+        block[moved] = wrap(block[moved] - correction[moved])
+    del frames
+    source = phase["phase"].transpose("tag", "time", *GRID_DIMS).data  # numpy or dask
+    out = phase.copy()
+    out["phase"] = xr.Variable(
+        ("tag", "time", *GRID_DIMS),
+        indexing.LazilyIndexedArray(_CorrectedPhase(source, box, blocks)),
+        phase["phase"].attrs,
+    )
+    return out, mean

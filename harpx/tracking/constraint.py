@@ -392,13 +392,31 @@ class PhaseConstraint:
             If ``phase`` has another grid, other tags, or a different frame 0.
         """
         same = all(phase.sizes[d] == self.phase.sizes[d] for d in ("tag", "time", "z", "y", "x"))
-        first = [np.asarray(p["phase"].isel(time=0).values, dtype=np.float64)
-                 for p in (phase, self.phase)]  # fmt: skip
-        if not same or np.abs(wrap(first[0] - first[1])).max(initial=0.0) > 1e-5:
+        if same:
+            # frame 0 in the images' own precision, a few planes at a time: no grid-sized
+            # float64 temporaries
+            new, old = (np.asarray(p["phase"].isel(time=0).transpose("tag", ...).values)
+                        for p in (phase, self.phase))  # fmt: skip
+            planes = new.reshape(-1, *new.shape[-2:])
+            step = max(1, (1 << 18) // max(1, planes[0].size))
+            same = all(
+                np.abs(wrap(a - b)).max(initial=0.0) <= 1e-5
+                for a, b in (
+                    (planes[k : k + step], old.reshape(planes.shape)[k : k + step])
+                    for k in range(0, planes.shape[0], step)
+                )
+            )
+            del new, old, planes
+        if not same:
             raise ValueError(
                 "replace_images needs images on the same grid and tags with frame 0 unchanged"
             )
         self.phase = phase
+        self._sampler = None
+
+    def release_frame(self) -> None:
+        """Drop the sampler of the current frame (its grid-sized buffers) until the next
+        :meth:`set_frame`; evaluating the constraint before that raises RuntimeError."""
         self._sampler = None
 
     def set_frame(self, time_index: int) -> None:

@@ -30,7 +30,7 @@ from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.schema import validate
 from harpx.tracking.augmented import track_frame_augmented
-from harpx.tracking.blur import blur_correction, blur_models, deblurred
+from harpx.tracking.blur import _deblurred_lazily, blur_models
 from harpx.tracking.constraint import PhaseConstraint
 from harpx.tracking.equilibrium import Timings, split_dirichlet
 from harpx.tracking.frame import FrameOutcome, FrameProblem
@@ -300,10 +300,9 @@ def track(
         passes = settings.effective_blur_passes if disk else 0
         for _ in range(passes):
             clock = _time.perf_counter()
-            correction = blur_correction(phase, body, result.U)
-            correction_mean = _mean_correction(correction)
-            corrected = deblurred(phase, correction)
-            del correction  # grid-sized: freed before the images are swapped
+            constraint.release_frame()  # the last frame's sampler buffers, before the blur's
+            # the corrected images, built frame by frame when the constraint reads them
+            corrected, correction_mean = _deblurred_lazily(phase, body, result.U)
             constraint.replace_images(corrected)  # frame 0 is uncorrected: its samples stay
             del corrected  # the constraint holds it
             timings.blur += _time.perf_counter() - clock
@@ -313,6 +312,7 @@ def track(
             pass_iterations.append(int(result.iterations.sum()))
     wall[0] = timings.setup + timings.blur  # frame 0: every pass's set-up and the corrections
     _warn_frames(phase, result.reached, result.converged, result.eps, result.target, result.floor)
+    constraint.release_frame()  # the last frame's sampler buffers, before the output's
     clock = _time.perf_counter()
     attrs = {
         "method": settings.method,
@@ -467,14 +467,3 @@ def _keep(out: _Pass, earlier: _Pass, n: int) -> None:
     for name in ("U", "eps", "floor", "target", "eps_cell", "penalty", "iterations", "stages",
                  "reached", "converged", "plateau"):  # fmt: skip
         getattr(out, name)[n] = getattr(earlier, name)[n]
-
-
-def _mean_correction(correction: np.ndarray) -> np.ndarray:
-    """Mean |correction| per frame over the grid voxels that carry one, rad."""
-    mean = np.zeros(correction.shape[1])
-    for n in range(correction.shape[1]):  # frame by frame: no grid-sized temporaries
-        frame = correction[:, n]
-        total = np.count_nonzero(frame)
-        if total:
-            mean[n] = float(np.abs(frame).sum(dtype=np.float64)) / total
-    return mean

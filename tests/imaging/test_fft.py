@@ -88,3 +88,44 @@ def test_bad_shapes():
         hfft.rfft2(np.ones((4, 4), dtype=complex))
     with pytest.raises(ValueError, match="does not match"):
         hfft.irfft2(np.ones((4, 4), dtype=complex), (4, 8))
+
+
+@pytest.mark.parametrize("dtype", [np.complex64, np.complex128])
+def test_inplace_plans_transform_their_buffer_like_numpy(dtype, rng):
+    shape = (3, 10, 12)
+    a = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(dtype)
+    buffer, forward, backward = hfft.inplace_plans(shape, dtype, (-2, -1), threads=1)
+    assert buffer.dtype == dtype and buffer.shape == shape
+    buffer[...] = a
+    forward.execute()
+    # single precision: a 120-point transform of O(1) values rounds to ~1e-6 of its O(10)
+    # output; double to ~1e-14
+    atol = 1e-4 if dtype == np.complex64 else 1e-11
+    np.testing.assert_allclose(buffer, np.fft.fft2(a), rtol=0, atol=atol)
+    backward.execute()  # unnormalised: n times the input
+    np.testing.assert_allclose(buffer / 120, a, rtol=0, atol=atol / 10)
+    # a second shape of the same size shares the memory
+    other, forward2, _ = hfft.inplace_plans((3, 12, 10), dtype, (-1,), memory=buffer)
+    assert np.shares_memory(other, buffer)
+    other[...] = a.reshape(3, 12, 10)
+    forward2.execute()
+    np.testing.assert_allclose(other, np.fft.fft(a.reshape(3, 12, 10)), rtol=0, atol=atol)
+
+
+def test_inplace_plans_refuse_real_dtypes_and_memory_that_does_not_fit():
+    with pytest.raises(ValueError, match="complex dtype"):
+        hfft.inplace_plans((4, 4), np.float32, (-2, -1))
+    with pytest.raises(ValueError, match="'memory'"):
+        hfft.inplace_plans((4, 4), np.complex64, (-2, -1), memory=np.zeros(15, np.complex64))
+
+
+def test_make_plan_is_a_new_plan_every_time_and_get_plan_a_cached_one(rng):
+    a = rng.standard_normal((6, 8))
+    first = hfft.make_plan(a.shape, np.float64, (-2, -1), direction="forward", threads=1)
+    second = hfft.make_plan(a.shape, np.float64, (-2, -1), direction="forward", threads=1)
+    assert first is not second and not np.shares_memory(first.input_array, second.input_array)
+    cached = hfft.get_plan(a.shape, np.float64, (-2, -1), direction="forward", threads=1)
+    assert hfft.get_plan(a.shape, np.float64, (-2, -1), direction="forward", threads=1) is cached
+    first.input_array[...] = a
+    first.execute()
+    np.testing.assert_allclose(first.output_array, np.fft.rfft2(a), rtol=0, atol=1e-12)

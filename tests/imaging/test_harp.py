@@ -257,3 +257,23 @@ def test_bad_radius(cine, radius):
 def test_invalid_dataset_is_rejected(cine):
     with pytest.raises(SchemaError, match="'image'"):
         extract_phase(cine.drop_vars("image"))
+
+
+def test_displacement_true_is_refined_lazily_one_frame_a_chunk(cine):
+    import dask.array as da
+
+    phase = extract_phase(cine, upsample=2)
+    truth = phase.displacement_true
+    assert isinstance(truth.data, da.Array)
+    assert truth.data.chunks[truth.dims.index("time")] == (1,) * cine.sizes["time"]
+    # independently: linear interpolation along x, then y, then z onto the refined centres
+    # (constant beyond the outer native centres), numpy.interp line by line
+    native = cine.displacement_true.transpose("time", "axis", "z", "y", "x").values
+    values = native
+    for axis, dim in ((4, "x"), (3, "y"), (2, "z")):
+        values = np.apply_along_axis(
+            lambda line, d=dim: np.interp(phase[d].values, cine[d].values, line), axis, values
+        )
+    refined = truth.transpose("time", "axis", "z", "y", "x").values
+    # the same linear weights in another order of operations: rounding only
+    np.testing.assert_allclose(refined, values, rtol=0, atol=1e-12)
