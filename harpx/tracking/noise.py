@@ -63,7 +63,7 @@ def reference_residual(
     *,
     refinements: int = 2,
 ) -> FloatArray:
-    """Per-tag residual of an affine phase fitted to the reference frame, rad.
+    r"""Per-tag residual of an affine phase fitted to the reference frame, rad.
 
     Parameters
     ----------

@@ -228,7 +228,7 @@ def _frame_system(problem: Problem, n: int) -> _Frame:
 def sample_response(
     problem: Problem, noise: ImageNoise, samples: int, seed: int | None
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Sampled displacement changes (sample, time, dof), the mean :math:`|\delta r|` per
+    r"""Sampled displacement changes (sample, time, dof), the mean :math:`|\delta r|` per
     frame and the Newton step of each frame's rebuilt state."""
     constraint, raw, U = problem.constraint, problem.raw, problem.U
     rng = np.random.default_rng(seed)

@@ -30,14 +30,14 @@ def truth(scene):
 
 @pytest.fixture(scope="module")
 def fe(scene):
-    # CSPAMM has no DC peak: the wider band-pass (0.8 of the tag frequency) blurs the
-    # 10 mm wall less (benchmarks/results/infarct_small.md); the tracker's defaults
-    phase = extract_phase(scene.tagged, upsample=1, radius=0.8)
-    tracked = track(phase, scene.body(), dirichlet=scene.dirichlet())
+    # the setting for thick-slice CSPAMM short-axis stacks (guide, "Wall thickening"):
+    # CSPAMM has no DC peak, so the band-pass may be 0.8 of the tag frequency, and three
+    # blur-correction passes remove the band-pass and slice blur across the 10 mm wall
+    phase = extract_phase(scene.tagged, upsample=2, radius=0.8)
+    tracked = track(phase, scene.body(), dirichlet=scene.dirichlet(), blur_passes=3)
     # the apical cap (17) has long-axis data only: its Ecc and Ell come from the model
     with pytest.warns(HarpxWarning, match=r"partly inferred in segment\(s\) 17;"):
-        with pytest.warns(HarpxWarning, match=r"wall thickening\) is likely under-reported"):
-            return cardiac_strain(tracked, scene.template())
+        return cardiac_strain(tracked, scene.template())
 
 
 def _ecc(ds):
@@ -98,22 +98,20 @@ def test_fe_tracking_finds_the_infarct_and_its_ecc(truth, fe):
     # -0.061 there, -0.093 at most elsewhere)
     least = np.sort(np.argsort(np.abs(ecc))[: len(INFARCT)] + 1)
     assert least.tolist() == list(INFARCT), ecc.round(3)
-    # per-segment peak Ecc within 0.01 on average: measured mean |error| 0.0050 (max 0.014
+    # per-segment peak Ecc within 0.01 on average: measured mean |error| 0.0049 (max 0.013
     # at the basal segments next to the pins); bound at measured x 1.2
     error = np.abs(ecc - true)
-    assert error.mean() < 1.2 * 0.0050, error.round(4)
+    assert error.mean() < 1.2 * 0.0049, error.round(4)
     assert error.max() < 0.02, error.round(4)
-    # radial strain is under-reported (band-pass blur and 10 mm slices, issue 23 item 5):
-    # measured mean |error| 17.6 % of the mean true peak Err with the blur correction's
-    # slice profile (25.4 % with its in-plane model only); bound at measured x 1.2, so a
-    # further loss of thickening fails here
+    # wall thickening within 10 % (issue 23): mean |error| of the peak radial strain
+    # measured 8.5 % of the mean true peak Err (31.8 % with the library's defaults, radius
+    # 0.5 and one pass; HARP 36.9 %); the bound is the goal, 1.2 x measured would be 10.2 %
     err = fe.peak_strain.sel(component="radial").values[SHORT_AXIS]
     true_err = truth.peak_strain.sel(component="radial").values[SHORT_AXIS]
     ratio = np.abs(err - true_err).mean() / np.abs(true_err).mean()
-    assert ratio < 1.2 * 0.176, ratio
-    # ... and the result says so (one blur-correction pass), where the truth has no note
-    assert ratio > 0.10
-    assert "1 blur-correction pass(es) < 3" in fe.attrs["radial_strain_caution"]
+    assert ratio < 0.10, ratio
+    # these settings leave nothing to caution about; the truth has no note either
+    assert fe.attrs["radial_strain_caution"] == ""
     assert truth.attrs["radial_strain_caution"] == ""
 
 
