@@ -60,10 +60,12 @@ period, whose inner layers move more than its outer ones, that average pulls the
 each layer towards its neighbours: the wall seems to thicken less than it does. The
 tracker's blur correction (:mod:`harpx.tracking.blur`) predicts and removes that bias; its
 fixed point needs a few passes, and a wider band-pass (which CSPAMM allows, having no DC
-peak) leaves less to remove. :func:`radial_strain_caution` therefore names the settings of
-a result below :data:`THICKENING_RADIUS` or :data:`THICKENING_PASSES`, and any conventional
-HARP result (which has no correction): their radial strain (wall thickening) is
-under-reported. The measured biases are in the user guide ("Wall thickening").
+peak) leaves less to remove; the correction also needs the phase upsampled (the
+tracker samples it between voxels of a wall only a few voxels thick).
+:func:`radial_strain_caution` therefore names the settings of a result below
+:data:`THICKENING_RADIUS`, :data:`THICKENING_PASSES` or :data:`THICKENING_UPSAMPLE`, and
+any conventional HARP result (which has no correction): their radial strain (wall
+thickening) is under-reported. The measured biases are in the user guide ("Wall thickening").
 """
 
 from __future__ import annotations
@@ -85,6 +87,7 @@ __all__ = [
     "OBSERVED_MIN",
     "THICKENING_PASSES",
     "THICKENING_RADIUS",
+    "THICKENING_UPSAMPLE",
     "WALL_TOLERANCE",
     "VentricleShapeError",
     "check_body",
@@ -109,6 +112,8 @@ INFERRED_BELOW = 0.5
 THICKENING_RADIUS = 0.8
 #: least blur-correction passes for an unbiased radial strain
 THICKENING_PASSES = 3
+#: least in-plane upsampling of the phase for an unbiased radial strain
+THICKENING_UPSAMPLE = 2
 
 
 class VentricleShapeError(HarpxError, ValueError):
@@ -320,14 +325,16 @@ def radial_strain_caution(attrs: Mapping[str, Any]) -> str:
     ----------
     attrs : mapping
         The attributes of a ``tracked/1`` dataset: ``method`` (``"harp"`` for
-        conventional HARP), ``phase_radius`` and ``sequence`` (the phase extraction's,
-        recorded by the trackers), ``blur_passes_applied`` (finite-element tracking).
+        conventional HARP), ``phase_radius``, ``phase_upsample`` and ``sequence`` (the
+        phase extraction's, recorded by the trackers), ``blur_passes_applied``
+        (finite-element tracking).
 
     Returns
     -------
     str
-        Empty when the settings meet :data:`THICKENING_RADIUS` and
-        :data:`THICKENING_PASSES`, or when the dataset does not record its phase
+        Empty when the settings meet :data:`THICKENING_RADIUS`,
+        :data:`THICKENING_PASSES` and :data:`THICKENING_UPSAMPLE` (an upsampling not
+        recorded counts as met), or when the dataset does not record its phase
         extraction (a displacement from elsewhere, e.g. a synthetic truth); otherwise the
         reasons and the settings that remove the bias (module notes).
 
@@ -356,6 +363,12 @@ def radial_strain_caution(attrs: Mapping[str, Any]) -> str:
             else f"CSPAMM has no DC peak: ds.harp.phase(radius={THICKENING_RADIUS:g})"
         )
         reasons.append(f"band-pass radius {radius:g} < {THICKENING_RADIUS:g} ({fix})")
+    upsample = int(attrs.get("phase_upsample", THICKENING_UPSAMPLE))
+    if upsample < THICKENING_UPSAMPLE:
+        reasons.append(
+            f"phase upsampling {upsample} < {THICKENING_UPSAMPLE} "
+            f"(ds.harp.phase(upsample={THICKENING_UPSAMPLE}), the default)"
+        )
     passes = int(attrs.get("blur_passes_applied", 0))
     if passes < THICKENING_PASSES:
         reasons.append(

@@ -171,7 +171,15 @@ def test_a_dataset_that_does_not_record_what_the_tags_saw_says_so():
     ("attrs", "names"),
     [
         # the settings that remove the blur across the wall: nothing to say
-        ({"sequence": "CSPAMM", "phase_radius": 0.8, "blur_passes_applied": 3}, []),
+        (
+            {
+                "sequence": "CSPAMM",
+                "phase_radius": 0.8,
+                "phase_upsample": 2,
+                "blur_passes_applied": 3,
+            },
+            [],
+        ),
         # a displacement that does not record its phase extraction (a synthetic truth)
         ({"sequence": "CSPAMM", "blur_passes_applied": 0}, []),
         # the library's defaults on CSPAMM images: both settings named, with their fix
@@ -183,6 +191,16 @@ def test_a_dataset_that_does_not_record_what_the_tags_saw_says_so():
         (
             {"sequence": "SPAMM", "phase_radius": 0.5, "blur_passes_applied": 3},
             ["band-pass radius 0.5 < 0.8", "DC peak"],
+        ),
+        # the phase not upsampled: the correction samples a wall a few voxels thick
+        (
+            {
+                "sequence": "CSPAMM",
+                "phase_radius": 0.8,
+                "phase_upsample": 1,
+                "blur_passes_applied": 3,
+            },
+            ["phase upsampling 1 < 2", "upsample=2"],
         ),
         # conventional HARP never corrects the blur, whatever its radius
         ({"method": "harp", "sequence": "CSPAMM", "phase_radius": 0.8}, ["conventional HARP"]),
