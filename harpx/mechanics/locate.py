@@ -52,6 +52,7 @@ __all__ = [
     "VTK_CORNERS",
     "HexLocator",
     "displacement_at",
+    "interpolation_matrix",
     "locate",
     "trilinear",
 ]
@@ -401,22 +402,58 @@ def displacement_at(body: Any, u: ArrayLike, points: ArrayLike) -> FloatArray:
         raise ValueError(
             f"u has shape {U.shape!r}; expected ({body.ndof},) or (ntime, {body.ndof})"
         )
-    cells, xi = locate(body.mesh, X.reshape(-1, 3))
-    inside = cells >= 0
+    inside, interpolate = interpolation_matrix(body, X.reshape(-1, 3))
     Ut = U.reshape(-1, body.ndof)
-    out = np.full((Ut.shape[0], cells.size, 3), np.nan)
+    out = np.full((Ut.shape[0], inside.size, 3), np.nan)
     if inside.any():
-        vals, _ = _shape_values(body.scalar_element, xi[inside].T, body.nbasis)
-        nodes = body.element_dofs[cells[inside], :, 0] // 3  # (m, nb): dof 3 s + i of node s
-        m, nb = nodes.shape
         nnode = body.ndof // 3
         # one sparse interpolation matrix for every frame (no (ntime, m, nb, 3) gather)
-        interpolate = sparse.csr_matrix(
-            (vals.ravel(), nodes.ravel(), np.arange(0, m * nb + 1, nb)), shape=(m, nnode)
-        )
         nodal = Ut.reshape(-1, nnode, 3).transpose(1, 0, 2).reshape(nnode, -1)
-        values = np.asarray(interpolate @ nodal).reshape(m, -1, 3)  # (m, ntime, 3)
+        values = np.asarray(interpolate @ nodal).reshape(inside.sum(), -1, 3)  # (m, ntime, 3)
         out[:, inside] = values.transpose(1, 0, 2)
     if U.ndim == 1:
         out = out[0]
     return out.reshape(X.shape) if U.ndim == 1 else out.reshape(Ut.shape[0], *X.shape)
+
+
+def interpolation_matrix(
+    body: Any, points: ArrayLike, *, chunk: int = 1 << 14
+) -> tuple[np.ndarray, sparse.csr_matrix]:
+    """Which reference points lie in the body, and the matrix interpolating nodal values there.
+
+    Parameters
+    ----------
+    body : Body
+        The body whose reference mesh and shape functions are used.
+    points : array_like, shape (n, 3)
+        Reference positions, mm.
+    chunk : int, default 16384
+        Points located at once (bounds the locator's temporaries).
+
+    Returns
+    -------
+    inside : ndarray of bool, shape (n,)
+        Points inside the reference mesh.
+    matrix : scipy.sparse.csr_matrix, shape (inside.sum(), nnode)
+        Row ``i`` holds the shape-function values of the ``i``-th inside point at its
+        cell's nodes: ``matrix @ nodal`` (nnode, 3) gives the displacement there.
+    """
+    X = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    nb = body.nbasis
+    insides, values, nodes = [], [], []
+    for a in range(0, len(X), chunk):  # chunks of points, not single points
+        cells, xi = locate(body.mesh, X[a : a + chunk])
+        here = cells >= 0
+        vals, _ = _shape_values(body.scalar_element, xi[here].T, nb)
+        insides.append(here)
+        values.append(vals)
+        nodes.append(body.element_dofs[cells[here], :, 0] // 3)  # (m, nb): dof 3 s + i of s
+    inside = np.concatenate(insides) if insides else np.zeros(0, dtype=bool)
+    nodes_all = np.concatenate(nodes) if nodes else np.zeros((0, nb), dtype=np.int64)
+    vals_all = np.concatenate(values) if values else np.zeros((0, nb))
+    m = nodes_all.shape[0]
+    matrix = sparse.csr_matrix(
+        (vals_all.ravel(), nodes_all.ravel(), np.arange(0, m * nb + 1, nb)),
+        shape=(m, body.ndof // 3),
+    )
+    return inside, matrix

@@ -85,7 +85,7 @@ from harpx._typing import FloatArray
 from harpx.imaging.fft import inplace_plans
 from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.imaging.sample import wrap
-from harpx.mechanics.locate import _shape_values, locate
+from harpx.mechanics.locate import interpolation_matrix
 from harpx.schema import GRID_DIMS
 
 #: Splatted signal below this fraction of its largest modulus counts as outside the tissue.
@@ -345,31 +345,6 @@ def _filtered_phase(
     np.copyto(out, np.moveaxis(angle, 0, normal)[box], where=np.moveaxis(mask, 0, normal)[box])
 
 
-def _interpolation(body: Any, points: FloatArray) -> tuple[np.ndarray, sparse.csr_matrix]:
-    """Which ``points`` (n, 3) lie in the body's reference mesh, and the sparse matrix that
-    interpolates nodal displacements (nnode, 3) at those points (as
-    :func:`harpx.mechanics.locate.displacement_at`, frame by frame)."""
-    chunk = 1 << 14  # points located at once: bounds the locator's temporaries
-    insides, values, nodes = [], [], []
-    for a in range(0, len(points), chunk):
-        cells, xi = locate(body.mesh, points[a : a + chunk])
-        here = cells >= 0
-        vals, _ = _shape_values(body.scalar_element, xi[here].T, body.nbasis)
-        insides.append(here)
-        values.append(vals)
-        nodes.append(body.element_dofs[cells[here], :, 0] // 3)  # (m, nb): dof 3 s + i of s
-    inside = np.concatenate(insides) if insides else np.zeros(0, dtype=bool)
-    nb = body.nbasis
-    nodes_all = np.concatenate(nodes) if nodes else np.zeros((0, nb), dtype=np.int64)
-    vals_all = np.concatenate(values) if values else np.zeros((0, nb))
-    m = nodes_all.shape[0]
-    matrix = sparse.csr_matrix(
-        (vals_all.ravel(), nodes_all.ravel(), np.arange(0, m * nb + 1, nb)),
-        shape=(m, body.ndof // 3),
-    )
-    return inside, matrix
-
-
 class _CorrectionFrames:
     """The correction of :func:`blur_correction` frame by frame.
 
@@ -405,7 +380,7 @@ class _CorrectionFrames:
             density = density.reshape(-1)[voxels]
         else:
             density = np.ones(voxels.size)
-        tissue, interpolate = _interpolation(body, points)  # centres in the reference
+        tissue, interpolate = interpolation_matrix(body, points)  # centres in the reference
         self.reference, self.density = points[tissue], density[tissue]
         del points, voxels
         # the tissue's points in parts: one part's work arrays at a time

@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from harpx.mechanics.body import Body
-from harpx.mechanics.locate import SKFEM_CORNERS, HexLocator, locate, trilinear
+from harpx.mechanics.locate import (
+    SKFEM_CORNERS,
+    HexLocator,
+    interpolation_matrix,
+    locate,
+    trilinear,
+)
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import box
 
@@ -46,3 +52,17 @@ def test_skfem_and_vtk_orders_give_the_same_point(rng):
     np.testing.assert_allclose(back, points, atol=1e-12)  # map inversion to round-off
     back = np.einsum("ma,mai->mi", trilinear(xi_vtk), body.nodes[body.cells[c_vtk]])
     np.testing.assert_allclose(back, points, atol=1e-12)
+
+
+def test_interpolation_matrix_reproduces_a_linear_field_and_flags_outside_points():
+    body = Body(box((2.0, 1.0, 1.0), (3, 2, 2)), NeoHookean(c1=1.0, kappa=100.0))
+    grad = np.array([[0.1, -0.2, 0.05], [0.3, 0.0, -0.1], [0.02, 0.04, 0.2]])
+    nodal = body.dof_points @ grad.T  # a linear field, which hex8 reproduces exactly
+    rng = np.random.default_rng(1)
+    points = rng.uniform([-0.5, -0.2, -0.2], [2.5, 1.2, 1.2], size=(500, 3))
+    expected_inside = np.all((points >= 0.0) & (points <= [2.0, 1.0, 1.0]), axis=1)
+    # small chunks: the result does not depend on how the points are split
+    inside, matrix = interpolation_matrix(body, points, chunk=37)
+    np.testing.assert_array_equal(inside, expected_inside)
+    assert matrix.shape == (int(expected_inside.sum()), body.dof_points.shape[0])
+    np.testing.assert_allclose(matrix @ nodal, points[inside] @ grad.T, atol=1e-12)
