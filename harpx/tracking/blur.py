@@ -567,7 +567,7 @@ class _CorrectedPhase(BackendArray):
         return np.stack(frames, axis=1)
 
 
-def _deblurred_lazily(
+def lazily_deblurred(
     phase: xr.Dataset, body: Any, U: FloatArray, model: str = "slice-profile"
 ) -> tuple[xr.Dataset, np.ndarray]:
     """``deblurred(phase, blur_correction(phase, body, U, model))`` without a grid-sized copy,
@@ -577,6 +577,19 @@ def _deblurred_lazily(
     ``phase`` and the corrected values, which are held only in the box of the voxels the
     splatted tissue reaches (:class:`_CorrectionFrames`), in one array. Values equal
     :func:`deblurred`'s.
+
+    Parameters
+    ----------
+    phase, body, U, model
+        As for :func:`blur_correction`.
+
+    Returns
+    -------
+    corrected : xarray.Dataset
+        ``phase`` with its ``phase`` variable (tag, time, z, y, x, rad) corrected and read
+        lazily, frame by frame.
+    mean : ndarray, shape (ntime,)
+        Mean |correction| per frame, rad, over the voxels that carry one (0 in frame 0).
     """
     ntag, ntime = phase.sizes["tag"], phase.sizes["time"]
     frames = _CorrectionFrames(phase, body, U, model)

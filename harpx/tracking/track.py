@@ -30,7 +30,7 @@ from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.schema import validate
 from harpx.tracking.augmented import track_frame_augmented
-from harpx.tracking.blur import _deblurred_lazily, blur_models
+from harpx.tracking.blur import blur_models, lazily_deblurred
 from harpx.tracking.constraint import PhaseConstraint
 from harpx.tracking.equilibrium import Timings, split_dirichlet
 from harpx.tracking.frame import FrameOutcome, FrameProblem
@@ -302,7 +302,7 @@ def track(
             clock = _time.perf_counter()
             constraint.release_frame()  # the last frame's sampler buffers, before the blur's
             # the corrected images, built frame by frame when the constraint reads them
-            corrected, correction_mean = _deblurred_lazily(phase, body, result.U)
+            corrected, correction_mean = lazily_deblurred(phase, body, result.U)
             constraint.replace_images(corrected)  # frame 0 is uncorrected: its samples stay
             del corrected  # the constraint holds it
             timings.blur += _time.perf_counter() - clock

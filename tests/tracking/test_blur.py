@@ -211,12 +211,12 @@ def test_correction_matches_a_full_grid_double_precision_reference(moving_wall):
 
 
 def test_lazily_corrected_phase_equals_the_deblurred_copy(moving_wall):
-    from harpx.tracking.blur import _CorrectionFrames, _deblurred_lazily
+    from harpx.tracking.blur import _CorrectionFrames, lazily_deblurred
 
     phase, body, U = moving_wall
     correction = blur_correction(phase, body, U)
     eager = deblurred(phase, correction).phase
-    lazy, mean = _deblurred_lazily(phase, body, U)
+    lazy, mean = lazily_deblurred(phase, body, U)
     assert not isinstance(lazy.phase.variable._data, np.ndarray)  # built when read
     # the same kernels on the same frames (plans below FFTW_MEASURE's size: deterministic)
     np.testing.assert_array_equal(lazy.phase.values, eager.values)
