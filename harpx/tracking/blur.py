@@ -571,7 +571,7 @@ def lazily_deblurred(
     phase: xr.Dataset, body: Any, U: FloatArray, model: str = "slice-profile"
 ) -> tuple[xr.Dataset, np.ndarray]:
     """``deblurred(phase, blur_correction(phase, body, U, model))`` without a grid-sized copy,
-    and the mean |correction| per frame (rad, over the voxels that carry one).
+    and the mean absolute correction per frame (rad, over the voxels that carry one).
 
     The corrected phase is lazy (:class:`_CorrectedPhase`): a frame is built when read from
     ``phase`` and the corrected values, which are held only in the box of the voxels the
@@ -589,7 +589,7 @@ def lazily_deblurred(
         ``phase`` with its ``phase`` variable (tag, time, z, y, x, rad) corrected and read
         lazily, frame by frame.
     mean : ndarray, shape (ntime,)
-        Mean |correction| per frame, rad, over the voxels that carry one (0 in frame 0).
+        Mean absolute correction per frame, rad, over the voxels that carry one (0 in frame 0).
     """
     ntag, ntime = phase.sizes["tag"], phase.sizes["time"]
     frames = _CorrectionFrames(phase, body, U, model)
