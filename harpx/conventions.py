@@ -165,6 +165,15 @@ UNITS: dict[str, str] = {
     "penalty": "1",
     "iterations": "1",
     "wall_time": "s",
+    "stages": "1",
+    "target_reached": "1",
+    "plateau": "1",
+    "converged": "1",
+    "epsilon_target": "rad",
+    "blur_correction": "rad",
+    "epsilon_floor": "rad",
+    "observed_directions": "1",
+    "observed_fraction": "1",
 }
 
 #: Descriptive ``long_name`` of each standard variable/coordinate.
@@ -200,6 +209,17 @@ LONG_NAMES: dict[str, str] = {
     "penalty": "tracking penalty relative to stiffness and tag wavenumber",
     "iterations": "iterations",
     "wall_time": "wall-clock time",
+    "stages": "penalty stages or multiplier updates",
+    "target_reached": (
+        "tracking residual met its target or levelled off within the accepted plateau"
+    ),
+    "plateau": "tracking residual ended above its target, within the accepted plateau",
+    "converged": "Gauss-Newton met its increment tolerance",
+    "epsilon_target": "target tracking residual",
+    "blur_correction": "mean phase removed as the band-pass blur of the tracked motion",
+    "epsilon_floor": "noise floor of the tracking residual estimated from the images",
+    "observed_directions": "number of independent directions the tags with data in the cell see",
+    "observed_fraction": "fraction of each axis seen by the cell's tags, |P e_axis|^2",
 }
 
 #: CF ``standard_name`` of the standard variables that have one in the CF standard-name

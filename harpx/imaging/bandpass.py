@@ -39,7 +39,7 @@ from harpx.imaging._kernels import (
     _pool,
     _spline_transfer,
 )
-from harpx.imaging.fft import default_threads, get_plan, make_plan
+from harpx.imaging.fft import default_threads, get_plan
 
 __all__ = ["bandpass_mask", "harmonic_images", "harmonic_phase"]
 
@@ -214,12 +214,13 @@ class _Bandpass:
         )
         # the refined volume: not cached (a grid-sized pair of buffers per thread would stay
         # allocated for the life of the process); FFTW's wisdom makes planning it again cheap
-        self.p2 = make_plan(
+        self.p2 = get_plan(
             shape(b1, b2, batch * slice_factor),
             cplx,
             (b,),
             direction="backward",
             threads=threads,
+            cached=False,
         )
         self.p1.input_array[...] = 0.0
         self.p2.input_array[...] = 0.0

@@ -1,7 +1,7 @@
 """FFTs through pyfftw with a cache of plans that own aligned buffers.
 
-Every transform goes through :func:`get_plan` (or, for grid-sized transforms whose buffers
-should not outlive their use, the uncached :func:`make_plan` and :func:`inplace_plans`),
+Every transform goes through :func:`get_plan` (for grid-sized transforms whose buffers
+should not outlive their use, with ``cached=False``, or :func:`inplace_plans`),
 which returns a :class:`pyfftw.FFTW` object for one exact ``(shape, dtype, axes, threads,
 direction)``. Plans are created once, with
 ``FFTW_MEASURE`` for arrays of at least ``MEASURE_MIN_SIZE`` elements and ``FFTW_ESTIMATE``
@@ -42,7 +42,6 @@ __all__ = [
     "ifft2",
     "inplace_plans",
     "irfft2",
-    "make_plan",
     "rfft2",
 ]
 
@@ -99,6 +98,7 @@ def get_plan(
     *,
     direction: Direction,
     threads: int | None = None,
+    cached: bool = True,
 ) -> pyfftw.FFTW:
     """Cached FFTW plan that owns aligned input and output buffers.
 
@@ -120,6 +120,10 @@ def get_plan(
         Sign of the exponent; backward plans are *not* normalised by ``execute()``.
     threads : int or None
         FFTW threads of this plan; None means ``os.cpu_count()``.
+    cached : bool, default True
+        False: a new plan, not kept in the cache, whose buffers live as long as it does (for
+        a transform too large to keep between calls; a second planning of the same problem
+        takes FFTW's wisdom and costs little).
 
     Returns
     -------
@@ -130,37 +134,26 @@ def get_plan(
     dtype = np.dtype(dtype)
     axes = tuple(int(a) % len(shape) for a in axes)
     nthreads = default_threads(threads)
+    if not cached:
+        return _new_plan(shape, dtype, axes, direction, nthreads)
     key = (shape, dtype.str, axes, nthreads, direction)
     cache = _cache()
     plan = cache.get(key)
     if plan is not None:
         cache.move_to_end(key)
         return plan
-    plan = make_plan(shape, dtype, axes, direction=direction, threads=nthreads)
+    plan = _new_plan(shape, dtype, axes, direction, nthreads)
     cache[key] = plan
     while len(cache) > MAX_PLANS_PER_THREAD:
         cache.popitem(last=False)
     return plan
 
 
-def make_plan(
-    shape: Sequence[int],
-    dtype: np.dtype | type,
-    axes: Sequence[int],
-    *,
-    direction: Direction,
-    threads: int | None = None,
-) -> pyfftw.FFTW:
-    """A new plan of :func:`get_plan`'s kind, not cached: its buffers live as long as it does.
-
-    For a transform too large to keep in the cache between calls: a second planning of the
-    same problem takes FFTW's wisdom and costs little. Parameters and return value as for
-    :func:`get_plan`.
-    """
-    shape = tuple(int(s) for s in shape)
-    dtype = np.dtype(dtype)
-    axes = tuple(int(a) % len(shape) for a in axes)
-    nthreads = default_threads(threads)
+def _new_plan(
+    shape: tuple[int, ...], dtype: np.dtype, axes: tuple[int, ...], direction: Direction,
+    nthreads: int,
+) -> pyfftw.FFTW:  # fmt: skip
+    """A new plan of :func:`get_plan`'s kind from its normalised arguments."""
     real = dtype.kind == "f"
     half = list(shape)
     half[axes[-1]] = shape[axes[-1]] // 2 + 1

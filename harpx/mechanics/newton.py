@@ -504,15 +504,8 @@ def equilibrate(
         If Newton diverges or stalls.
     """
     u = _check_u0(body, u0)
-    nt = _Newton(
-        body,
-        loads,
-        tol=tol,
-        atol=atol,
-        max_iterations=max_iterations,
-        line_search=line_search,
-        linear_solver=linear_solver,
-    )
+    nt = _Newton(body, loads, tol=tol, atol=atol, max_iterations=max_iterations,
+                 line_search=line_search, linear_solver=linear_solver)  # fmt: skip
     out = nt.run(u, float(s))
     res = SolveResult(
         u=out.u if out.ok else u,
@@ -615,16 +608,8 @@ def solve(
     if int(steps) < 1:
         raise ValueError(f"steps={steps!r} must be >= 1")
     u = _check_u0(body, u0)
-    nt = _Newton(
-        body,
-        loads,
-        tol=tol,
-        atol=atol,
-        max_iterations=max_iterations,
-        line_search=line_search,
-        linear_solver=linear_solver,
-        t_max=t_max,
-    )
+    nt = _Newton(body, loads, tol=tol, atol=atol, max_iterations=max_iterations,
+                 line_search=line_search, linear_solver=linear_solver, t_max=t_max)  # fmt: skip
     nominal = 1.0 / int(steps)
     res = SolveResult(u=u, converged=False)
     with progress_bar(progress=progress, total=100, desc="load", unit="%") as bar:

@@ -93,17 +93,10 @@ def region_values(body: Body, t_max: Any) -> dict[str, float]:
 def with_active_law(body: Body, law: ActiveContraction) -> Body:
     """The same model with an active fibre law (t_max = 0), leaving ``body`` untouched."""
     return Body(
-        body.mesh,
-        body.material,
-        fibers=body.fibers_qp,
-        regions=body.regions,
-        element=body.element,
-        active=law,
-        t_max=0.0,
-        growth=body.growth,
-        boundaries=body.boundaries,
-        volumetric=body.volumetric,
-    )
+        body.mesh, body.material, fibers=body.fibers_qp, regions=body.regions,
+        element=body.element, active=law, t_max=0.0, growth=body.growth,
+        boundaries=body.boundaries, volumetric=body.volumetric,
+    )  # fmt: skip
 
 
 def default_law(body: Body, law: ActiveContraction | None) -> ActiveContraction:

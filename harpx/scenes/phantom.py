@@ -150,13 +150,8 @@ def phantom(
         rng=np.random.default_rng(seed),
     )
     tagged.attrs["scene"] = f"phantom/{size}"
-    mesh = cylinder(
-        g.radius,
-        g.height,
-        n_radial=g.n_radial,
-        n_circumferential=g.n_circumferential,
-        n_axial=g.n_axial,
-        center=(0.0, 0.0, base),
-    )
+    mesh = cylinder(g.radius, g.height, n_radial=g.n_radial,
+                    n_circumferential=g.n_circumferential, n_axial=g.n_axial,
+                    center=(0.0, 0.0, base))  # fmt: skip
     info = {"size": size, "geometry": g, "sequence": sequence, "snr": snr, "seed": seed}
     return Scene(tagged, mesh, NeoHookean(c1=c1, kappa=kappa), motion, info)

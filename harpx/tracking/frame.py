@@ -68,20 +68,11 @@ class FrameProblem:
         are reused).
         """
         return equilibrate(
-            self.body,
-            self.constraint,
-            u,
-            dirichlet=self.dirichlet,
-            terms=self.terms,
-            solver=self.solver,
-            tolerance=self.settings.tolerance,
-            max_iterations=max_iterations,
-            offset=self.offset,
-            timings=self.timings,
-            start=start,
-            tuning=self.settings.tuning,
+            self.body, self.constraint, u, dirichlet=self.dirichlet, terms=self.terms,
+            solver=self.solver, tolerance=self.settings.tolerance, max_iterations=max_iterations,
+            offset=self.offset, timings=self.timings, start=start, tuning=self.settings.tuning,
             executor=self.executor,
-        )
+        )  # fmt: skip
 
 
 @dataclass

@@ -12,40 +12,6 @@ from harpx._typing import FloatArray
 from harpx.schema import fill_standard_attrs, standard_attrs
 from harpx.tracking.resample import interpolate_displacement
 
-_DIAGNOSTIC_ATTRS = {
-    "stages": {"units": "1", "long_name": "penalty stages or multiplier updates"},
-    "target_reached": {
-        "units": "1",
-        "long_name": "tracking residual met its target or levelled off within the accepted plateau",
-    },
-    "plateau": {
-        "units": "1",
-        "long_name": "tracking residual ended above its target, within the accepted plateau",
-    },
-    "converged": {"units": "1", "long_name": "Gauss-Newton met its increment tolerance"},
-    "epsilon_target": {"units": "rad", "long_name": "target tracking residual"},
-    "blur_correction": {
-        "units": "rad",
-        "long_name": "mean phase removed as the band-pass blur of the tracked motion",
-    },
-    "epsilon_floor": {
-        "units": "rad",
-        "long_name": "noise floor of the tracking residual estimated from the images",
-    },
-    "observed_directions": {
-        "units": "1",
-        "long_name": "number of independent directions the tags with data in the cell see",
-    },
-    "observed_fraction": {
-        "units": "1",
-        "long_name": "fraction of each axis seen by the cell's tags, |P e_axis|^2",
-    },
-}
-
-
-def _attrs(name: str) -> dict[str, str]:
-    return _DIAGNOSTIC_ATTRS.get(name) or standard_attrs(name)
-
 
 def grid_points(ds: xr.Dataset) -> FloatArray:
     """Voxel-centre positions (nz·ny·nx, 3) in mm, columns (x, y, z), C order over (z, y, x)."""
@@ -191,7 +157,7 @@ def tracked_dataset(
             dims, value = value
         else:
             dims = ("time",) if np.ndim(value) == 1 else ("time", "cell")
-        ds[name] = xr.DataArray(np.asarray(value), dims=dims, attrs=_attrs(name))
+        ds[name] = xr.DataArray(np.asarray(value), dims=dims, attrs=standard_attrs(name))
     ds["displacement_grid"] = displacement_on_grid(body, U, acquired_grid(phase))
     ds["dof_displacement"] = xr.DataArray(
         U, dims=("time", "dof"), attrs={"units": "mm", "long_name": "displacement of each dof"}

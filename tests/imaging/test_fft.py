@@ -119,10 +119,11 @@ def test_inplace_plans_refuse_real_dtypes_and_memory_that_does_not_fit():
         hfft.inplace_plans((4, 4), np.complex64, (-2, -1), memory=np.zeros(15, np.complex64))
 
 
-def test_make_plan_is_a_new_plan_every_time_and_get_plan_a_cached_one(rng):
+def test_uncached_plan_is_new_every_time_and_the_cached_one_is_kept(rng):
     a = rng.standard_normal((6, 8))
-    first = hfft.make_plan(a.shape, np.float64, (-2, -1), direction="forward", threads=1)
-    second = hfft.make_plan(a.shape, np.float64, (-2, -1), direction="forward", threads=1)
+    kw = {"direction": "forward", "threads": 1, "cached": False}
+    first = hfft.get_plan(a.shape, np.float64, (-2, -1), **kw)
+    second = hfft.get_plan(a.shape, np.float64, (-2, -1), **kw)
     assert first is not second and not np.shares_memory(first.input_array, second.input_array)
     cached = hfft.get_plan(a.shape, np.float64, (-2, -1), direction="forward", threads=1)
     assert hfft.get_plan(a.shape, np.float64, (-2, -1), direction="forward", threads=1) is cached
