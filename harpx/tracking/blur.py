@@ -318,8 +318,9 @@ def _filtered_phase(
     (the correction is a fraction of a radian; float32 keeps it to ~1e-6 rad), in place in
     the buffer of ``plans(shape)`` (buffer, forward, backward); the inverse transform is left
     unnormalised, which the angle ignores. ``out`` is the box ``box`` (z, y, x slices) of
-    the grid, outside which ``S`` is 0. ``S`` is conjugated in place; ``work`` (float32) and
-    ``has`` (bool), of ``S``'s size, are work arrays.
+    the grid, outside which ``S`` is 0: the angle is taken in the box only. ``S`` is
+    conjugated in place in the box; ``work`` (float32) and ``has`` (bool), of at least the
+    box's size, are work arrays.
     """
     stack = np.moveaxis(S, normal, 0)  # (slices, plane 1, plane 2): the plane axes keep order
     buffer, forward, backward = plans(stack.shape)
@@ -334,15 +335,19 @@ def _filtered_phase(
     forward.execute()
     buffer *= disk
     backward.execute()
-    power = work.reshape(stack.shape)
-    np.multiply(stack.real, stack.real, out=power)  # |S|², no square roots
-    power += stack.imag * stack.imag
-    mask = has.reshape(stack.shape)
-    np.greater(power, SIGNAL_FLOOR**2 * power.max(), out=mask)
-    np.conjugate(stack, out=stack)
-    buffer *= stack
-    angle = np.arctan2(buffer.imag, buffer.real, out=power)
-    np.copyto(out, np.moveaxis(angle, 0, normal)[box], where=np.moveaxis(mask, 0, normal)[box])
+    # S is 0 outside the box: its largest |S|² and every voxel with signal lie inside it
+    inner = (box[normal], *(b for a, b in enumerate(box) if a != normal))  # in stack order
+    signal, filtered = stack[inner], buffer[inner]
+    size = int(np.prod(signal.shape))
+    power = work[:size].reshape(signal.shape)
+    np.multiply(signal.real, signal.real, out=power)  # |S|², no square roots
+    power += signal.imag * signal.imag
+    mask = has[:size].reshape(signal.shape)
+    np.greater(power, SIGNAL_FLOOR**2 * power.max(initial=0.0), out=mask)
+    np.conjugate(signal, out=signal)
+    filtered *= signal
+    angle = np.arctan2(filtered.imag, filtered.real, out=power)
+    np.copyto(out, np.moveaxis(angle, 0, normal), where=np.moveaxis(mask, 0, normal))
 
 
 class _CorrectionFrames:

@@ -51,6 +51,13 @@ _SOLVE_REUSE: float | None = 1e-8
 #: small, the two threads mostly wait for the interpreter lock, and one thread is faster
 #: (measured in benchmarks/results/tracking_speed.md).
 _OVERLAP_POINTS = 50_000
+#: Gauss–Newton tolerance of the first pass when a blur-correction pass follows, in voxels
+#: of the phase grid (its finest spacing), never below ``tolerance``: the correction pass
+#: re-converges every frame to ``tolerance``, and the correction predicted from the first
+#: pass changes with its state by a fraction of the correction's change across a voxel
+#: (errors and Gauss–Newton iterations against the tight first pass in
+#: benchmarks/results/tracking_speed.md).
+_FIRST_PASS_VOXELS = 0.2
 
 
 def _as_phase(ds: xr.Dataset) -> xr.Dataset:
@@ -209,7 +216,11 @@ def track(
         ``epsilon_min``), each point's pull is weighted robustly (``robust_scale``), and
         after a first pass over all frames the band-pass blur predicted from it is removed
         from the images and every frame tracked again (``blur_passes``,
-        :mod:`harpx.tracking.blur`).
+        :mod:`harpx.tracking.blur`). When such a pass follows, the first pass's Gauss–Newton
+        solves stop at a fifth of a phase-grid voxel (``first_pass_tolerance``, never below
+        ``tolerance``), as every frame it reaches is solved again to ``tolerance`` on the
+        corrected images; a frame it misses is tracked again at ``tolerance`` before it is
+        kept.
     dirichlet : sequence, optional
         Prescribed displacements (:class:`harpx.mechanics.loads.Fixed`, ``Prescribed``).
     terms : sequence, optional
@@ -231,7 +242,9 @@ def track(
         ``unseen_directions``; ``displacement_grid`` on the phase grid. Constraint points
         outside the field of view or the mask carry no force; a point inside some tags'
         masks only (e.g. short-axis but not long-axis slices) is pulled by those tags alone,
-        along the directions they see. The run time is recorded in attributes, s:
+        along the directions they see. ``first_pass_tolerance`` (mm) is the Gauss–Newton
+        tolerance of the first pass, ``iterations_per_pass`` the Gauss–Newton iterations of
+        each pass. The run time is recorded in attributes, s:
         ``time_total`` (the whole call) and by stage ``time_phase``, ``time_setup``,
         ``time_first_pass``, ``time_blur`` (predicting the blur), ``time_correction_pass``
         and ``time_output`` (strain and the grid displacement), with the Gauss–Newton parts
@@ -291,13 +304,16 @@ def track(
         overlap = constraint.points.shape[0] >= _OVERLAP_POINTS
         problem = FrameProblem(body, constraint, settings, solver, dirichlet, terms, timings,
                                executor=pool if overlap else None)  # fmt: skip
-        result = _track_frames(problem, phase, setup_start)
+        disk = PhaseParameters.from_dataset(phase).disk_bandpass  # the blur correction models it
+        passes = settings.effective_blur_passes if disk else 0
+        first_tolerance = settings.tolerance
+        if passes:  # a correction pass re-converges every frame: the first pass less tightly
+            first_tolerance = max(settings.tolerance, _FIRST_PASS_VOXELS * _voxel(phase))
+        result = _track_frames(problem, phase, setup_start, loose=first_tolerance)
         wall = result.wall.copy()  # per frame, over every pass
         timings.first_pass = float(wall[1:].sum())
         pass_iterations = [int(result.iterations.sum())]
         correction_mean = np.zeros(phase.sizes["time"])
-        disk = PhaseParameters.from_dataset(phase).disk_bandpass  # the blur correction models it
-        passes = settings.effective_blur_passes if disk else 0
         for _ in range(passes):
             clock = _time.perf_counter()
             constraint.release_frame()  # the last frame's sampler buffers, before the blur's
@@ -329,6 +345,7 @@ def track(
         "rigid_modes_removed": int(seen.unseen_modes.shape[0]),
         "outside_fraction": float(outside),
         "blur_passes_applied": int(passes),
+        "first_pass_tolerance": float(first_tolerance),
         **_blur_model_attrs(phase, passes),
         "iterations_per_pass": np.asarray(pass_iterations, dtype=np.int64),
         **timings.as_attrs(),
@@ -374,10 +391,25 @@ class _Pass:
     wall: np.ndarray
 
 
+def _voxel(phase: xr.Dataset) -> float:
+    """Finest spacing of the phase grid, mm (over the axes with more than one voxel; 0 if none)."""
+    steps = [abs(float(phase[d][1] - phase[d][0])) for d in ("z", "y", "x") if phase.sizes[d] > 1]
+    return min(steps, default=0.0)
+
+
 def _track_frames(
-    problem: FrameProblem, phase: xr.Dataset, start: float, earlier: _Pass | None = None
+    problem: FrameProblem,
+    phase: xr.Dataset,
+    start: float,
+    earlier: _Pass | None = None,
+    loose: float | None = None,
 ) -> _Pass:
     """Track every frame of ``phase`` in order, each started from the last (one pass).
+
+    ``loose`` (mm, a first pass only): the Gauss–Newton tolerance of the pass in place of
+    ``settings.tolerance``; a frame that misses its target with it is tracked again from the
+    same start with ``settings.tolerance``, so a miss, kept by the later passes, is as
+    converged as without ``loose``.
 
     A later pass (``earlier`` given) starts each frame from the earlier pass's result and
     penalty for it, which the blur correction moves only a little. A frame the earlier pass
@@ -407,6 +439,9 @@ def _track_frames(
     out.wall[0] = _time.perf_counter() - start
     timings.setup += out.wall[0]
     lam = settings.penalty
+    relaxed = None
+    if loose is not None and loose != settings.tolerance:
+        relaxed = TrackingSettings.build(settings, tolerance=loose)
     desc = "tracking" if earlier is None else "tracking (blur correction)"
     for n in progress_bar(range(1, ntime), progress=settings.progress, desc=desc, unit="frame"):
         if earlier is not None and not earlier.reached[n]:
@@ -426,10 +461,24 @@ def _track_frames(
         out.floor[n] = constraint.epsilon_floor(u0)
         out.target[n] = settings.target(out.floor[n])
         timings.prediction += _time.perf_counter() - clock
-        outcome: FrameOutcome = strategy(
-            problem, u0, target=out.target[n], penalty=lam,
-            plateau=settings.accepted_plateau(out.floor[n]), warm=earlier is not None,
-        )  # fmt: skip
+        plateau = settings.accepted_plateau(out.floor[n])
+        if relaxed is not None:
+            problem.settings = relaxed
+            try:
+                outcome: FrameOutcome = strategy(
+                    problem, u0, target=out.target[n], penalty=lam, plateau=plateau
+                )
+            finally:
+                problem.settings = settings
+            spent = outcome.iterations
+            if not outcome.reached:  # kept by the later passes: at the full tolerance
+                outcome = strategy(problem, u0, target=out.target[n], penalty=lam, plateau=plateau)
+                outcome.iterations += spent
+        else:
+            outcome = strategy(
+                problem, u0, target=out.target[n], penalty=lam, plateau=plateau,
+                warm=earlier is not None,
+            )  # fmt: skip
         if not np.isfinite(outcome.epsilon) or outcome.state is None:
             where = explain_missing_data(phase, constraint.current_points(u0), n)
             raise SchemaError(
