@@ -100,6 +100,12 @@ class SolverTuning:
         fit; one that moves a point half a period or more has dragged it into another tag
         basin, so the raise stops at the fit before it and the frame is a miss
         (:mod:`harpx.tracking.penalty`).
+    first_pass_voxels : float, default 0.2
+        Gauss–Newton tolerance of the first pass when a blur-correction pass follows, in
+        voxels of the phase grid (its finest spacing; > 0), never below ``tolerance``: the
+        correction pass solves every frame the first pass reached again to ``tolerance``,
+        and the blur predicted from the first pass changes with its state by a fraction of
+        the correction's change across a voxel.
 
     Raises
     ------
@@ -126,6 +132,7 @@ class SolverTuning:
     predictor_factors: tuple[float, ...] = (0.0, 0.5, 1.0)
     predictor_margin: float = 0.05
     raise_move: float = 0.5
+    first_pass_voxels: float = 0.2
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -141,7 +148,8 @@ class SolverTuning:
         if not (math.isfinite(margin) and 0.0 <= margin < 1.0):
             raise ValueError(f"predictor_margin={margin!r} must lie in [0, 1)")
         set_(self, "predictor_margin", float(margin))
-        set_(self, "raise_move", _positive("raise_move", self.raise_move))
+        for name in ("raise_move", "first_pass_voxels"):
+            set_(self, name, _positive(name, getattr(self, name)))
         for name in ("ramp_iterations", "damp_after", "damp_small_after"):
             set_(self, name, _count(name, getattr(self, name), minimum=1))
         factors = tuple(float(a) for a in self.predictor_factors)

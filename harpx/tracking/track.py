@@ -51,13 +51,6 @@ _SOLVE_REUSE: float | None = 1e-8
 #: small, the two threads mostly wait for the interpreter lock, and one thread is faster
 #: (measured in benchmarks/results/tracking_speed.md).
 _OVERLAP_POINTS = 50_000
-#: Gauss–Newton tolerance of the first pass when a blur-correction pass follows, in voxels
-#: of the phase grid (its finest spacing), never below ``tolerance``: the correction pass
-#: re-converges every frame to ``tolerance``, and the correction predicted from the first
-#: pass changes with its state by a fraction of the correction's change across a voxel
-#: (errors and Gauss–Newton iterations against the tight first pass in
-#: benchmarks/results/tracking_speed.md).
-_FIRST_PASS_VOXELS = 0.2
 
 
 def _as_phase(ds: xr.Dataset) -> xr.Dataset:
@@ -217,10 +210,10 @@ def track(
         after a first pass over all frames the band-pass blur predicted from it is removed
         from the images and every frame tracked again (``blur_passes``,
         :mod:`harpx.tracking.blur`). When such a pass follows, the first pass's Gauss–Newton
-        solves stop at a fifth of a phase-grid voxel (``first_pass_tolerance``, never below
-        ``tolerance``), as every frame it reaches is solved again to ``tolerance`` on the
-        corrected images; a frame it misses is tracked again at ``tolerance`` before it is
-        kept.
+        solves stop at ``tuning.first_pass_voxels`` of a phase-grid voxel
+        (``first_pass_tolerance``, never below ``tolerance``), as every frame it reaches is
+        solved again to ``tolerance`` on the corrected images; a frame it misses is tracked
+        again at ``tolerance`` before it is kept.
     dirichlet : sequence, optional
         Prescribed displacements (:class:`harpx.mechanics.loads.Fixed`, ``Prescribed``).
     terms : sequence, optional
@@ -308,7 +301,9 @@ def track(
         passes = settings.effective_blur_passes if disk else 0
         first_tolerance = settings.tolerance
         if passes:  # a correction pass re-converges every frame: the first pass less tightly
-            first_tolerance = max(settings.tolerance, _FIRST_PASS_VOXELS * _voxel(phase))
+            first_tolerance = max(
+                settings.tolerance, settings.tuning.first_pass_voxels * _voxel(phase)
+            )
         result = _track_frames(problem, phase, setup_start, loose=first_tolerance)
         wall = result.wall.copy()  # per frame, over every pass
         timings.first_pass = float(wall[1:].sum())

@@ -10,6 +10,7 @@ import harpx.tracking.track as track_module
 from harpx.imaging.harp import extract_phase
 from harpx.scenes.phantom import phantom
 from harpx.tracking.results import tracking_error
+from harpx.tracking.settings import SolverTuning
 from harpx.tracking.track import track
 
 
@@ -31,6 +32,7 @@ def _voxel(phase):
 
 
 def test_the_first_pass_stops_at_a_fifth_of_a_voxel_only_before_a_correction_pass(scene, loose):
+    assert SolverTuning().first_pass_voxels == 0.2
     made, _, phase = scene
     assert int(loose.attrs["blur_passes_applied"]) == 1
     assert float(loose.attrs["first_pass_tolerance"]) == pytest.approx(0.2 * _voxel(phase))
@@ -42,10 +44,10 @@ def test_the_first_pass_stops_at_a_fifth_of_a_voxel_only_before_a_correction_pas
     assert float(coarse.attrs["first_pass_tolerance"]) == 0.5
 
 
-def test_a_loose_first_pass_tracks_as_the_tight_one(scene, loose, monkeypatch):
+def test_a_loose_first_pass_tracks_as_the_tight_one(scene, loose):
     made, tagged, phase = scene
-    monkeypatch.setattr(track_module, "_FIRST_PASS_VOXELS", 0.0)  # the first pass at tolerance
-    tight = track(phase, made.body())
+    # the first pass at tolerance: a vanishing voxel fraction
+    tight = track(phase, made.body(), tuning=SolverTuning(first_pass_voxels=1e-9))
     assert float(tight.attrs["first_pass_tolerance"]) == float(tight.attrs["setting_tolerance"])
     first_loose, second_loose = (int(i) for i in loose.attrs["iterations_per_pass"])
     first_tight, second_tight = (int(i) for i in tight.attrs["iterations_per_pass"])
