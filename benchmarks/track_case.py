@@ -8,6 +8,8 @@ runs load them instead of building them. Cases:
 
 * ``phantom`` / ``phantom-small``: paper (or small) brain phantom, FE hex8 with the
   tracker's defaults (``phase()`` with ``upsample=2`` included in the step);
+* ``phantom-hex20``: the paper phantom with a hex20 body on the same mesh (the
+  ``fe-hex20`` row of ``benchmarks/error_vs_runtime.py``);
 * ``phantom-harp``: conventional HARP on the same phase images (phase extraction
   included);
 * ``lv-small`` / ``lv``: left ventricle, stress-free reference, tracker defaults;
@@ -42,8 +44,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-CASES = ("phantom", "phantom-small", "phantom-harp", "lv-small", "lv", "short-axis-small",
-         "short-axis")  # fmt: skip
+CASES = ("phantom", "phantom-small", "phantom-hex20", "phantom-harp", "lv-small", "lv",
+         "short-axis-small", "short-axis")  # fmt: skip
 
 
 def _cache(name: str) -> Path:
@@ -53,7 +55,7 @@ def _cache(name: str) -> Path:
     return Path(tempfile.gettempdir()) / f"harpx_case_{name}_{key}"
 
 
-def _phantom(size: str) -> tuple[xr.Dataset, Any]:
+def _phantom(size: str, element: str = "hex8") -> tuple[xr.Dataset, Any]:
     from harpx.mechanics.body import Body
     from harpx.mechanics.materials import NeoHookean
     from harpx.mechanics.mesh import cylinder
@@ -66,7 +68,7 @@ def _phantom(size: str) -> tuple[xr.Dataset, Any]:
     g = GEOMETRIES[size]
     mesh = cylinder(g.radius, g.height, n_radial=g.n_radial, n_circumferential=g.n_circumferential,
                     n_axial=g.n_axial, center=(0.0, 0.0, -g.height / 2))  # fmt: skip
-    return tagged, Body(mesh, NeoHookean(c1=1.0, kappa=120.0), element="hex8")
+    return tagged, Body(mesh, NeoHookean(c1=1.0, kappa=120.0), element=element)
 
 
 def _scene(name: str, size: str) -> Any:
@@ -102,7 +104,8 @@ def run(case: str) -> dict[str, Any]:
     kwargs: dict[str, Any] = {}
     upsample: dict[str, Any] = {}
     if case.startswith("phantom"):
-        tagged, body = _phantom("small" if case == "phantom-small" else "paper")
+        element = "hex20" if case == "phantom-hex20" else "hex8"
+        tagged, body = _phantom("small" if case == "phantom-small" else "paper", element)
         upsample = {"upsample": 2}
     else:
         name = "lv" if case.startswith("lv") else "short-axis"

@@ -15,7 +15,10 @@
   iterations. The matrix is factorised afresh when the loop does not reach the relative
   residual ``reuse``, returns non-finite values, or the pattern changed, so a singular
   matrix meets the same factorisation (and the same errors) as without ``reuse``, after at
-  most ``reuse_iterations`` iterations.
+  most :attr:`LinearSolver.iteration_budget` iterations. That budget is
+  ``reuse_iterations``, raised for a matrix whose factorisation costs many loop iterations
+  (PARDISO's own operation counts of its analysis; e.g. quadratic elements, whose factors
+  fill in far more than their iterations cost).
 * ``"superlu"`` — SuperLU with ``MMD_AT_PLUS_A`` ordering and symmetric mode for symmetric
   tangents (COLAMD for non-symmetric ones).
 * ``"superlu-colamd"`` — SuperLU with its default COLAMD ordering (reference).
@@ -53,6 +56,16 @@ Method = Literal["auto", "pardiso", "superlu", "superlu-colamd", "umfpack", "amg
 #: tracking benchmarks, benchmarks/results/tracking_speed.md).
 _GIVE_UP_AFTER = 4
 _GIVE_UP_SLACK = 1.25
+#: Floating-point operations of a factorisation run this many times as fast, per operation,
+#: as those of a Krylov iteration (dense supernodal kernels against memory-bound
+#: substitutions and products): the ratio of the two times over the ratio of PARDISO's
+#: operation counts, on the tracking benchmarks' tangents (benchmarks/results/tracking_speed.md).
+_FACTOR_SPEEDUP = 6.0
+#: The Krylov loop of ``reuse`` may run up to this share of a factorisation's cost (in
+#: iterations, :attr:`LinearSolver.iteration_budget`), if that is more than
+#: ``reuse_iterations``: a failed loop then costs at most this share on top of the
+#: factorisation that follows it.
+_BUDGET_SHARE = 0.5
 
 
 def _dot(a: FloatArray, b: FloatArray) -> float:
@@ -259,8 +272,10 @@ class LinearSolver:
         of the last factorised one may be solved iteratively, preconditioned with that
         factorisation (module notes), e.g. 1e-8. None (default): every matrix is factorised.
     reuse_iterations : int, default 15
-        With ``reuse``: the iteration limit of the Krylov loop; a matrix it does not solve
-        within this many iterations is factorised afresh.
+        With ``reuse``: the iteration limit of the Krylov loop, or more where a
+        factorisation costs more than twice as many iterations
+        (:attr:`iteration_budget`); a matrix the loop does not solve within its limit is
+        factorised afresh.
     threads : int, optional
         PARDISO only: threads of each call (MKL's thread-local setting, restored after the
         call), e.g. 1 where another thread of the caller keeps the other cores busy, or
@@ -283,6 +298,13 @@ class LinearSolver:
     last_iterations : int
         Iterations of the last solve's Krylov loop (``reuse`` or ``"amg-cg"``); 0 when it
         factorised without trying one.
+    iteration_budget : int
+        With ``reuse``: the iteration limit of the Krylov loop on the current pattern, the
+        larger of ``reuse_iterations`` and ``_BUDGET_SHARE`` times the iterations one
+        factorisation costs, estimated from the floating-point operations PARDISO's analysis
+        reports for the factorisation and its substitutions (a factorisation's operations
+        taken as ``_FACTOR_SPEEDUP`` times as fast); ``reuse_iterations`` before the first
+        analysis or where PARDISO reports no counts.
     """
 
     def __init__(
@@ -335,6 +357,7 @@ class LinearSolver:
         self._upper_indices: NDArray[np.int32] | None = None
         self._diagonal: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None
         self.last_iterations = 0
+        self.iteration_budget = self.reuse_iterations
 
     # ------------------------------------------------------------------ pardiso
     def _same_pattern(self, K: sparse.csr_matrix, symmetric: bool) -> bool:
@@ -376,6 +399,8 @@ class LinearSolver:
             self._pardiso.set_iparm(10, 8 if symmetric else 13)  # pivot perturbation 1e-8 / 1e-13
             self._pardiso.set_iparm(11, 0 if symmetric else 1)  # scaling (non-symmetric)
             self._pardiso.set_iparm(13, 0 if symmetric else 1)  # weighted matching
+            self._pardiso.set_iparm(18, -1)  # report the factors' entries (analysis)
+            self._pardiso.set_iparm(19, -1)  # report the factorisation's Mflop (analysis)
             self._pardiso.set_iparm(28, 0)
             self._pardiso.set_iparm(35, 1)  # zero-based indexing
             if symmetric:
@@ -407,7 +432,24 @@ class LinearSolver:
                     self.reused += 1
                     return x
                 self.reuse_failures += 1
-            return self._factorise(data, indptr, indices, rhs, new_pattern)
+            x = self._factorise(data, indptr, indices, rhs, new_pattern)
+            if new_pattern:
+                self.iteration_budget = self._budget(len(data))
+            return x
+
+    def _budget(self, stored: int) -> int:
+        """The Krylov loop's iteration limit for the pattern just analysed (``stored``
+        entries handed to PARDISO): :attr:`iteration_budget`."""
+        iparm = self._pardiso.iparm
+        factor_entries, mflop = int(iparm[17]), int(iparm[18])
+        if factor_entries <= 0 or mflop <= 0:  # not reported
+            return self.reuse_iterations
+        # two flops per entry: CG substitutes forward and backward through L (LDLᵀ) and
+        # multiplies by the stored upper triangle and its transpose; BiCGSTAB through L and U
+        # (``factor_entries`` counts both) and by the matrix, twice each
+        per_iteration = 4.0 * (factor_entries + stored)
+        iterations = mflop * 1e6 / (_FACTOR_SPEEDUP * per_iteration)
+        return max(self.reuse_iterations, int(_BUDGET_SHARE * iterations))
 
     def _factorise(
         self, data: FloatArray, indptr: Any, indices: Any, b: FloatArray, new_pattern: bool
@@ -458,7 +500,7 @@ class LinearSolver:
 
         # a breakdown (a singular or indefinite matrix) divides by zero: non-finite values,
         # caught below, not warnings
-        stop = _Stop(b, self.reuse, self.reuse_iterations)
+        stop = _Stop(b, self.reuse, self.iteration_budget)
         if stop.target == 0.0:
             return np.zeros_like(b)
         with np.errstate(all="ignore"):

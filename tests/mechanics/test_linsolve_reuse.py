@@ -54,6 +54,26 @@ def test_a_far_matrix_or_a_refresh_is_factorised_afresh(rng):
     assert solver.factorizations == before + 1
 
 
+def test_a_factorisation_that_costs_many_iterations_raises_the_loops_budget(rng):
+    # 8 000 unknowns of a 3D Laplacian: its factors fill in, so one factorisation costs
+    # several iterations of the loop (PARDISO's operation counts); a 1-iteration budget is
+    # raised, and a nearby matrix that needs more than one iteration is still reused
+    b = rng.standard_normal(20**3)
+    solver = LinearSolver("pardiso", reuse=1e-8, reuse_iterations=1)
+    assert solver.iteration_budget == 1  # nothing analysed yet
+    solver.solve(_laplacian(20, 0.1), b)
+    assert 3 <= solver.iteration_budget <= 8  # 5 measured
+    K = _laplacian(20, 0.102)
+    x = solver.solve(K, b)
+    assert np.linalg.norm(K @ x - b) <= 1e-8 * np.linalg.norm(b)
+    assert (solver.factorizations, solver.reused) == (1, 1)
+    assert 1 < solver.last_iterations <= solver.iteration_budget
+    # a small system's factorisation is cheap: the budget stays at reuse_iterations
+    small = LinearSolver("pardiso", reuse=1e-8)
+    small.solve(_laplacian(8, 0.1), b[: 8**3])
+    assert small.iteration_budget == small.reuse_iterations == 15
+
+
 def test_reuse_out_of_range_is_named():
     with pytest.raises(ValueError, match="reuse=2"):
         LinearSolver("pardiso", reuse=2.0)
