@@ -100,12 +100,14 @@ class SolverTuning:
         fit; one that moves a point half a period or more has dragged it into another tag
         basin, so the raise stops at the fit before it and the frame is a miss
         (:mod:`harpx.tracking.penalty`).
-    first_pass_voxels : float, default 0.2
+    first_pass_voxels : float, default 0.1
         Gauss–Newton tolerance of the first pass when a blur-correction pass follows, in
         voxels of the phase grid (its finest spacing; > 0), never below ``tolerance``: the
         correction pass solves every frame the first pass reached again to ``tolerance``,
         and the blur predicted from the first pass changes with its state by a fraction of
-        the correction's change across a voxel.
+        the correction's change across a voxel. Looser first passes keep the errors of
+        ordinary scenes but can let a frame whose penalty raise would drag the body across
+        a wrap pass as reached (``tests/test_stability.py``).
 
     Raises
     ------
@@ -132,7 +134,7 @@ class SolverTuning:
     predictor_factors: tuple[float, ...] = (0.0, 0.5, 1.0)
     predictor_margin: float = 0.05
     raise_move: float = 0.5
-    first_pass_voxels: float = 0.2
+    first_pass_voxels: float = 0.1
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
