@@ -44,8 +44,11 @@ STRATEGIES = {"penalty": track_frame_penalty, "augmented-lagrangian": track_fram
 #: Relative residual to which a Gauss–Newton tangent is solved iteratively with the
 #: factorisation of an earlier one as preconditioner (PARDISO;
 #: :class:`~harpx.mechanics.linsolve.LinearSolver` ``reuse``: a bounded Krylov loop that falls
-#: back to a fresh factorisation), or None: factorise every tangent.
-_SOLVE_REUSE: float | None = 1e-8
+#: back to a fresh factorisation), or None: factorise every tangent. A Gauss–Newton step
+#: needs no more: its increments stop at ``tolerance`` (0.01 mm), far above what a 1e-6
+#: relative residual leaves in the step (errors and iterations the same as at 1e-8 on the
+#: scenes measured in benchmarks/results/tracking_speed.md).
+_SOLVE_REUSE: float | None = 1e-6
 #: Constraint points from which a worker thread samples the images while the solve
 #: assembles (:func:`~harpx.tracking.equilibrium.equilibrate`): below this the arrays are
 #: small, the two threads mostly wait for the interpreter lock, and one thread is faster
