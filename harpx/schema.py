@@ -39,7 +39,7 @@ from harpx.conventions import (
 from harpx.errors import SchemaError
 
 # the conventions are importable from here as well (module docstring)
-__all__ = ["validate"]
+__all__ = ["grid_step", "validate"]
 __all__ += conventions.__all__
 
 
@@ -368,7 +368,22 @@ def _check_time(ds: xr.Dataset, problems: list[str]) -> None:
         problems.append("coordinate 'time' is not strictly increasing; sort with ds.sortby('time')")
 
 
-def _spacing(ds: xr.Dataset, dim: str) -> float | None:
+def grid_step(ds: xr.Dataset, dim: str) -> float | None:
+    """Mean step of a grid coordinate, mm (or the coordinate's unit).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        A dataset with the coordinate ``dim`` (e.g. ``"x"``).
+    dim : str
+        The grid dimension.
+
+    Returns
+    -------
+    float or None
+        ``(last - first) / (n - 1)``; None where the coordinate is missing or has fewer
+        than two values (no step to speak of).
+    """
     if dim not in ds.coords or ds.sizes.get(dim, 0) < 2:
         return None
     values = np.asarray(ds[dim].values, dtype=np.float64)
@@ -463,7 +478,7 @@ def _check_tags(ds: xr.Dataset, problems: list[str]) -> None:
         for a, axis in enumerate(AXES):
             if axis == s:
                 continue
-            step = _spacing(ds, axis)
+            step = grid_step(ds, axis)
             if step is None:
                 continue
             component = float(f * abs(d[a]))

@@ -23,7 +23,7 @@ from harpx.imaging._kernels import refine_linear, refine_positions
 from harpx.imaging.bandpass import harmonic_phase
 from harpx.imaging.fft import default_threads
 from harpx.imaging.noise import harmonic_noise
-from harpx.schema import AXES, GRID_DIMS, standard_attrs, validate
+from harpx.schema import AXES, GRID_DIMS, grid_step, standard_attrs, validate
 
 __all__ = ["extract_phase", "refinement_factors", "slice_geometry"]
 
@@ -92,13 +92,6 @@ def _warn_constant_frames(ds: xr.Dataset) -> None:
         )
 
 
-def _spacing(ds: xr.Dataset, dim: str) -> float | None:
-    values = np.asarray(ds[dim].values, dtype=np.float64)
-    if values.size < 2:
-        return None
-    return float((values[-1] - values[0]) / (values.size - 1))
-
-
 def refinement_factors(ds: xr.Dataset, upsample: int) -> tuple[int, int, int]:
     """Integer refinement factor per grid axis ``(z, y, x)`` of the common output grid.
 
@@ -132,7 +125,7 @@ def refinement_factors(ds: xr.Dataset, upsample: int) -> tuple[int, int, int]:
     inplane = sorted({d for s in slice_axes for d in GRID_DIMS if d != s}, key=GRID_DIMS.index)
     spacing = {}
     for dim in inplane:
-        step = _spacing(ds, dim)
+        step = grid_step(ds, dim)
         if step is None:
             raise SchemaError(
                 f"grid dim {dim!r} has {ds.sizes[dim]} voxel(s) but lies in the acquisition "
@@ -197,7 +190,7 @@ def _refined_coord(ds: xr.Dataset, dim: str, factor: int) -> xr.Variable:
     attrs = {**standard_attrs(dim), **ds[dim].attrs}
     if factor == 1:
         return xr.Variable(dim, values, attrs)
-    step = _spacing(ds, dim)
+    step = grid_step(ds, dim)
     assert step is not None  # factor > 1 only on in-plane axes, which have >= 2 voxels
     return xr.Variable(dim, values[0] + step * refine_positions(values.size, factor), attrs)
 
@@ -291,7 +284,7 @@ def slice_geometry(ds: xr.Dataset) -> dict[str, xr.Variable]:
         for t, axis in enumerate(axes):
             a = GRID_DIMS.index(axis)
             grid = np.asarray(ds[axis].values, dtype=np.float64)
-            step = _spacing(ds, axis) or thickness
+            step = grid_step(ds, axis) or thickness
             held = mask[t].any(axis=tuple(b for b in range(3) if b != a))
             if not held.any():
                 continue
@@ -306,7 +299,7 @@ def slice_geometry(ds: xr.Dataset) -> dict[str, xr.Variable]:
             thick[t], positions[t] = found[t][0]
     lattice = float(ds.attrs.get("slice_thickness", np.nan))
     lattice_ok = lattice > 0 and all(
-        (_spacing(ds, axis) or np.inf) >= lattice * (1 - 1e-6) for axis in axes
+        (grid_step(ds, axis) or np.inf) >= lattice * (1 - 1e-6) for axis in axes
     )  # a grid finer than the slices is a resampled one, not the lattice
     if lattice_ok and not np.isfinite(thick).any():
         for t, axis in enumerate(axes):
@@ -428,7 +421,7 @@ def extract_phase(
     lazy = _check_chunks(ds, ["image", *carried])
     nthreads = default_threads(threads) if threads is not None or not lazy else 1
     factors = refinement_factors(ds, int(upsample))
-    spacing = tuple(_spacing(ds, d) or 1.0 for d in GRID_DIMS)
+    spacing = tuple(grid_step(ds, d) or 1.0 for d in GRID_DIMS)
 
     direction = ds["tag_direction"].transpose("tag", "axis").values.astype(np.float64)
     frequency = ds["tag_frequency"].values.astype(np.float64)

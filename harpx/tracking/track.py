@@ -15,7 +15,7 @@ import time as _time
 import warnings
 from collections.abc import Sequence
 from concurrent.futures import Executor, ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, cast
 
 import numpy as np
@@ -28,7 +28,7 @@ from harpx.imaging.coverage import explain_missing_data, phase_direction_mismatc
 from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.linsolve import LinearSolver
-from harpx.schema import validate
+from harpx.schema import GRID_DIMS, grid_step, validate
 from harpx.tracking.augmented import track_frame_augmented
 from harpx.tracking.blur import blur_models, lazily_deblurred
 from harpx.tracking.constraint import PhaseConstraint
@@ -391,8 +391,8 @@ class _Pass:
 
 def _voxel(phase: xr.Dataset) -> float:
     """Finest spacing of the phase grid, mm (over the axes with more than one voxel; 0 if none)."""
-    steps = [abs(float(phase[d][1] - phase[d][0])) for d in ("z", "y", "x") if phase.sizes[d] > 1]
-    return min(steps, default=0.0)
+    steps = (grid_step(phase, d) for d in GRID_DIMS)
+    return min((abs(h) for h in steps if h is not None), default=0.0)
 
 
 def _track_frames(
@@ -461,13 +461,10 @@ def _track_frames(
         timings.prediction += _time.perf_counter() - clock
         plateau = settings.accepted_plateau(out.floor[n])
         if relaxed is not None:
-            problem.settings = relaxed
-            try:
-                outcome: FrameOutcome = strategy(
-                    problem, u0, target=out.target[n], penalty=lam, plateau=plateau
-                )
-            finally:
-                problem.settings = settings
+            loose_problem = replace(problem, settings=relaxed)  # this frame's offset included
+            outcome: FrameOutcome = strategy(
+                loose_problem, u0, target=out.target[n], penalty=lam, plateau=plateau
+            )
             spent = outcome.iterations
             if not outcome.reached:  # kept by the later passes: at the full tolerance
                 outcome = strategy(problem, u0, target=out.target[n], penalty=lam, plateau=plateau)
