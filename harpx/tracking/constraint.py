@@ -393,20 +393,18 @@ class PhaseConstraint:
         """
         same = all(phase.sizes[d] == self.phase.sizes[d] for d in ("tag", "time", "z", "y", "x"))
         if same:
-            # frame 0 in the images' own precision, a few planes at a time: no grid-sized
-            # float64 temporaries
+            # frame 0 in the images' own precision, compared a block of planes at a time: no
+            # grid-sized float64 temporaries
             new, old = (np.asarray(p["phase"].isel(time=0).transpose("tag", ...).values)
                         for p in (phase, self.phase))  # fmt: skip
-            planes = new.reshape(-1, *new.shape[-2:])
-            step = max(1, (1 << 18) // max(1, planes[0].size))
+            new = new.reshape(-1, *new.shape[-2:])
+            old = old.reshape(new.shape)
+            step = max(1, (1 << 18) // max(1, new[0].size))
             same = all(
-                np.abs(wrap(a - b)).max(initial=0.0) <= 1e-5
-                for a, b in (
-                    (planes[k : k + step], old.reshape(planes.shape)[k : k + step])
-                    for k in range(0, planes.shape[0], step)
-                )
+                np.abs(wrap(new[k : k + step] - old[k : k + step])).max(initial=0.0) <= 1e-5
+                for k in range(0, new.shape[0], step)
             )
-            del new, old, planes
+            del new, old
         if not same:
             raise ValueError(
                 "replace_images needs images on the same grid and tags with frame 0 unchanged"
