@@ -108,6 +108,14 @@ class SolverTuning:
         the correction's change across a voxel. Looser first passes keep the errors of
         ordinary scenes but can let a frame whose penalty raise would drag the body across
         a wrap pass as reached (``tests/test_stability.py``).
+    step_accuracy : float or None, default 0.01
+        Relative error, in (0, 1), to which each Gauss–Newton step is solved iteratively,
+        preconditioned with the factorisation of an earlier tangent
+        (:class:`~harpx.mechanics.linsolve.LinearSolver` with ``reuse_measure="step"``: a
+        bounded conjugate-gradient loop that falls back to a fresh factorisation); None
+        factorises every tangent. An inexact Newton method converges with such steps
+        (Dembo, Eisenstat & Steihaug 1982): the increments that decide convergence stop at
+        ``tolerance``, where a 1 % error of the step is far below it.
 
     Raises
     ------
@@ -135,6 +143,7 @@ class SolverTuning:
     predictor_margin: float = 0.05
     raise_move: float = 0.5
     first_pass_voxels: float = 0.1
+    step_accuracy: float | None = 0.01
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -152,6 +161,10 @@ class SolverTuning:
         set_(self, "predictor_margin", float(margin))
         for name in ("raise_move", "first_pass_voxels"):
             set_(self, name, _positive(name, getattr(self, name)))
+        accuracy = _positive("step_accuracy", self.step_accuracy, allow_none=True)
+        if accuracy is not None and accuracy >= 1.0:
+            raise ValueError(f"step_accuracy={accuracy!r} must lie in (0, 1), or be None")
+        set_(self, "step_accuracy", accuracy)
         for name in ("ramp_iterations", "damp_after", "damp_small_after"):
             set_(self, name, _count(name, getattr(self, name), minimum=1))
         factors = tuple(float(a) for a in self.predictor_factors)

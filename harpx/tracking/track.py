@@ -41,14 +41,6 @@ from harpx.tracking.results import tracked_dataset
 from harpx.tracking.settings import SolverTuning, TrackingSettings
 
 STRATEGIES = {"penalty": track_frame_penalty, "augmented-lagrangian": track_frame_augmented}
-#: Relative residual to which a Gauss–Newton tangent is solved iteratively with the
-#: factorisation of an earlier one as preconditioner (PARDISO;
-#: :class:`~harpx.mechanics.linsolve.LinearSolver` ``reuse``: a bounded Krylov loop that falls
-#: back to a fresh factorisation), or None: factorise every tangent. A Gauss–Newton step
-#: needs no more: its increments stop at ``tolerance`` (0.01 mm), far above what a 1e-6
-#: relative residual leaves in the step (errors and iterations the same as at 1e-8 on the
-#: scenes measured in benchmarks/results/tracking_speed.md).
-_SOLVE_REUSE: float | None = 1e-6
 #: Constraint points from which a worker thread samples the images while the solve
 #: assembles (:func:`~harpx.tracking.equilibrium.equilibrate`): below this the arrays are
 #: small, the two threads mostly wait for the interpreter lock, and one thread is faster
@@ -294,7 +286,12 @@ def track(
     seen = constraint.observe(fixed)
     _warn_unseen(constraint)
     # one PARDISO thread: the other core samples the images (the worker below)
-    solver = LinearSolver(settings.linear_solver, reuse=_SOLVE_REUSE, threads=1)
+    solver = LinearSolver(
+        settings.linear_solver,
+        reuse=settings.tuning.step_accuracy,
+        reuse_measure="step",
+        threads=1,
+    )
     # one worker samples the images at each trial step while the solve assembles there
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="harpx-sampling") as pool:
         overlap = constraint.points.shape[0] >= _OVERLAP_POINTS

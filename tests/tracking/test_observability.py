@@ -88,9 +88,12 @@ def test_in_plane_tags_warn_and_remove_the_through_plane_translation(in_plane):
 def test_in_plane_tags_do_not_let_the_body_drift_through_plane(in_plane):
     ds, out, _ = in_plane
     # the truth has no through-plane motion; the unseen translation is held, so the mean
-    # through-plane displacement of the body stays at the truth's (0) in every frame
+    # through-plane displacement of the body stays at the truth's (0) in every frame: the
+    # held amplitude is the mass-weighted mean, and the plain node mean differs from it only
+    # by the asymmetry a Gauss–Newton step solved to 1 % leaves (measured 3.6e-9 mm); the
+    # bound is a millionth of the 1 mm voxel, where a drift would be a fraction of it
     uz = out.displacement.sel(axis="z")
-    assert float(np.abs(uz.mean("node")).max()) < 1e-9
+    assert float(np.abs(uz.mean("node")).max()) < 1e-6
     # and the in-plane motion is tracked to a small fraction of a 1 mm voxel (ideal data)
     grid = out.displacement_grid.assign_coords(z=ds.z, y=ds.y, x=ds.x)
     diff = (grid - ds.displacement_true).sel(axis=["x", "y"])
