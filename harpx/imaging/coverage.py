@@ -22,6 +22,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike
 
+from harpx.imaging._kernels import wrap
 from harpx.schema import AXES, GRID_DIMS
 
 __all__ = ["explain_missing_data", "phase_direction_mismatch"]
@@ -177,7 +178,7 @@ def phase_direction_mismatch(phase: xr.Dataset, time_index: int = 0) -> str:
             if values.shape[g] < 2:
                 continue
             step = float(phase[dim].values[1] - phase[dim].values[0])
-            wrapped = np.angle(np.exp(1j * np.diff(values, axis=g)))
+            wrapped = wrap(np.diff(values, axis=g))
             keep = (
                 np.ones(wrapped.shape, bool)
                 if strong is None
