@@ -438,6 +438,7 @@ class TrackingSettings:
                     "robust_scale": "none",
                     "blur_passes": "auto",
                     "progress": "auto",
+                    "tuning_step_accuracy": "none",
                 }.get(key, -1)
             elif isinstance(value, bool):
                 value = int(value)

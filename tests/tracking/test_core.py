@@ -372,6 +372,8 @@ def test_predictor_keeps_the_steady_motion_unless_another_start_is_clearly_bette
         pytest.param({"predictor_margin": 1.0}, r"predictor_margin=1.0 must lie in \[0, 1\)"),
         pytest.param({"predictor_margin": -0.1}, r"predictor_margin=-0.1 must lie"),
         pytest.param({"raise_move": -1.0}, "raise_move=-1.0 must be a positive"),
+        pytest.param({"step_accuracy": 1.0}, r"step_accuracy=1.0 must lie in \(0, 1\)"),
+        pytest.param({"step_accuracy": 0.0}, "step_accuracy=0.0 must be a positive"),
     ],
 )
 def test_predictor_tuning_names_what_is_wrong(kwargs, match):
@@ -385,6 +387,9 @@ def test_settings_attributes_are_netcdf_safe():
     scalars = {k: v for k, v in attrs.items() if k != "setting_tuning_predictor_factors"}
     assert all(isinstance(v, str | int | float) for v in scalars.values())
     assert attrs["setting_tuning_predictor_factors"] == [0.0, 0.5, 1.0]  # a NetCDF number list
+    # every tangent factorised: written as a word, not a number that reads as an accuracy
+    exact = TrackingSettings(tuning=SolverTuning(step_accuracy=None)).as_attrs()
+    assert exact["setting_tuning_step_accuracy"] == "none"
 
 
 def test_robust_weight_is_for_the_penalty_method_only():
