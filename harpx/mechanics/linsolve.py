@@ -33,6 +33,7 @@ import contextlib
 import copy
 import ctypes
 import functools
+import os
 from collections.abc import Callable, Iterator
 from typing import Any, Literal
 
@@ -96,6 +97,24 @@ def _new_pardiso(mtype: int) -> Any:
     solver.perm = np.zeros(0, dtype=np.int32)
     solver.mtype = mtype
     return solver
+
+
+@functools.cache
+def _openmp_wait() -> tuple[Any, Any] | None:
+    """``(kmp_get_blocktime, kmp_set_blocktime)`` of the Intel OpenMP runtime MKL already
+    loaded, or None (another threading layer, or not loaded: nothing to release)."""
+    names = ("libiomp5.so", "libiomp5.dylib", "libiomp5md.dll")
+    mode = getattr(os, "RTLD_NOLOAD", 0) | ctypes.DEFAULT_MODE  # only if already loaded
+    for name in names:
+        try:
+            runtime = ctypes.CDLL(name, mode=mode)
+            get, set_ = runtime.kmp_get_blocktime, runtime.kmp_set_blocktime
+        except (OSError, AttributeError):
+            continue
+        get.restype, get.argtypes = ctypes.c_int, []
+        set_.restype, set_.argtypes = None, [ctypes.c_int]
+        return get, set_
+    return None
 
 
 @functools.cache
@@ -318,6 +337,11 @@ class LinearSolver:
         call), e.g. 1 where another thread of the caller keeps the other cores busy, or
         on a machine shared with other jobs, where spinning OpenMP threads wait for cores.
         None (default): MKL's own setting.
+    release_cores : bool, default False
+        PARDISO only: let its threads sleep as soon as each call returns (the Intel OpenMP
+        runtime's wait, ``kmp_set_blocktime(0)``, for the calling thread's team, restored
+        after the call) instead of spinning for a next call, e.g. where the caller's own
+        threads need those cores between solves. No effect under another threading layer.
 
     Attributes
     ----------
@@ -354,6 +378,7 @@ class LinearSolver:
         reuse_iterations: int = 15,
         reuse_measure: Measure = "residual",
         threads: int | None = None,
+        release_cores: bool = False,
     ) -> None:
         if method not in METHODS:
             raise ValueError(f"linear_solver={method!r} is not one of {METHODS!r}")
@@ -381,6 +406,7 @@ class LinearSolver:
         if threads is not None and threads < 1:
             raise ValueError(f"threads={threads!r} must be at least 1, or None")
         self.threads = threads
+        self.release_cores = bool(release_cores)
         self.reuse = None if reuse is None else float(reuse)
         self.reuse_iterations = int(reuse_iterations)
         self.reuse_measure = reuse_measure
@@ -560,17 +586,20 @@ class LinearSolver:
 
     @contextlib.contextmanager
     def _mkl_threads(self) -> Iterator[None]:
-        """MKL's thread-local thread count set to ``threads`` inside, restored after."""
-        if self.threads is None or self._pardiso is None:
+        """MKL's thread-local thread count set to ``threads``, and with ``release_cores``
+        the OpenMP wait set to 0, inside; both restored after."""
+        with contextlib.ExitStack() as restore:
+            if self.threads is not None and self._pardiso is not None:
+                local = self._pardiso.libmkl.MKL_Set_Num_Threads_Local
+                local.restype, local.argtypes = ctypes.c_int, [ctypes.c_int]
+                previous = local(self.threads)
+                restore.callback(local, previous)  # 0: back to MKL's global setting
+            wait = _openmp_wait() if self.release_cores else None
+            if wait is not None:
+                get, set_ = wait
+                restore.callback(set_, get())
+                set_(0)
             yield
-            return
-        local = self._pardiso.libmkl.MKL_Set_Num_Threads_Local
-        local.restype, local.argtypes = ctypes.c_int, [ctypes.c_int]
-        previous = local(self.threads)
-        try:
-            yield
-        finally:
-            local(previous)  # 0: back to MKL's global setting
 
     @staticmethod
     def _call(

@@ -285,12 +285,13 @@ def track(
     fixed, _ = split_dirichlet(body, dirichlet)
     seen = constraint.observe(fixed)
     _warn_unseen(constraint)
-    # one PARDISO thread: the other core samples the images (the worker below)
+    # PARDISO on MKL's threads (the sampling worker below waits while it solves), which sleep
+    # as soon as each call returns, so that they do not spin on the worker's core
     solver = LinearSolver(
         settings.linear_solver,
         reuse=settings.tuning.step_accuracy,
         reuse_measure="step",
-        threads=1,
+        release_cores=True,
     )
     # one worker samples the images at each trial step while the solve assembles there
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="harpx-sampling") as pool:

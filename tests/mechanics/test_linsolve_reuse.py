@@ -242,3 +242,29 @@ def test_step_measure_bounds_the_error_of_the_solution_where_the_residual_does_n
     assert max(errors["residual"]) > 1e-2
     with pytest.raises(ValueError, match="reuse_measure='error'"):
         LinearSolver("pardiso", reuse=1e-2, reuse_measure="error")  # type: ignore[arg-type]
+
+
+def test_release_cores_sets_the_openmp_wait_to_zero_during_calls_only(rng, monkeypatch):
+    from harpx.mechanics import linsolve
+
+    wait = linsolve._openmp_wait()
+    if wait is None:
+        pytest.skip("MKL does not run on the Intel OpenMP runtime here")
+    get, _ = wait
+    before = get()
+    seen = []
+    call = LinearSolver._call
+
+    def spy(*args):
+        seen.append(get())
+        return call(*args)
+
+    monkeypatch.setattr(LinearSolver, "_call", staticmethod(spy))
+    K = _laplacian(8, 0.1)
+    b = rng.standard_normal(8**3)
+    x = LinearSolver("pardiso", release_cores=True).solve(K, b)
+    np.testing.assert_allclose(K @ x, b, atol=1e-10)
+    assert seen and set(seen) == {0}  # the threads sleep at once after each call
+    assert get() == before  # and the caller's own setting is back
+    LinearSolver("pardiso").solve(K, b)
+    assert seen[-1] == before  # without it, the runtime's setting is left alone
