@@ -27,7 +27,7 @@ Errors are ``peak - true peak``; the radial error is also given relative to the 
 radial strain: mean over segments of ``|error|`` divided by the mean ``|true peak|``.
 
 Writes ``benchmarks/results/cardiac_strain[_<size>].md`` (healthy) or
-``benchmarks/results/infarct_<size>.md`` (with ``--infarct``).
+``benchmarks/results/infarct_<size>.md`` (with ``--infarct``), or ``--output PATH``.
 
 ``--radius-study 0.5 0.7 0.8`` instead tracks every small scene (phantom, tongue, LV,
 short axis) with the phase extracted at each band-pass radius (FE with the tracker's
@@ -252,6 +252,12 @@ def main() -> None:
         metavar="NAME=VALUE",
         help="further tracker settings (harpx.tracking.settings.TrackingSettings)",
     )
+    parser.add_argument(
+        "--output",
+        default=None,
+        help="write the table here instead of benchmarks/results/ (e.g. for an experiment "
+        "with --set, which should not replace the recorded table)",
+    )
     parser.add_argument("--infarct", type=int, nargs="*", default=[])
     parser.add_argument("--scar-activation", type=float, default=0.0)
     parser.add_argument(
@@ -436,13 +442,15 @@ def main() -> None:
         f"segmentation mesh {q.cells} cells (min scaled Jacobian {q.min_scaled_jacobian:.2f}, "
         f"{q.inverted} inverted). Wall times on a shared 2-core machine.",
     ]
-    RESULTS.mkdir(exist_ok=True)
-    if infarct:
+    if args.output is not None:
+        out = Path(args.output)
+    elif infarct:
         out = RESULTS / f"infarct_{args.size}.md"
     else:
         out = RESULTS / (
             "cardiac_strain.md" if args.size == "paper" else f"cardiac_strain_{args.size}.md"
         )
+    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     print(f"wrote {out}")
