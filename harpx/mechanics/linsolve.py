@@ -34,7 +34,7 @@ import copy
 import ctypes
 import functools
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from typing import Any, Literal
 
 import numpy as np
@@ -44,21 +44,14 @@ from scipy.sparse import linalg as spla
 
 from harpx._typing import FloatArray
 from harpx.errors import ConvergenceError
+from harpx.mechanics.krylov import Measure, Stop, bicgstab, cg, vector_norm
 
 __all__ = ["LinearSolver", "METHODS", "available_methods", "rigid_body_modes"]
 
 METHODS = ("auto", "pardiso", "superlu", "superlu-colamd", "umfpack", "amg-cg")
 Method = Literal["auto", "pardiso", "superlu", "superlu-colamd", "umfpack", "amg-cg"]
-#: What the ``reuse`` loop's tolerance bounds (:class:`LinearSolver` ``reuse_measure``)
-Measure = Literal["residual", "step"]
 
 
-#: The Krylov loop of ``reuse`` gives up on a matrix from this iteration on when the mean rate
-#: of decrease of its residual so far would need more than ``_GIVE_UP_SLACK`` times
-#: ``reuse_iterations`` to reach the tolerance (chosen on the residual histories of the
-#: tracking benchmarks, benchmarks/results/tracking_speed.md).
-_GIVE_UP_AFTER = 4
-_GIVE_UP_SLACK = 1.25
 #: Floating-point operations of a factorisation run this many times as fast, per operation,
 #: as those of a Krylov iteration (dense supernodal kernels against memory-bound
 #: substitutions and products): the ratio of the two times over the ratio of PARDISO's
@@ -69,17 +62,6 @@ _FACTOR_SPEEDUP = 6.0
 #: ``reuse_iterations``: a failed loop then costs at most this share on top of the
 #: factorisation that follows it.
 _BUDGET_SHARE = 0.5
-
-
-def _dot(a: FloatArray, b: FloatArray) -> float:
-    """``a · b`` without BLAS: OpenBLAS runs its dot product on several threads from 10 000
-    entries, whose spinning then takes a second core beside each PARDISO solve phase."""
-    return float(np.einsum("i,i->", a, b))
-
-
-def _norm(a: FloatArray) -> float:
-    """Euclidean norm without BLAS (see :func:`_dot`)."""
-    return float(np.sqrt(_dot(a, a)))
 
 
 @functools.cache
@@ -170,140 +152,6 @@ def rigid_body_modes(points: FloatArray) -> FloatArray:
     B[:, 1, 4], B[:, 2, 4] = -x[:, 2], x[:, 1]  # about x
     B[:, 0, 5], B[:, 2, 5] = x[:, 2], -x[:, 0]  # about y
     return B.reshape(3 * n, 6)
-
-
-class _Stop:
-    """The stopping rule of the Krylov loops of ``reuse`` for one right-hand side ``b``.
-
-    With ``measure="residual"`` the loop has converged when its residual norm is at most
-    ``target = reuse |b|``; with ``measure="step"`` when the held factorisation's solve of
-    the residual (an estimate of the error of ``x``, :meth:`reached`) is at most ``reuse |x|``.
-    It runs at most ``limit`` iterations, gives up early (:meth:`give_up`) and records in
-    ``iterations`` how many it ran.
-    """
-
-    def __init__(
-        self, b: FloatArray, reuse: float, limit: int, measure: Measure = "residual"
-    ) -> None:
-        self.first = _norm(b)
-        self.reuse = reuse
-        self.target = reuse * self.first
-        self.limit = limit
-        self.measure = measure
-        self.iterations = 0
-        self.norm = self.first  # the loop's residual norm when it last checked
-
-    def reached(self, norm: float, x: FloatArray, correction: FloatArray | None) -> bool:
-        """Whether ``x`` (residual norm ``norm``) is accurate enough.
-
-        ``correction`` is the held factorisation's solve of the residual, ``M⁻¹ r``: with a
-        preconditioner close to the matrix it is close to the error ``x* − x`` itself, so
-        ``|M⁻¹ r| <= reuse |x|`` bounds the relative error of the step (inexact Newton;
-        Dembo, Eisenstat & Steihaug 1982, SIAM J. Numer. Anal. 19:400).
-        """
-        self.norm = norm
-        if self.measure == "residual":
-            return norm <= self.target
-        return correction is not None and _norm(correction) <= self.reuse * _norm(x)
-
-    def accepted_residual(self) -> float:
-        """The largest true residual norm ``|b − K x|`` accepted once the loop has stopped:
-        ``target``, or with ``measure="step"`` also twice the loop's own last residual (its
-        recurrence drifts from the true one by rounding only)."""
-        return self.target if self.measure == "residual" else max(self.target, 2.0 * self.norm)
-
-    def give_up(self, k: int, norm: float) -> bool:
-        """Whether the loop stops at iteration ``k`` with residual ``norm`` (of ``first``).
-
-        From iteration ``_GIVE_UP_AFTER`` on: when the residual's mean rate of decrease so
-        far would not reach ``target`` within ``_GIVE_UP_SLACK`` times ``limit`` iterations
-        (CG speeds up as it goes, hence the slack). A factorisation gone stale shows in the
-        first iterations, and a failed attempt then costs a few solve phases.
-        """
-        if not np.isfinite(norm):
-            return True
-        if k < _GIVE_UP_AFTER:
-            return False
-        if norm >= self.first:
-            return True
-        limit = _GIVE_UP_SLACK * self.limit
-        return bool(k * np.log(self.target / self.first) < limit * np.log(norm / self.first))
-
-
-_Operator = Callable[[FloatArray], FloatArray]
-
-
-def _cg(apply: _Operator, precondition: _Operator, b: FloatArray, stop: _Stop) -> FloatArray | None:
-    """Preconditioned conjugate gradients from zero; None: not converged (or gave up)."""
-    x = np.zeros_like(b)
-    r = b.copy()
-    z = precondition(r)
-    p = z.copy()
-    rz = _dot(r, z)
-    for k in range(1, stop.limit + 1):
-        q = apply(p)
-        pq = _dot(p, q)
-        if not (np.isfinite(pq) and pq != 0.0 and np.isfinite(rz) and rz != 0.0):
-            return None  # a breakdown: singular or indefinite
-        alpha = rz / pq
-        x += alpha * p
-        r -= alpha * q
-        stop.iterations = k
-        norm = _norm(r)
-        if stop.measure == "residual" and stop.reached(norm, x, None):
-            return x
-        if stop.give_up(k, norm):
-            return None
-        z = precondition(r)
-        if stop.measure == "step" and stop.reached(norm, x, z):
-            return x
-        rz_new = _dot(r, z)
-        p = z + (rz_new / rz) * p
-        rz = rz_new
-    return None
-
-
-def _bicgstab(
-    apply: _Operator, precondition: _Operator, b: FloatArray, stop: _Stop
-) -> FloatArray | None:
-    """Right-preconditioned BiCGSTAB from zero; None: not converged (or gave up)."""
-    x = np.zeros_like(b)
-    r = b.copy()
-    shadow = b.copy()
-    p = np.zeros_like(b)
-    v = np.zeros_like(b)
-    rho_old = alpha = omega = 1.0
-    for k in range(1, stop.limit + 1):
-        rho = _dot(shadow, r)
-        if not (np.isfinite(rho) and rho != 0.0 and omega != 0.0):
-            return None  # a breakdown
-        p = r + (rho / rho_old) * (alpha / omega) * (p - omega * v)
-        p_hat = precondition(p)
-        v = apply(p_hat)
-        sv = _dot(shadow, v)
-        if not (np.isfinite(sv) and sv != 0.0):
-            return None
-        alpha = rho / sv
-        s = r - alpha * v
-        stop.iterations = k
-        if stop.measure == "residual" and stop.reached(_norm(s), x, None):
-            return x + alpha * p_hat
-        s_hat = precondition(s)
-        t = apply(s_hat)
-        tt = _dot(t, t)
-        if not (np.isfinite(tt) and tt != 0.0):
-            return None
-        omega = _dot(t, s) / tt
-        x += alpha * p_hat + omega * s_hat
-        r = s - omega * t
-        norm = _norm(r)
-        correction = precondition(r) if stop.measure == "step" else None
-        if stop.reached(norm, x, correction):
-            return x
-        if stop.give_up(k, norm):
-            return None
-        rho_old = rho
-    return None
 
 
 class LinearSolver:
@@ -567,12 +415,12 @@ class LinearSolver:
 
         # a breakdown (a singular or indefinite matrix) divides by zero: non-finite values,
         # caught below, not warnings
-        stop = _Stop(b, self.reuse, self.iteration_budget, self.reuse_measure)
+        stop = Stop(b, self.reuse, self.iteration_budget, self.reuse_measure)
         if stop.target == 0.0:
             return np.zeros_like(b)
         with np.errstate(all="ignore"):
             try:
-                x = (_cg if symmetric else _bicgstab)(apply, precondition, b, stop)
+                x = (cg if symmetric else bicgstab)(apply, precondition, b, stop)
             except (ConvergenceError, ArithmeticError):  # refused or overflowed: factorise
                 return None
             finally:
@@ -580,7 +428,7 @@ class LinearSolver:
             if x is None or not np.all(np.isfinite(x)):
                 return None
             # the true residual, not the loop's recurrence
-            if not _norm(b - apply(x)) <= stop.accepted_residual():
+            if not vector_norm(b - apply(x)) <= stop.accepted_residual():
                 return None
         return x
 
