@@ -167,7 +167,9 @@ def track_harp(
         displacement[t, acquired] = position[acquired] - X[acquired]
         wall[t] = _time.perf_counter() - start
 
-    out = _assemble(ds, X, displacement, epsilon, sweeps, wall, int(iterations))
+    frames = {"displacement": displacement, "epsilon": epsilon, "iterations": sweeps,
+              "wall_time": wall}  # fmt: skip
+    out = _assemble(ds, X, frames, int(iterations))
     lost = int(np.count_nonzero(valid0 & np.isnan(displacement[1:, :, 0]).any(axis=0)))
     out.attrs["points_lost"] = lost
     unseen = int(np.count_nonzero(~valid0))  # only given points: grid points are selected
@@ -390,14 +392,12 @@ def _symmetric_solver(
 
 
 def _assemble(
-    ds: xr.Dataset,
-    X: NDArray[np.float64],
-    displacement: NDArray[np.float64],
-    epsilon: NDArray[np.float64],
-    sweeps: NDArray[np.int64],
-    wall: NDArray[np.float64],
-    iterations: int,
+    ds: xr.Dataset, X: NDArray[np.float64], frames: dict[str, NDArray[Any]], iterations: int
 ) -> xr.Dataset:
+    """``tracked/1`` of points ``X`` with per-frame variables ``frames`` (standard names).
+
+    ``frames["displacement"]`` is ``(time, node, axis)``; every other entry is ``(time,)``.
+    """
     cells = xr.Variable(("cell", "vertex"), np.zeros((0, 0), np.int64), standard_attrs("cells"))
     cells.attrs["element"] = "points"
     attrs: dict[str, Any] = {
@@ -413,14 +413,14 @@ def _assemble(
         {
             "points": (("node", "axis"), X, standard_attrs("points")),
             "cells": cells,
-            "displacement": (
-                ("time", "node", "axis"),
-                displacement,
-                standard_attrs("displacement"),
-            ),
-            "epsilon": ("time", epsilon, standard_attrs("epsilon")),
-            "iterations": ("time", sweeps, standard_attrs("iterations")),
-            "wall_time": ("time", wall, standard_attrs("wall_time")),
+            **{
+                name: (
+                    ("time", "node", "axis") if values.ndim == 3 else "time",
+                    values,
+                    standard_attrs(name),
+                )
+                for name, values in frames.items()
+            },
         },
         coords={
             "axis": ("axis", list(AXES), standard_attrs("axis")),

@@ -163,17 +163,10 @@ def _outer(a: FloatArray, b: FloatArray) -> FloatArray:
 
 
 def right_cauchy_green(F: ArrayLike) -> FloatArray:
-    """Right Cauchy--Green tensor ``C = F^T F``.
+    """Right Cauchy--Green tensor ``C = F^T F`` (dimensionless, symmetric).
 
-    Parameters
-    ----------
-    F : array_like, shape (..., 3, 3)
-        Deformation gradients (dimensionless).
-
-    Returns
-    -------
-    ndarray, shape (..., 3, 3)
-        ``C`` (dimensionless, symmetric).
+    ``F`` holds deformation gradients of shape ``(..., 3, 3)`` as in :func:`cofactor`;
+    ``C`` has the same shape.
     """
     F = _as_tensor(F)
     return np.matmul(np.swapaxes(F, -1, -2), F)

@@ -11,30 +11,20 @@ Multipliers carry over from frame to frame as a warm start.
 from __future__ import annotations
 
 from harpx._typing import FloatArray
-from harpx.tracking.frame import FrameOutcome, FrameProblem
+from harpx.tracking.frame import FrameGoal, FrameOutcome, FrameProblem
 
 
-def track_frame_augmented(
-    problem: FrameProblem,
-    u: FloatArray,
-    *,
-    target: float,
-    penalty: float,
-    plateau: float | None = None,
-    warm: bool = False,
-) -> FrameOutcome:
+def track_frame_augmented(problem: FrameProblem, u: FloatArray, goal: FrameGoal) -> FrameOutcome:
     """Track one frame with the augmented-Lagrangian method.
 
     Parameters
     ----------
-    problem, u, target, plateau
+    problem, u
         As in :func:`~harpx.tracking.penalty.track_frame_penalty`; of the settings, this
         method also reads ``multiplier_tolerance`` and ``max_updates``.
-    penalty : float
-        Relative penalty λ (dimensionless).
-    warm : bool, default False
-        ``u`` is an earlier pass's result for this frame; accepted for the strategies' common
-        signature (this method has no ramp to skip: it starts at ``penalty`` anyway).
+    goal : FrameGoal
+        Target ε, the fixed relative penalty λ and the accepted plateau (``goal.warm`` is
+        part of the strategies' common goal; this method has no ramp to skip).
 
     Returns
     -------
@@ -43,14 +33,14 @@ def track_frame_augmented(
     settings = problem.settings
     constraint = problem.constraint
     scale = constraint.penalty_scale()
-    lam = float(penalty)
+    lam = float(goal.penalty)
     outcome = FrameOutcome.start(u)
     best = float("inf")
     while True:
         constraint.penalty = lam * scale
         for _ in range(settings.max_updates):  # max_updates ≥ 1 (TrackingSettings)
             outcome.add(problem.solve(outcome.u, settings.max_iterations, outcome.last), lam, True)
-            if outcome.epsilon <= target:
+            if outcome.epsilon <= goal.target:
                 return outcome.finish(reached=True)
             assert outcome.state is not None  # set by add()
             change = constraint.update_multipliers(outcome.state)
@@ -58,6 +48,6 @@ def track_frame_augmented(
                 break
         stall = settings.tuning.stall
         if 2.0 * lam > settings.penalty_limit or outcome.epsilon > (1.0 - stall) * best:
-            return outcome.finish_raise(best, stall, target if plateau is None else plateau)
+            return outcome.finish_raise(best, stall, goal.accepted)
         best = min(best, outcome.epsilon)
         lam *= 2.0

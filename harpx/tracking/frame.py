@@ -4,7 +4,8 @@ The penalty (:mod:`harpx.tracking.penalty`) and augmented-Lagrangian
 (:mod:`harpx.tracking.augmented`) strategies differ only in how they set the penalty and
 the multipliers between equilibrium solves; everything else — the body, the constraint
 targeted at the frame, the loads, the linear solver, the settings and the timings — is the
-:class:`FrameProblem` they share, and each returns a :class:`FrameOutcome`.
+:class:`FrameProblem` they share; each aims at a :class:`FrameGoal` and returns a
+:class:`FrameOutcome`.
 """
 
 from __future__ import annotations
@@ -73,6 +74,37 @@ class FrameProblem:
             offset=self.offset, timings=self.timings, start=start, tuning=self.settings.tuning,
             executor=self.executor,
         )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class FrameGoal:
+    """What a strategy aims at in one frame, and the penalty it starts from.
+
+    Attributes
+    ----------
+    target : float
+        Tracking residual ε to reach, rad.
+    penalty : float
+        Relative penalty to start from (dimensionless; see
+        :mod:`harpx.tracking.constraint`): λ_max at the top of the penalty method's ramp,
+        the fixed λ of the augmented-Lagrangian method.
+    plateau : float, optional
+        Highest ε at which a levelled-off penalty raise counts as reached, rad (default: the
+        target; :meth:`~harpx.tracking.settings.TrackingSettings.accepted_plateau`).
+    warm : bool, default False
+        The starting displacement is an earlier pass's result for this frame: the penalty
+        method starts at the top of its ramp (the augmented-Lagrangian method has no ramp).
+    """
+
+    target: float
+    penalty: float
+    plateau: float | None = None
+    warm: bool = False
+
+    @property
+    def accepted(self) -> float:
+        """Highest ε at which a levelled-off raise counts as reached, rad."""
+        return self.target if self.plateau is None else self.plateau
 
 
 @dataclass

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from harpx._typing import FloatArray
-from harpx.tracking.frame import FrameOutcome, FrameProblem
+from harpx.tracking.frame import FrameGoal, FrameOutcome, FrameProblem
 
 
 def phase_step(constraint: Any, u: FloatArray, v: FloatArray) -> float:
@@ -41,15 +41,7 @@ def phase_step(constraint: Any, u: FloatArray, v: FloatArray) -> float:
     return float(cycles[constraint.reference_valid].max(initial=0.0))
 
 
-def track_frame_penalty(
-    problem: FrameProblem,
-    u: FloatArray,
-    *,
-    target: float,
-    penalty: float,
-    plateau: float | None = None,
-    warm: bool = False,
-) -> FrameOutcome:
+def track_frame_penalty(problem: FrameProblem, u: FloatArray, goal: FrameGoal) -> FrameOutcome:
     """Track one frame with the penalty method.
 
     Parameters
@@ -58,13 +50,9 @@ def track_frame_penalty(
         Body, constraint (targeted at the frame), loads, solver and settings.
     u : ndarray, shape (ndof,)
         Starting displacement, mm.
-    target : float
-        Tracking residual ε to reach, rad.
-    penalty : float
-        Relative λ_max at the top of the ramp (dimensionless).
-    plateau : float, optional
-        Highest ε at which a levelled-off raise counts as reached, rad (default: the target;
-        :meth:`TrackingSettings.accepted_plateau`).
+    goal : FrameGoal
+        Target ε, relative λ_max at the top of the ramp, accepted plateau, and whether ``u``
+        is an earlier pass's result (then the ramp is skipped).
 
     Returns
     -------
@@ -77,9 +65,9 @@ def track_frame_penalty(
     scale = constraint.penalty_scale()
     constraint.multipliers[:] = 0.0
     outcome = FrameOutcome.start(u)
-    lam_max = float(penalty)
+    lam_max = float(goal.penalty)
     ramp = settings.ramp
-    levels = [lam_max] if warm else list(lam_max * np.arange(1, ramp + 1) / ramp)
+    levels = [lam_max] if goal.warm else list(lam_max * np.arange(1, ramp + 1) / ramp)
     best = np.inf
     before: FrameOutcome | None = None  # the converged fit a doubling starts from
     while True:
@@ -103,12 +91,12 @@ def track_frame_penalty(
                 # the doubling relocated the body across a wrap: keep the fit before it
                 kept = replace(before, iterations=outcome.iterations, stages=outcome.stages)
                 return kept.finish(reached=False)
-            if outcome.epsilon <= target:
+            if outcome.epsilon <= goal.target:
                 return outcome.finish(reached=True)
         stall = settings.tuning.stall
         if 2.0 * lam_max > settings.penalty_limit or outcome.epsilon > (1.0 - stall) * best:
             # the limit, or the data's noise floor: doubling λ no longer lowers ε
-            return outcome.finish_raise(best, stall, target if plateau is None else plateau)
+            return outcome.finish_raise(best, stall, goal.accepted)
         best = min(best, outcome.epsilon)
         before = replace(outcome)
         lam_max *= 2.0

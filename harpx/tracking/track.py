@@ -33,7 +33,7 @@ from harpx.tracking.augmented import track_frame_augmented
 from harpx.tracking.blur import blur_models, lazily_deblurred
 from harpx.tracking.constraint import PhaseConstraint
 from harpx.tracking.equilibrium import Timings, split_dirichlet
-from harpx.tracking.frame import FrameOutcome, FrameProblem
+from harpx.tracking.frame import FrameGoal, FrameOutcome, FrameProblem
 from harpx.tracking.image_fit import check_coverage, check_fits_image
 from harpx.tracking.observability import describe_direction
 from harpx.tracking.penalty import track_frame_penalty
@@ -457,21 +457,19 @@ def _track_frames(
         out.floor[n] = constraint.epsilon_floor(u0)
         out.target[n] = settings.target(out.floor[n])
         timings.prediction += _time.perf_counter() - clock
-        plateau = settings.accepted_plateau(out.floor[n])
+        goal = FrameGoal(
+            target=float(out.target[n]), penalty=lam,
+            plateau=settings.accepted_plateau(out.floor[n]), warm=earlier is not None,
+        )  # fmt: skip
         if relaxed is not None:
             loose_problem = replace(problem, settings=relaxed)  # this frame's offset included
-            outcome: FrameOutcome = strategy(
-                loose_problem, u0, target=out.target[n], penalty=lam, plateau=plateau
-            )
+            outcome: FrameOutcome = strategy(loose_problem, u0, goal)
             spent = outcome.iterations
             if not outcome.reached:  # kept by the later passes: at the full tolerance
-                outcome = strategy(problem, u0, target=out.target[n], penalty=lam, plateau=plateau)
+                outcome = strategy(problem, u0, goal)
                 outcome.iterations += spent
         else:
-            outcome = strategy(
-                problem, u0, target=out.target[n], penalty=lam, plateau=plateau,
-                warm=earlier is not None,
-            )  # fmt: skip
+            outcome = strategy(problem, u0, goal)
         if not np.isfinite(outcome.epsilon) or outcome.state is None:
             where = explain_missing_data(phase, constraint.current_points(u0), n)
             raise SchemaError(

@@ -11,7 +11,7 @@ from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import box
 from harpx.tracking.constraint import PhaseConstraint
 from harpx.tracking.equilibrium import EquilibriumResult
-from harpx.tracking.frame import FrameProblem
+from harpx.tracking.frame import FrameGoal, FrameProblem
 from harpx.tracking.settings import SolverTuning, TrackingSettings
 from tests._helpers import still
 from tests._ideal import ideal_phase
@@ -194,7 +194,7 @@ def test_penalty_ramps_then_doubles_until_the_target():
     from harpx.tracking.penalty import track_frame_penalty
 
     problem = _Scripted([0.5, 0.3, 0.2, 0.09], TrackingSettings(ramp=2, penalty_limit=100.0))
-    out = track_frame_penalty(problem, np.zeros(3), target=0.1, penalty=4.0)
+    out = track_frame_penalty(problem, np.zeros(3), FrameGoal(target=0.1, penalty=4.0))
     # ramp 2 → 4, then doubled 8 → 16 while each doubling lowers ε by > 3 %
     assert problem.penalties == [2.0, 4.0, 8.0, 16.0]
     assert out.reached and out.penalty == 16.0 and out.stages == 4 and out.epsilon == 0.09
@@ -205,7 +205,7 @@ def test_a_warm_frame_starts_at_the_top_of_the_ramp():
 
     # an earlier pass's result: no relaxed stage, straight to λ_max, then the usual doubling
     problem = _Scripted([0.3, 0.09], TrackingSettings(ramp=2, penalty_limit=100.0))
-    out = track_frame_penalty(problem, np.zeros(3), target=0.1, penalty=4.0, warm=True)
+    out = track_frame_penalty(problem, np.zeros(3), FrameGoal(target=0.1, penalty=4.0, warm=True))
     assert problem.penalties == [4.0, 8.0]
     assert out.reached and out.stages == 2
 
@@ -215,7 +215,7 @@ def test_penalty_stops_raising_at_the_noise_floor():
 
     stalled = 0.2 * (1.0 - SolverTuning().stall / 2)  # lowers ε by less than the stall margin
     problem = _Scripted([0.3, 0.2, stalled], TrackingSettings(ramp=1, penalty_limit=100.0))
-    out = track_frame_penalty(problem, np.zeros(3), target=0.1, penalty=1.0)
+    out = track_frame_penalty(problem, np.zeros(3), FrameGoal(target=0.1, penalty=1.0))
     assert problem.penalties == [1.0, 2.0, 4.0]
     assert not out.reached and out.stalled
 
@@ -224,7 +224,7 @@ def test_penalty_stops_at_its_limit():
     from harpx.tracking.penalty import track_frame_penalty
 
     problem = _Scripted([0.5, 0.4, 0.3], TrackingSettings(ramp=1, penalty=1.0, penalty_limit=4.0))
-    out = track_frame_penalty(problem, np.zeros(3), target=0.1, penalty=1.0)
+    out = track_frame_penalty(problem, np.zeros(3), FrameGoal(target=0.1, penalty=1.0))
     assert problem.penalties == [1.0, 2.0, 4.0]
     assert not out.reached and not out.stalled and out.penalty == 4.0
 
@@ -244,7 +244,7 @@ def test_a_doubling_that_drags_the_body_across_a_wrap_ends_the_frame_as_a_miss(m
 
     settings = TrackingSettings(ramp=1, penalty_limit=100.0)
     problem = _Scripted([0.5, 0.3, 0.2, 0.09], settings, moves=moves)
-    out = track_frame_penalty(problem, np.zeros(3), target=0.1, penalty=1.0)
+    out = track_frame_penalty(problem, np.zeros(3), FrameGoal(target=0.1, penalty=1.0))
     if relocated:
         assert problem.penalties == [1.0, 2.0, 4.0]  # no doubling after the relocation
         assert not out.reached and not out.plateau and out.penalty == 2.0
@@ -260,7 +260,7 @@ def test_augmented_lagrangian_updates_multipliers_then_raises_the_penalty():
 
     settings = TrackingSettings(method="augmented-lagrangian", max_updates=2, penalty_limit=10.0)
     problem = _Scripted([0.5, 0.4, 0.3, 0.05], settings)
-    out = track_frame_augmented(problem, np.zeros(3), target=0.1, penalty=2.0)
+    out = track_frame_augmented(problem, np.zeros(3), FrameGoal(target=0.1, penalty=2.0))
     # two updates at λ = 2 (Λ += 2 r each), then λ doubled
     assert problem.penalties == [2.0, 2.0, 4.0, 4.0]
     assert problem.constraint.multipliers[0, 0] == pytest.approx(2.0 + 2.0 + 4.0)

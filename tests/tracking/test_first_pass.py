@@ -70,10 +70,10 @@ def test_a_frame_the_loose_first_pass_misses_is_tracked_again_at_tolerance(scene
     strategy = track_module.STRATEGIES["penalty"]
     calls: list[tuple[int, float, bool]] = []
 
-    def spy(problem, u, **kwargs):
-        outcome = strategy(problem, u, **kwargs)
+    def spy(problem, u, goal):
+        outcome = strategy(problem, u, goal)
         frame, tolerance = problem.constraint.frame, float(problem.settings.tolerance)
-        calls.append((frame, tolerance, bool(kwargs.get("warm", False))))
+        calls.append((frame, tolerance, goal.warm))
         if frame == 2 and tolerance > 0.01:  # the loose solve of frame 2 misses
             outcome.reached = False
         return outcome
