@@ -368,13 +368,15 @@ def _check_time(ds: xr.Dataset, problems: list[str]) -> None:
         problems.append("coordinate 'time' is not strictly increasing; sort with ds.sortby('time')")
 
 
-def grid_step(ds: xr.Dataset, dim: str) -> float | None:
+def grid_step(ds: xr.Dataset | xr.DataArray, dim: str) -> float | None:
     """Mean step of a grid coordinate, mm (or the coordinate's unit).
+
+    The one place harpx reads a grid's voxel spacing from its coordinates.
 
     Parameters
     ----------
-    ds : xarray.Dataset
-        A dataset with the coordinate ``dim`` (e.g. ``"x"``).
+    ds : xarray.Dataset or xarray.DataArray
+        Data with the coordinate ``dim`` (e.g. ``"x"``).
     dim : str
         The grid dimension.
 

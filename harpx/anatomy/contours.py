@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike
 from harpx._typing import FloatArray, IntArray
 from harpx.anatomy.ventricle_template import VentricleTemplate
 from harpx.io.labels import read_labels
+from harpx.schema import grid_step
 
 __all__ = ["ventricle_contours"]
 
@@ -108,7 +109,7 @@ def _padded_along(f: FloatArray, da: Any, slice_axis: str) -> tuple[FloatArray, 
     normal = ("z", "y", "x").index(slice_axis)
     coords = [np.asarray(da[d].values, dtype=np.float64) for d in ("z", "y", "x")]
     c = coords[normal]
-    step = c[1] - c[0] if c.size > 1 else 1.0
+    step = grid_step(da, slice_axis) or 1.0
     coords[normal] = np.concatenate([[c[0] - step], c, [c[-1] + step]])
     pad = [(0, 0)] * 3
     pad[normal] = (1, 1)

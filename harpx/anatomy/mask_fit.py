@@ -74,6 +74,7 @@ from harpx.anatomy.ventricle_template import (
 )
 from harpx.errors import HarpxError, HarpxWarning
 from harpx.io.labels import read_labels
+from harpx.schema import grid_step
 
 __all__ = ["VentricleFitError", "VentricleFitWarning", "fit_ventricle_to_mask"]
 
@@ -158,7 +159,7 @@ def _read_lax(
         coords = []
         for d in ("z", "y", "x"):
             c = np.asarray(da[d].values, dtype=np.float64)
-            step = c[1] - c[0] if c.size > 1 else 1.0
+            step = grid_step(da, d) or 1.0
             coords.append(np.concatenate([[c[0] - step], c, [c[-1] + step]]))
         tissue = np.argwhere(f >= 0.5)
         if len(tissue) < 10:

@@ -23,7 +23,7 @@ import xarray as xr
 from numpy.typing import ArrayLike
 
 from harpx.imaging._kernels import wrap
-from harpx.schema import AXES, GRID_DIMS
+from harpx.schema import AXES, GRID_DIMS, grid_step
 
 __all__ = ["explain_missing_data", "phase_direction_mismatch"]
 
@@ -78,7 +78,7 @@ def explain_missing_data(phase: xr.Dataset, points: ArrayLike, time_index: int =
     low, high = [], []
     for axis in AXES:
         values = np.asarray(phase[axis].values, dtype=np.float64)
-        half = 0.5 * float(values[1] - values[0]) if values.size > 1 else 0.5
+        half = 0.5 * (grid_step(phase, axis) or 1.0)
         low.append(values[0] - half)
         high.append(values[-1] + half)
     inside = np.all((pts >= np.array(low)) & (pts <= np.array(high)), axis=1)
@@ -177,7 +177,7 @@ def phase_direction_mismatch(phase: xr.Dataset, time_index: int = 0) -> str:
         for g, dim in enumerate(GRID_DIMS):
             if values.shape[g] < 2:
                 continue
-            step = float(phase[dim].values[1] - phase[dim].values[0])
+            step = grid_step(phase, dim) or 1.0  # at least two planes here
             wrapped = wrap(np.diff(values, axis=g))
             keep = (
                 np.ones(wrapped.shape, bool)

@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 from harpx._blas import matmul_one_thread
 from harpx.errors import HarpxWarning, SchemaError
 from harpx.imaging.sample import PhaseSampler, wrap
-from harpx.schema import AXES, GRID_DIMS, newer_schema, standard_attrs, validate
+from harpx.schema import AXES, GRID_DIMS, grid_step, newer_schema, standard_attrs, validate
 
 __all__ = ["track_harp"]
 
@@ -293,12 +293,7 @@ def _tag_basis(wavevectors: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def _voxel_size(ds: xr.Dataset) -> NDArray[np.float64]:
     """Grid spacing along (x, y, z) in mm (inf along an axis with a single sample)."""
-    size = np.full(3, np.inf)
-    for column, name in enumerate(AXES):
-        values = np.asarray(ds[name].values, np.float64)
-        if values.size > 1:
-            size[column] = (values[-1] - values[0]) / (values.size - 1)
-    return size
+    return np.array([grid_step(ds, name) or np.inf for name in AXES])
 
 
 def _track_frame(

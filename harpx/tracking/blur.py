@@ -86,7 +86,7 @@ from harpx.imaging.fft import inplace_plans
 from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.imaging.sample import wrap
 from harpx.mechanics.locate import interpolation_matrix
-from harpx.schema import GRID_DIMS
+from harpx.schema import GRID_DIMS, grid_step
 
 #: Splatted signal below this fraction of its largest modulus counts as outside the tissue.
 SIGNAL_FLOOR = 1e-3
@@ -233,8 +233,7 @@ def blur_models(phase: xr.Dataset, model: str = "slice-profile") -> list[str]:
 
 def _grid_spacing(phase: xr.Dataset) -> FloatArray:
     """Voxel spacing (z, y, x) of the phase grid, mm (1 along a single-voxel axis)."""
-    coords = [np.asarray(phase[d].values, dtype=np.float64) for d in GRID_DIMS]
-    return np.array([c[1] - c[0] if c.size > 1 else 1.0 for c in coords])
+    return np.array([grid_step(phase, d) or 1.0 for d in GRID_DIMS])
 
 
 def _slab(phase: xr.Dataset, t: int, spacing: FloatArray) -> tuple[float, FloatArray] | None:

@@ -54,6 +54,7 @@ from harpx._typing import FloatArray, IntArray
 from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.imaging.sample import PhaseSampler, wrap
 from harpx.mechanics.assembly import sparsity
+from harpx.schema import GRID_DIMS, grid_step
 from harpx.tracking.noise import epsilon_floor, noise_floor, reference_residual
 from harpx.tracking.observability import Observability, observability
 
@@ -264,10 +265,8 @@ class PhaseConstraint:
         self.phase = phase
         # the acquired voxel: grid spacing times the upsampling factor of the phase images
         upsample = PhaseParameters.from_dataset(phase).upsample
-        spacing = upsample * float(
-            min(
-                abs(float(phase[d][1] - phase[d][0])) for d in ("z", "y", "x") if phase.sizes[d] > 1
-            )
+        spacing = upsample * min(
+            abs(step) for step in (grid_step(phase, d) for d in GRID_DIMS) if step is not None
         )
         element = body.scalar_element
         if intorder is None:

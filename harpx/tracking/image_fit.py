@@ -21,7 +21,7 @@ from harpx.errors import HarpxWarning, SchemaError
 from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.mechanics.body import Body
 from harpx.mechanics.cells import _VTK_TET_EDGES
-from harpx.schema import AXES, GRID_DIMS
+from harpx.schema import AXES, GRID_DIMS, grid_step
 
 __all__ = ["OUTSIDE_WARN", "check_coverage", "check_fits_image"]
 
@@ -111,7 +111,7 @@ def check_fits_image(body: Body, grid: Any, *, max_points: int = 10_000_000) -> 
         values = np.asarray(grid[axis].values, dtype=np.float64)
         if values.size == 0 or not np.all(np.isfinite(values)):
             raise SchemaError(f"grid coordinate {axis!r} is empty or not finite")
-        d = float((values[-1] - values[0]) / (values.size - 1)) if values.size > 1 else 0.0
+        d = grid_step(grid, axis) or 0.0
         low.append(values[0] - d / 2)
         high.append(values[-1] + d / 2)
         if values.size > 1:

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from harpx._typing import BoolArray, FloatArray, IntArray
 from harpx.imaging.noise import MAD_GAUSS, MAX_TAG_LEAK, band_share, harmonic_noise_block
 from harpx.imaging.phase_parameters import PhaseParameters
-from harpx.schema import AXES, GRID_DIMS, validate
+from harpx.schema import AXES, GRID_DIMS, grid_step, validate
 from harpx.tracking.results import acquired_grid
 
 __all__ = ["BACKGROUND", "SIGNIFICANCE", "ImageNoise", "image_noise"]
@@ -220,7 +220,7 @@ def image_noise(phase: xr.Dataset, tagged: xr.Dataset | None = None) -> ImageNoi
     grid = tagged if tagged is not None else acquired_grid(phase)
     coords = [np.asarray(grid[d].values, dtype=np.float64) for d in GRID_DIMS]
     shape = tuple(c.size for c in coords)
-    spacing = np.array([c[1] - c[0] if c.size > 1 else 1.0 for c in coords])
+    spacing = np.array([grid_step(grid, d) or 1.0 for d in GRID_DIMS])
     params = PhaseParameters.from_dataset(phase)
     radius = params.radius
     sigma_h = _harmonic_noise(phase)
