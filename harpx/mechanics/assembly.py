@@ -555,8 +555,10 @@ def internal_forces(
     A: FloatArray | None = None
     fac: kernel.TangentFactors | None = None
     with np.errstate(over="ignore", invalid="ignore"):  # checked just below
-        if factored:
+        if factored and tangent:
             P, fac = body.material.isochoric_factors(F, body.fibers_qp, det_cof=(Jq, cof))
+        elif factored:
+            P = body.material.isochoric_stress(F, body.fibers_qp, det_cof=(Jq, cof))
         else:
             P, A = material_response(body, F, tangent=tangent)
         p, cof, J, extra = _volumetric(body, F, (Jq, cof))

@@ -233,6 +233,25 @@ class _Uncoupled:
         """
         return self._factors(_as_tensor(F), fiber, det_cof)
 
+    def isochoric_stress(
+        self,
+        F: ArrayLike,
+        fiber: ArrayLike | None = None,
+        *,
+        det_cof: tuple[FloatArray, FloatArray] | None = None,
+    ) -> FloatArray:
+        """Stress ``dWbar/dF`` (kPa, shape (..., 3, 3)) without the tangent's factors.
+
+        The first output of :meth:`isochoric_factors`, for a residual alone (a line-search
+        or fold check); arguments and errors as there.
+        """
+        return self._stress(_as_tensor(F), fiber, det_cof)
+
+    def _stress(
+        self, F: FloatArray, fiber: ArrayLike | None, det_cof: tuple[FloatArray, FloatArray] | None
+    ) -> FloatArray:
+        return self._factors(F, fiber, det_cof)[0]
+
     def _factors(
         self, F: FloatArray, fiber: ArrayLike | None, det_cof: tuple[FloatArray, FloatArray] | None
     ) -> tuple[FloatArray, TangentFactors]:
@@ -485,21 +504,32 @@ class Guccione(_Uncoupled):
         S = (j * j)[..., None, None] * Sbar
         return P, TangentFactors(Y=Y, Z=Z, s=np.zeros_like(j), c=pbar / 3.0, H=H, h_index=8, S=S)
 
-    def _tangent_parts(self, F: FloatArray, fiber: ArrayLike | None) -> tuple[FloatArray, ...]:
-        """Stress and the pieces of the tangent (module docstring):
-        ``(P, K, MK, pbar, Hbar, Sbar, j, H)`` with ``K`` and ``MK`` of shape (..., 9, 3, 3)."""
+    def _stress(
+        self, F: FloatArray, fiber: ArrayLike | None, det_cof: tuple[FloatArray, FloatArray] | None
+    ) -> FloatArray:
+        """Stress alone (``det_cof`` is recomputed in the local basis)."""
+        return self._stress_parts(F, fiber)[0]
+
+    def _stress_parts(self, F: FloatArray, fiber: ArrayLike | None) -> tuple[FloatArray, ...]:
+        """``(P, Pbar, pbar, Hbar, j, J, cof, R, G, Ct, sig, psi)`` (module docstring)."""
         F, J, cof, R, G, Ct, Q = self._local(F, fiber)
-        batch = J.shape
-        B = self._weights()
-        sig = 0.5 * B * (Ct - np.eye(3))
+        sig = 0.5 * self._weights() * (Ct - np.eye(3))
         j = J ** (-1.0 / 3.0)
         psi = self.c * np.exp(Q)
         Hbar = cof / (J * j)[..., None, None]
-        RT = np.swapaxes(R, -1, -2)
-        Pbar = psi[..., None, None] * np.matmul(np.matmul(G, sig), RT)
-        Sbar = psi[..., None, None] * np.matmul(np.matmul(R, sig), RT)
+        Pbar = psi[..., None, None] * np.matmul(np.matmul(G, sig), np.swapaxes(R, -1, -2))
         pbar = psi * np.einsum("...ab,...ab->...", Ct, sig)  # Pbar : Fbar
         P = j[..., None, None] * (Pbar - (pbar / 3.0)[..., None, None] * Hbar)
+        return P, Pbar, pbar, Hbar, j, J, cof, R, G, Ct, sig, psi
+
+    def _tangent_parts(self, F: FloatArray, fiber: ArrayLike | None) -> tuple[FloatArray, ...]:
+        """Stress and the pieces of the tangent (module docstring):
+        ``(P, K, MK, pbar, Hbar, Sbar, j, H)`` with ``K`` and ``MK`` of shape (..., 9, 3, 3)."""
+        P, Pbar, pbar, Hbar, j, J, cof, R, G, Ct, sig, psi = self._stress_parts(F, fiber)
+        batch = J.shape
+        B = self._weights()
+        RT = np.swapaxes(R, -1, -2)
+        Sbar = psi[..., None, None] * np.matmul(np.matmul(R, sig), RT)
         # low-rank form of the tangent (module docstring): A = j^2 [K^T M K + ...]
         X = np.swapaxes(G, -1, -2)[..., :, None, :, None] * RT[..., None, :, None, :]
         K = np.empty(batch + (9, 3, 3))

@@ -31,6 +31,8 @@ def _random_body(rng, element, case, volumetric="mean-dilatation"):
     fibers = rng.standard_normal((spec.mesh.nelements, 3))
     kw: dict = {}
     mat = NEO
+    if case == "guccione":  # factored tangent; the residual from the stress-only path
+        mat = GUC
     if case in ("active", "active+growth"):
         mat = GUC
         kw["active"] = ActiveContraction(t_max=20.0)  # calcium law, length dependent
@@ -54,6 +56,8 @@ CASES = [
     pytest.param("hex20", "plain", "mean-dilatation", id="hex20"),
     pytest.param("hex8", "plain", "pointwise", id="hex8-pointwise"),
     pytest.param("hex20", "plain", "pointwise", id="hex20-pointwise"),
+    pytest.param("hex8", "guccione", "mean-dilatation", id="hex8-guccione"),
+    pytest.param("hex20", "guccione", "pointwise", id="hex20-guccione-pointwise"),
     pytest.param("hex8", "active", "mean-dilatation", id="hex8-guccione-active"),
     pytest.param("hex20", "active", "mean-dilatation", id="hex20-guccione-active"),
     pytest.param("hex8", "growth", "mean-dilatation", id="hex8-growth"),
