@@ -17,7 +17,7 @@ that term the next step restores the volume; the residual, hence the solution, i
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass, field
 from typing import Any
@@ -117,15 +117,6 @@ def _remaining(steps: list[float], fast: float = SolverTuning().fast) -> float:
     return rate * steps[-1] / (1.0 - rate) if rate < fast else float("inf")
 
 
-def _converges(step: float, full: bool, steps: list[float], tolerance: float, fast: float) -> bool:
-    """Whether an increment of ``step`` mm after ``steps`` ends a solve at ``tolerance``.
-
-    Below the tolerance, or a ``full`` step (neither clipped by the trust radius, damped nor
-    halved) after which :func:`_remaining` bounds the distance still to go below it.
-    """
-    return step < tolerance or (full and _remaining([*steps, step], fast) < tolerance)
-
-
 def _admissible_step(
     body: Any,
     constraint: PhaseConstraint,
@@ -137,23 +128,19 @@ def _admissible_step(
     iteration: int,
     history: list[float],
     executor: Executor | None = None,
-    final: Callable[[float], bool] = lambda alpha: False,
 ) -> tuple[FloatArray, Any, float, Future[ConstraintState] | None]:
     """The step ``u + alpha du``, halved until no element inverts.
 
     With an ``executor`` the constraint state at the first trial is sampled on it while the
     internal forces are assembled here (image sampling and assembly do not depend on each
-    other); its future is returned when that trial is taken, else None. A trial whose step
-    ends the solve (``final(alpha)``) gets the internal force without the tangent.
+    other); its future is returned when that trial is taken, else None.
     """
     for halving in range(max_halvings + 1):
         trial = u + alpha * du
         if seen is not None:
             trial = seen.remove_unseen(trial)
         pending = executor.submit(constraint.state, trial) if executor and not halving else None
-        internal_trial = internal_forces(
-            body, trial, tangent=not final(alpha), pressure_stiffness=False
-        )
+        internal_trial = internal_forces(body, trial, pressure_stiffness=False)
         if internal_trial.r is not None:
             return trial, internal_trial, alpha, pending
         if pending is not None and not pending.cancel():
@@ -268,10 +255,6 @@ def equilibrate(
     if start is not None and start.internal is not None and np.array_equal(start.u, u):
         result = EquilibriumResult(u, start.state, 0)
         internal = start.internal
-        if internal.K is None:  # the earlier solve ended here without the tangent
-            tic = time.perf_counter()
-            internal = internal_forces(body, u, pressure_stiffness=False)
-            clock.assembly += time.perf_counter() - tic
     else:
         tic = time.perf_counter()
         pending = executor.submit(constraint.state, u) if executor is not None else None
@@ -323,16 +306,9 @@ def equilibrate(
             # are what carry a point past a wrap into the right tag basin)
             damping *= 0.5
         alpha *= damping
-
-        def final(a: float, largest: float = largest, iteration: int = iteration) -> bool:
-            """Whether a step of ``a`` du ends the solve (converged, or the last iteration)."""
-            return iteration == max_iterations or _converges(
-                a * largest, a == 1.0, result.step_norms, tolerance, tune.fast
-            )
-
         trial, internal_trial, alpha, pending = _admissible_step(
             body, constraint, u, du, alpha, seen, max_halvings, iteration, result.step_norms,
-            executor, final,
+            executor,
         )  # fmt: skip
         clock.assembly += time.perf_counter() - tic
         tic = time.perf_counter()
@@ -340,13 +316,12 @@ def equilibrate(
         clock.sampling += time.perf_counter() - tic
         u = trial
         internal = internal_trial
-        converged = _converges(
-            alpha * largest, alpha == 1.0, result.step_norms, tolerance, tune.fast
-        )
-        result.step_norms.append(alpha * largest)
+        step = float(np.abs(alpha * du).max())
+        full = alpha == 1.0  # neither clipped by the trust radius, damped nor halved
+        result.step_norms.append(step)
         result.iterations = iteration
         result.state = state_trial
-        if converged:
+        if step < tolerance or (full and _remaining(result.step_norms, tune.fast) < tolerance):
             result.converged = True
             break
     result.u = u
