@@ -380,7 +380,7 @@ class PhaseSampler:
         return buffer
 
     def _remodulate(
-        self, pts: NDArray[np.float64], re: NDArray[np.float64], im: NDArray[np.float64]
+        self, pts: NDArray[np.float64], re: NDArray[np.floating], im: NDArray[np.floating]
     ) -> Any:
         """W(arg D + k·x) (n, ntag) from Re and Im of D (ntag, n), with the slice position
         along invariant axes."""
@@ -393,8 +393,8 @@ class PhaseSampler:
 
     def _evaluate(
         self, pts: NDArray[np.float64], *, derivatives: bool
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
-        """Spline values (nq, 2 ntag, n): Re then Im of D and of its derivative along each
+    ) -> tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.bool_]]:
+        """Spline values (nq, 2 ntag, n), in the coefficients' precision: Re then Im of D and of its derivative along each
         active axis (per voxel); ``|D|`` (ntag, n); validity per tag (n, ntag)."""
         n = pts.shape[0]
         d = len(self._active)
@@ -436,25 +436,114 @@ class PhaseSampler:
             tag_ok[inside] = self._mask[(slice(None), *nearest)].T
         return u, tag_ok
 
-    def _spline(self, u: NDArray[np.float64], nq: int) -> NDArray[np.float64]:
+    def _spline(self, u: NDArray[np.float64], nq: int) -> NDArray[np.floating]:
         """Spline value (q=0) and derivatives along each active axis (q=1..d) at ``u``.
 
         Returns shape (nq, channels, n): one contiguous row per quantity and channel, so that
         the per-point algebra downstream runs on contiguous rows (on (n, 3) slices of an
         (n, nq, channels) array numpy's inner loops are 3 long, several times slower).
         """
+        runs, first, frac, offsets = self._taps(u)
+        if self.order == 1:
+            return self._linear(runs, first, frac, offsets, nq)
+        padded = self._padded
+        assert padded is not None  # checked by _taps
         taps = self.order + 1
         d = u.shape[1]
+        nf = padded.shape[-1]
+        # sort by voxel so gathers walk memory in order
+        order = np.argsort(first, kind="stable")
+        n = u.shape[0]
+        # rows (q, channel), columns in the sorted order; in the coefficients' precision
+        ordered = np.empty((nq * nf, n), dtype=padded.dtype)
+        # separable contraction: the leading axes with their tensor-product weights (value,
+        # and the derivative along each leading axis), then the last axis (value weights for
+        # those, slope weights for the derivative along it)
+        lead = d if nq > 1 else 1
+        for s in range(0, u.shape[0], self.chunk_size):
+            chunk = order[s : s + self.chunk_size]
+            m = chunk.size
+            weights = _weights(frac[chunk], self.order)
+            gathered = runs[first[chunk, None] + offsets]  # (m, taps**(d-1)) runs
+            gathered = gathered.view(padded.dtype).reshape(m, taps ** (d - 1), taps * nf)
+            if d > 1:
+                head = np.matmul(_tensor_weights(weights[:, :-1], lead), gathered)
+            else:
+                head = gathered  # (m, 1, taps * nf)
+            # (m, lead, taps, nf) -> (m, taps, lead * nf): the last axis's taps as rows
+            rows = head.reshape(m, lead, taps, nf).transpose(0, 2, 1, 3).reshape(m, taps, -1)
+            last = np.matmul(weights[:, -1, : 1 if nq == 1 else 2], rows)  # (m, 1|2, lead*nf)
+            ordered[: lead * nf, s : s + m] = last[:, 0].T
+            if nq > 1:
+                ordered[lead * nf :, s : s + m] = last[:, 1, :nf].T
+        rank = np.empty_like(order)  # back to the points' own order
+        rank[order] = np.arange(n)
+        return np.take(ordered, rank, axis=1).reshape(nq, nf, n)
+
+    def _linear(
+        self,
+        runs: NDArray[np.void],
+        first: NDArray[np.int64],
+        frac: NDArray[np.floating],
+        offsets: NDArray[np.int64],
+        nq: int,
+    ) -> NDArray[np.floating]:
+        """The linear spline of :meth:`_spline`: interpolation along one axis at a time.
+
+        Each block of points is gathered once and turned channel-major, so that every step
+        (the difference of a cell's two faces along an axis is the derivative there, their
+        interpolation the value; derivatives along the axes done carry along) works on
+        contiguous rows of a block. The points keep their own order: the tracker's points
+        come cell by cell, already close in memory (a sort and its inverse cost more here
+        than they save).
+        """
+        padded = self._padded
+        assert padded is not None
+        nf = padded.shape[-1]
+        n, d = frac.shape
+        out = np.empty((nq, nf, n), dtype=padded.dtype)
+        block = 8 * self.chunk_size
+        for s in range(0, n, block):
+            m = min(block, n - s)
+            taps = runs[first[s : s + m, None] + offsets].view(padded.dtype).reshape(m, -1)
+            # (corner of the leading axes, face along the last axis, channel, point)
+            faces = np.ascontiguousarray(taps.T).reshape(-1, 2, nf, m)
+            t = np.ascontiguousarray(frac[s : s + m].T)  # (d, m)
+            slopes = [faces[:, 1] - faces[:, 0]]  # along axis d-1
+            value = faces[:, 0] + t[d - 1] * slopes[0]
+            for a in range(d - 2, -1, -1):  # pairs of corners along axis a, innermost first
+                pair = value.reshape(-1, 2, nf, m)
+                along = [q.reshape(-1, 2, nf, m) for q in slopes] if nq > 1 else []
+                slopes = [q[:, 0] + t[a] * (q[:, 1] - q[:, 0]) for q in along]
+                slopes.append(pair[:, 1] - pair[:, 0])
+                value = pair[:, 0] + t[a] * slopes[-1]
+            out[0, :, s : s + m] = value[0]
+            for j in range(1, nq):  # slopes run from axis d-1 down to axis 0
+                out[j, :, s : s + m] = slopes[d - j][0]
+        return out
+
+    def _taps(
+        self, u: NDArray[np.float64]
+    ) -> tuple[NDArray[np.void], NDArray[np.int64], NDArray[np.floating], NDArray[np.int64]]:
+        """Where each point's spline taps are, as :meth:`_spline` gathers them.
+
+        Returns ``runs`` (one opaque item per run of ``order + 1`` consecutive voxels along
+        the last axis, all channels: one gather index fetches a whole run; runs overlap, one
+        voxel apart, and numpy copies an item as a block, twice as fast as a (taps, nf)
+        subarray), the index ``first`` (n,) of each point's first run, its fraction
+        ``frac`` (n, d) within its cell in the coefficients' precision (no promoted copy of
+        the gathered taps), and the ``offsets`` of the runs of one point's taps along the
+        leading axes.
+        """
         padded = self._padded
         if padded is None:
             raise RuntimeError(
                 "this PhaseSampler handed its buffers to another one (reuse=); sample with that"
             )
+        taps = self.order + 1
+        d = u.shape[1]
         pshape = padded.shape[:-1]
         nf = padded.shape[-1]
-        # runs of `taps` consecutive voxels along the last axis, all channels, as one opaque
-        # item each (overlapping, one voxel apart): one gather index fetches a whole run, and
-        # numpy copies an item as a block (twice as fast as a (taps, nf) subarray)
         nvox = padded.size // nf
         runs = np.ndarray(
             shape=(nvox - taps + 1,),
@@ -470,38 +559,9 @@ class PhaseSampler:
         start = 0 if self.order == 3 else 1
         u = u - self._lo + self._before  # index in the extended window
         extended = self._hi - self._lo + self._before + self._after
-        base_index = np.clip(np.floor(u).astype(np.int64), 0, extended - 2)
-        frac = u - base_index
-        # sort by voxel so gathers walk memory in order
-        linear = (base_index + start) @ strides[:d]
-        order = np.argsort(linear, kind="stable")
-        n = u.shape[0]
-        # rows (q, channel), columns in the sorted order; in the coefficients' precision
-        ordered = np.empty((nq * nf, n), dtype=padded.dtype)
-        # separable contraction: the leading axes with their tensor-product weights (value,
-        # and the derivative along each leading axis), then the last axis (value weights for
-        # those, slope weights for the derivative along it)
-        lead = d if nq > 1 else 1
-        for s in range(0, u.shape[0], self.chunk_size):
-            chunk = order[s : s + self.chunk_size]
-            m = chunk.size
-            # weights in the coefficients' precision: no promoted copy of the gathered taps
-            weights = _weights(frac[chunk].astype(padded.dtype, copy=False), self.order)
-            gathered = runs[linear[chunk, None] + offsets]  # (m, taps**(d-1)) runs
-            gathered = gathered.view(padded.dtype).reshape(m, taps ** (d - 1), taps * nf)
-            if d > 1:
-                head = np.matmul(_tensor_weights(weights[:, :-1], lead), gathered)
-            else:
-                head = gathered  # (m, 1, taps * nf)
-            # (m, lead, taps, nf) -> (m, taps, lead * nf): the last axis's taps as rows
-            rows = head.reshape(m, lead, taps, nf).transpose(0, 2, 1, 3).reshape(m, taps, -1)
-            last = np.matmul(weights[:, -1, : 1 if nq == 1 else 2], rows)  # (m, 1|2, lead*nf)
-            ordered[: lead * nf, s : s + m] = last[:, 0].T
-            if nq > 1:
-                ordered[lead * nf :, s : s + m] = last[:, 1, :nf].T
-        rank = np.empty_like(order)  # back to the points' own order
-        rank[order] = np.arange(n)
-        return np.take(ordered, rank, axis=1).reshape(nq, nf, n)
+        cell = np.clip(np.floor(u).astype(np.int64), 0, extended - 2)
+        frac = (u - cell).astype(padded.dtype, copy=False)
+        return runs, (cell + start) @ strides[:d], frac, offsets
 
 
 def _percentile_99(values: NDArray[np.floating], inside: NDArray[np.bool_] | None) -> float:
