@@ -394,8 +394,9 @@ class PhaseSampler:
     def _evaluate(
         self, pts: NDArray[np.float64], *, derivatives: bool
     ) -> tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.bool_]]:
-        """Spline values (nq, 2 ntag, n), in the coefficients' precision: Re then Im of D and of its derivative along each
-        active axis (per voxel); ``|D|`` (ntag, n); validity per tag (n, ntag)."""
+        """Spline values (nq, 2 ntag, n) in the coefficients' precision: Re then Im of D and
+        of its derivative along each active axis (per voxel); ``|D|`` (ntag, n); validity per
+        tag (n, ntag)."""
         n = pts.shape[0]
         d = len(self._active)
         ntag = self._ntag
