@@ -37,6 +37,8 @@ body's displacement at points with this locator.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -146,38 +148,39 @@ class HexLocator:
         Newton's method from the cell centre, clipped to [-1, 2]³; not checked for
         containment (see :meth:`locate`).
         """
-        b = self.coeffs[cells]  # (m, 8, 3)
-        xi = np.full(points.shape, 0.5)
-        active = np.arange(len(points))
+        # rows: coefficient k and component i over the points (m contiguous), so that every
+        # step below runs on rows of m (on (m, 3) arrays numpy's inner loops are 3 long)
+        b = np.ascontiguousarray(self.coeffs[cells].transpose(1, 2, 0))  # (8, 3, m)
+        target = np.ascontiguousarray(np.asarray(points, dtype=np.float64).T)  # (3, m)
+        m = target.shape[1]
+        xi = np.full((3, m), 0.5)
+        active = np.arange(m)
         for _ in range(iterations):  # Newton, quadratic; only pairs that have not converged
-            bb, p = b[active], xi[active]
-            u, v, w = p[:, 0:1], p[:, 1:2], p[:, 2:3]
-            x = bb[:, 0] + bb[:, 1] * u + bb[:, 2] * v + bb[:, 3] * w + bb[:, 4] * u * v
-            x = x + bb[:, 5] * u * w + bb[:, 6] * v * w + bb[:, 7] * u * v * w
-            cu = bb[:, 1] + bb[:, 4] * v + bb[:, 5] * w + bb[:, 7] * v * w  # dx/dξ
-            cv = bb[:, 2] + bb[:, 4] * u + bb[:, 6] * w + bb[:, 7] * u * w
-            cw = bb[:, 3] + bb[:, 5] * u + bb[:, 6] * v + bb[:, 7] * u * v
-            r = points[active] - x
+            whole = active.size == m
+            bb = b if whole else b[:, :, active]
+            u, v, w = xi if whole else xi[:, active]
+            uv, uw, vw = u * v, u * w, v * w
+            x = bb[0] + bb[1] * u + bb[2] * v + bb[3] * w + bb[4] * uv + bb[5] * uw
+            x += bb[6] * vw + bb[7] * (uv * w)
+            cu = bb[1] + bb[4] * v + bb[5] * w + bb[7] * vw  # dx/dξ
+            cv = bb[2] + bb[4] * u + bb[6] * w + bb[7] * uw
+            cw = bb[3] + bb[5] * u + bb[6] * v + bb[7] * uv
+            r = (target if whole else target[:, active]) - x
             # Cramer's rule for [cu cv cw] δ = r
-            cvw, cwu, cuv = np.cross(cv, cw), np.cross(cw, cu), np.cross(cu, cv)
-            det = np.einsum("mi,mi->m", cu, cvw)
+            cvw, cwu, cuv = _cross_rows(cv, cw), _cross_rows(cw, cu), _cross_rows(cu, cv)
+            det = (cu * cvw).sum(axis=0)
             det = np.where(np.abs(det) > 1e-300, det, 1e-300)
-            step = (
-                np.stack(
-                    [
-                        np.einsum("mi,mi->m", r, cvw),
-                        np.einsum("mi,mi->m", r, cwu),
-                        np.einsum("mi,mi->m", r, cuv),
-                    ],
-                    axis=1,
-                )
-                / det[:, None]
-            )
-            xi[active] = np.clip(p + step, -1.0, 2.0)
-            active = active[np.abs(step).max(axis=1) > 1e-12]
+            step = np.stack([(r * cvw).sum(axis=0), (r * cwu).sum(axis=0), (r * cuv).sum(axis=0)])
+            step /= det
+            moved = np.clip((xi if whole else xi[:, active]) + step, -1.0, 2.0)
+            if whole:
+                xi = moved
+            else:
+                xi[:, active] = moved
+            active = active[np.abs(step).max(axis=0) > 1e-12]
             if active.size == 0:
                 break
-        return xi
+        return np.ascontiguousarray(xi.T)
 
     def _residual(self, cells: IntArray, points: FloatArray, xi: FloatArray) -> FloatArray:
         """Distance (m,) mm between ``points`` and the image of ``xi`` in ``cells``."""
@@ -255,6 +258,13 @@ class HexLocator:
                 xi_out[ids[try_now[inside]]] = xi[inside]
                 todo = np.setdiff1d(todo, try_now[inside], assume_unique=True)
         return cells_out, np.clip(xi_out, 0.0, 1.0)
+
+
+def _cross_rows(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Cross products of the columns of ``a`` and ``b`` (3, m), as rows (3, m)."""
+    return np.stack(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )
 
 
 def _tet_geometry(mesh: Any) -> tuple[Any, FloatArray]:
@@ -356,6 +366,11 @@ def locate(
         the unit tetrahedron); 0 where ``cells == -1``.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    return _locator(mesh)(points, candidates=candidates, tol=tol)
+
+
+def _locator(mesh: Any) -> Callable[..., tuple[IntArray, FloatArray]]:
+    """:func:`locate` for one mesh, its search structures built once (called per chunk)."""
     if isinstance(mesh, skfem.MeshHex2):
         raise NotImplementedError(
             "point location in curved hexahedra (skfem.MeshHex2, 27-node geometry) is not "
@@ -364,9 +379,8 @@ def locate(
             "straight mesh (curved=False) to track or sample it"
         )
     if isinstance(mesh, (skfem.MeshTet1, skfem.MeshTet2)):
-        return _locate_tets(mesh, points, candidates=candidates, tol=tol)
-    locator = HexLocator(mesh.p.T, mesh.t.T, corners=SKFEM_CORNERS)
-    return locator.locate(points, candidates=candidates, tol=tol)
+        return functools.partial(_locate_tets, mesh)
+    return HexLocator(mesh.p.T, mesh.t.T, corners=SKFEM_CORNERS).locate
 
 
 def displacement_at(body: Any, u: ArrayLike, points: ArrayLike) -> FloatArray:
@@ -441,8 +455,9 @@ def interpolation_matrix(
     X = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nb = body.nbasis
     insides, values, nodes = [], [], []
+    find = _locator(body.mesh)
     for a in range(0, len(X), chunk):  # chunks of points, not single points
-        cells, xi = locate(body.mesh, X[a : a + chunk])
+        cells, xi = find(X[a : a + chunk], candidates=8, tol=1e-7)  # locate's defaults
         here = cells >= 0
         vals, _ = _shape_values(body.scalar_element, xi[here].T, nb)
         insides.append(here)
