@@ -64,20 +64,22 @@ _FACTOR_SPEEDUP = 6.0
 _BUDGET_SHARE = 0.5
 
 
-@functools.cache
-def _pardiso_template() -> Any:
-    """One PyPardisoSolver per process: finding the MKL library is slow (~0.3 s)."""
+def _new_pardiso(mtype: int) -> Any:
+    """A new PyPardisoSolver, as its constructor makes it, without finding MKL again.
+
+    The constructor searches the environment's library folders for MKL (about 0.4 s); the
+    one pypardiso made at import (``pypardiso.ps``) has found it, so a copy of it shares the
+    loaded library, and everything a solver owns is reset to the constructor's values.
+    """
     import pypardiso
 
-    return pypardiso.PyPardisoSolver()
-
-
-def _new_pardiso(mtype: int) -> Any:
-    solver = copy.copy(_pardiso_template())
+    solver = copy.copy(pypardiso.ps)
     solver.pt = np.zeros(64, dtype=solver._pt_type[1])
     solver.iparm = np.zeros(64, dtype=np.int32)
     solver.perm = np.zeros(0, dtype=np.int32)
-    solver.mtype = mtype
+    solver.factorized_A = sparse.csr_matrix((0, 0))
+    solver.mtype, solver.phase, solver.msglvl = mtype, 13, False
+    solver.size_limit_storage, solver._solve_transposed = 5e7, False
     return solver
 
 

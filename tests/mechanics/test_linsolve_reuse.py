@@ -268,3 +268,27 @@ def test_release_cores_sets_the_openmp_wait_to_zero_during_calls_only(rng, monke
     assert get() == before  # and the caller's own setting is back
     LinearSolver("pardiso").solve(K, b)
     assert seen[-1] == before  # without it, the runtime's setting is left alone
+
+
+def test_a_new_pardiso_solver_is_what_the_constructor_makes_even_after_the_template_solved():
+    # harpx copies pypardiso's import-time solver (its MKL is already found) and resets what
+    # a solver owns; after that solver has factorised another matrix, a copy must still equal
+    # a freshly constructed one (and share no array with the template)
+    import pypardiso
+
+    from harpx.mechanics.linsolve import _new_pardiso
+
+    A = sparse.csr_matrix(np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 0.5], [0.0, 0.5, 2.0]]))
+    pypardiso.spsolve(A, np.ones(3))  # the template now holds a factorisation
+    ours, fresh = vars(_new_pardiso(11)), vars(pypardiso.PyPardisoSolver(mtype=11))
+    assert ours.keys() == fresh.keys()
+    for key, value in fresh.items():
+        if isinstance(value, np.ndarray):
+            np.testing.assert_array_equal(ours[key], value, err_msg=key)
+            assert ours[key] is not getattr(pypardiso.ps, key)
+        elif sparse.issparse(value):
+            assert ours[key].shape == value.shape, key
+        elif key not in ("libmkl", "_mkl_pardiso"):
+            assert ours[key] == value, key
+    B = sparse.csr_matrix(np.array([[2.0, 0.0], [0.0, 5.0]]))
+    np.testing.assert_allclose(_new_pardiso(11).solve(B, np.array([2.0, 5.0])), [1.0, 1.0])
