@@ -354,6 +354,18 @@ class PhaseSampler:
         """
         return self._locate(_as_points(points))[1]
 
+    def outside_window(self, points: ArrayLike) -> int:
+        """How many ``points`` (n, 3) mm lie in the field of view but outside the prepared
+        window (``region``): a sampler of the whole grid would sample them, this one calls
+        them invalid. 0 for a sampler of the whole grid."""
+        if not self._windowed:
+            return 0
+        pts = _as_points(points)
+        u = (pts[:, self._columns] - self._origin) / self._spacing  # (n, d) in voxels
+        in_grid = np.all((u >= -_FOV_TOL) & (u <= self._shape - 1 + _FOV_TOL), axis=1)
+        in_window = np.all((u >= self._lo - _FOV_TOL) & (u <= self._hi - 1 + _FOV_TOL), axis=1)
+        return int(np.count_nonzero(in_grid & ~in_window))
+
     # ------------------------------------------------------------------------------------
     def _window(
         self, region: ArrayLike | None, margin: int

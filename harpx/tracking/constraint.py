@@ -76,6 +76,13 @@ def shear_modulus(body: Body) -> float:
     return float(A[0, 0, 1, 0, 1])
 
 
+#: Tag periods (of the longest tag period) by which the box a frame's images are prepared in
+#: reaches beyond its starting points on every side (:meth:`PhaseConstraint.set_frame`):
+#: more than a frame's motion on every scene measured; a point beyond it makes the frame's
+#: images be prepared on the whole grid.
+WINDOW_PERIODS = 2.0
+
+
 def constraint_quadrature(body: Body, spacing: float) -> tuple[FloatArray, FloatArray]:
     """Tensor Gauss rule whose points are at most about ``spacing`` mm apart in every cell.
 
@@ -316,6 +323,7 @@ class PhaseConstraint:
         k = 2.0 * np.pi * np.asarray(phase["tag_frequency"], dtype=float)
         self.wavenumber = float(np.sqrt(np.mean(k**2)))
         self.max_wavenumber = float(np.max(k))
+        self.min_wavenumber = float(np.min(k))
         self.element_size = float(np.cbrt(np.mean(body.cell_volume)))
         self.shear_modulus = shear_modulus(body)
 
@@ -362,7 +370,8 @@ class PhaseConstraint:
             if self.frame == 0 or self._sampler is None:
                 magnitude, valid = self._reference_point_magnitude, self.reference_valid
             else:
-                magnitude, now = self._sampler.magnitude(self.current_points(u))
+                points = self.current_points(u)
+                magnitude, now = self._frame_sampler(points).magnitude(points)
                 valid = self.reference_valid & now[:, None]
             return noise_floor(
                 self.harmonic_noise, self._reference_point_magnitude, magnitude, self.volume,
@@ -373,9 +382,8 @@ class PhaseConstraint:
         if self.frame == 0 or self._sampler is None:
             ok = np.isfinite(self.reference_noise)
             return float((share[ok] * self.reference_noise[ok]).sum() / share[ok].sum())
-        magnitude = self._mean_magnitude(
-            self._sampler, self.current_points(u), self.reference_valid
-        )
+        points = self.current_points(u)
+        magnitude = self._mean_magnitude(self._frame_sampler(points), points, self.reference_valid)
         return epsilon_floor(self.reference_noise, self.reference_magnitude, magnitude, share)
 
     def replace_images(self, phase: xr.Dataset) -> None:
@@ -416,13 +424,37 @@ class PhaseConstraint:
         :meth:`set_frame`; evaluating the constraint before that raises RuntimeError."""
         self._sampler = None
 
-    def set_frame(self, time_index: int) -> None:
-        """Target the phase images of frame ``time_index`` (prefilters them once)."""
+    def set_frame(self, time_index: int, near: FloatArray | None = None) -> None:
+        """Target the phase images of frame ``time_index`` (prepares them once).
+
+        ``near`` (ndof,) mm: a displacement the frame's solves start close to. The images are
+        then prepared only in the box its points occupy, widened by :data:`WINDOW_PERIODS`
+        tag periods on every side; should a point leave that box later, they are prepared on
+        the whole grid (the box bounds the work, never what can be sampled). None: the whole
+        grid.
+        """
+        region = None
+        if near is not None:
+            points = self.current_points(near)
+            reach = WINDOW_PERIODS * 2.0 * np.pi / self.min_wavenumber
+            region = np.stack([points.min(axis=0) - reach, points.max(axis=0) + reach])
         # the previous frame's sampler is done with: its tap buffer is reused
         self._sampler = PhaseSampler(
-            self.phase, int(time_index), order=self.spline_order, reuse=self._sampler
-        )
+            self.phase, int(time_index), order=self.spline_order, reuse=self._sampler,
+            region=region,
+        )  # fmt: skip
         self.frame = int(time_index)
+
+    def _frame_sampler(self, points: FloatArray) -> PhaseSampler:
+        """The current frame's sampler, prepared on the whole grid if ``points`` leave its
+        window (:meth:`set_frame`)."""
+        sampler = self._sampler
+        if sampler is None:
+            raise RuntimeError("call set_frame(time_index) before evaluating the constraint")
+        if sampler.outside_window(points):
+            sampler = PhaseSampler(self.phase, self.frame, order=self.spline_order, reuse=sampler)
+            self._sampler = sampler
+        return sampler
 
     def current_points(self, u: FloatArray) -> FloatArray:
         """Current positions x = X + u(X) of the constraint points, mm."""
@@ -433,9 +465,8 @@ class PhaseConstraint:
     # ------------------------------------------------------------------ evaluation
     def state(self, u: FloatArray) -> ConstraintState:
         """Phase mismatch, gradients and weights at displacement ``u`` (ndof,) mm."""
-        if self._sampler is None:
-            raise RuntimeError("call set_frame(time_index) before evaluating the constraint")
-        phi, grad, valid = self._sampler.sample(self.current_points(u), per_tag=True)
+        points = self.current_points(u)
+        phi, grad, valid = self._frame_sampler(points).sample(points, per_tag=True)
         ok = valid & self.reference_valid  # (nq, ntag)
         residual = np.where(ok, wrap(phi - self.reference_phase), 0.0)
         grad = np.where(ok[..., None], grad, 0.0)
@@ -449,9 +480,8 @@ class PhaseConstraint:
 
     def epsilon_at(self, u: FloatArray) -> float:
         """Tracking residual ε at displacement ``u`` (phase only, no gradients), rad."""
-        if self._sampler is None:
-            raise RuntimeError("call set_frame(time_index) before evaluating the constraint")
-        phi, valid = self._sampler.phase(self.current_points(u), per_tag=True)
+        points = self.current_points(u)
+        phi, valid = self._frame_sampler(points).phase(points, per_tag=True)
         ok = valid & self.reference_valid
         return _epsilon(self.volume, ok, np.where(ok, wrap(phi - self.reference_phase), 0.0))
 

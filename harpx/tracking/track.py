@@ -444,7 +444,8 @@ def _track_frames(
             _keep(out, earlier, n)
             continue
         begin = _time.perf_counter()
-        constraint.set_frame(n)
+        # the images prepared around where the frame starts (the whole grid if it goes further)
+        constraint.set_frame(n, near=U[n - 1] if earlier is None else earlier.U[n])
         clock = _time.perf_counter()
         timings.prefilter += clock - begin
         u0 = U[n - 1]

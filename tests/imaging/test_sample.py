@@ -368,6 +368,17 @@ def test_region_samples_like_the_whole_grid(
         PhaseSampler(ds, 0, region=[[0.0, 0.0, np.nan], [1.0, 1.0, 1.0]])
 
 
+def test_outside_window_counts_points_a_whole_grid_sampler_would_sample() -> None:
+    ds = phase_dataset()  # x 0.5 .. 27.5, y -3 .. 22, z 2 .. 15.5 mm
+    box = np.array([[5.0, 0.0, 5.0], [10.0, 8.0, 9.0]])
+    points = np.array([[7.0, 4.0, 7.0], [20.0, 4.0, 7.0], [7.0, 4.0, 40.0], [-9.0, 4.0, 7.0]])
+    # in the box; in the grid beyond the box; beyond the grid along z; beyond it along x
+    windowed = PhaseSampler(ds, 0, order=1, region=box)
+    assert windowed.outside_window(points) == 1
+    assert windowed.phase(points)[1].tolist() == [True, False, False, False]
+    assert PhaseSampler(ds, 0, order=1).outside_window(points) == 0
+
+
 def test_float32_region_keeps_a_margin_to_float32_resolution(rng: np.random.Generator) -> None:
     # float32 coefficients: a 13-voxel margin (0.268**13 ~ 4e-8 of the data) is below their
     # resolution, so the cropped spline samples like the whole grid's to float32 rounding

@@ -267,6 +267,29 @@ def test_augmented_lagrangian_updates_multipliers_then_raises_the_penalty():
     assert out.reached and out.stages == 4
 
 
+def test_a_frame_prepared_near_its_start_samples_like_the_whole_grid_wherever_points_go(rng):
+    # the images of a frame are prepared in a box around its start (2 tag periods of 8 mm
+    # beyond the body on a 80 mm grid); a point that leaves the box (a 25 mm shift here)
+    # must see exactly what a constraint prepared on the whole grid sees
+    ds = ideal_phase(still, shape=(9, 40, 40), spacing=(2.0, 2.0, 2.0), times=[0.0, 10.0])
+    body = Body(box((12.0, 12.0, 8.0), (3, 3, 2), origin=(-6.0, -6.0, -4.0)).mesh,
+                NeoHookean(c1=1.0, kappa=50.0))  # fmt: skip
+    windowed, whole = PhaseConstraint(body, ds), PhaseConstraint(body, ds)
+    windowed.set_frame(1, near=np.zeros(body.ndof))
+    whole.set_frame(1)
+    far = np.tile([25.0, 0.0, 0.0], body.ndof // 3)
+    assert windowed._sampler.outside_window(windowed.current_points(far)) > 0
+    assert whole._sampler.outside_window(whole.current_points(far)) == 0
+    for shift in (np.zeros(body.ndof), far):  # inside the box, then beyond it
+        u = shift + rng.normal(0.0, 0.3, body.ndof)
+        a, b = windowed.state(u), whole.state(u)
+        assert a.tag_valid.all()
+        np.testing.assert_array_equal(a.residual, b.residual)
+        np.testing.assert_array_equal(a.gradient, b.gradient)
+        assert windowed.epsilon_at(u) == whole.epsilon_at(u)
+    assert windowed._sampler.outside_window(windowed.current_points(far)) == 0  # regrown
+
+
 def test_one_product_assembly_equals_the_cell_block_assembly(ideal, rng):
     # every cell of a one-element-type mesh has the same N at its points: the tangent is one
     # matrix product; the per-cell block path (kept for meshes without that) must agree
