@@ -49,6 +49,10 @@ __all__ = [
 PLANNER_EFFORT = "FFTW_MEASURE"
 #: Smaller transforms are planned with FFTW_ESTIMATE: measuring costs more than it saves.
 MEASURE_MIN_SIZE = 1 << 20
+#: In-place plans executed fewer times than this are planned with FFTW_ESTIMATE: measuring
+#: costs about as much as it saves over this many runs of a stack of image planes
+#: (benchmarks/results/tracking_speed.md).
+MEASURE_PAYS_AFTER = 160
 #: Plans kept per thread (least recently used are dropped; each holds two buffers).
 MAX_PLANS_PER_THREAD = 24
 
@@ -188,6 +192,7 @@ def inplace_plans(
     *,
     threads: int | None = None,
     memory: NDArray[np.complexfloating] | None = None,
+    executions: int | None = None,
 ) -> tuple[NDArray[np.complexfloating], pyfftw.FFTW, pyfftw.FFTW]:
     """One aligned complex buffer with a forward and a backward plan that transform it in place.
 
@@ -195,7 +200,8 @@ def inplace_plans(
     a third of the memory of :func:`get_plan`'s forward and backward plans, which own an
     input and an output buffer each and stay in the cache. Planned like :func:`get_plan`
     (``FFTW_MEASURE`` from ``MEASURE_MIN_SIZE`` elements; FFTW's wisdom makes a second
-    planning of the same problem cheap).
+    planning of the same problem cheap), unless ``executions`` says the plans will not run
+    often enough for measuring to pay (fewer than ``MEASURE_PAYS_AFTER`` times each).
 
     Parameters
     ----------
@@ -211,6 +217,8 @@ def inplace_plans(
         A C-contiguous, SIMD-aligned array of ``dtype`` (from an earlier call) whose memory
         the buffer takes, reshaped, so that transforms of several shapes of one size share
         it; planning overwrites its content.
+    executions : int, optional
+        How many times the caller will execute each plan (None: often).
 
     Returns
     -------
@@ -231,7 +239,10 @@ def inplace_plans(
         raise ValueError(f"in-place plans need a complex dtype, got {dtype!r}")
     axes = tuple(int(a) % len(shape) for a in axes)
     nthreads = default_threads(threads)
-    effort = PLANNER_EFFORT if int(np.prod(shape)) >= MEASURE_MIN_SIZE else "FFTW_ESTIMATE"
+    often = executions is None or executions >= MEASURE_PAYS_AFTER
+    effort = (
+        PLANNER_EFFORT if often and int(np.prod(shape)) >= MEASURE_MIN_SIZE else "FFTW_ESTIMATE"
+    )
     if memory is not None and (
         memory.dtype != dtype or memory.size != int(np.prod(shape)) or not memory.flags.c_contiguous
     ):

@@ -451,11 +451,14 @@ class _CorrectionFrames:
         shape, ntag = self.shape, self.ntag
         size = int(np.prod(shape))
         cached: dict[tuple[int, ...], tuple[np.ndarray, Any, Any]] = {}
+        runs = (self.U.shape[0] - 1) * ntag  # executions of a plan at most
 
         def plans(stack: tuple[int, ...]) -> tuple[np.ndarray, Any, Any]:
             if stack not in cached:  # every slice orientation transforms in one buffer
                 memory = next(iter(cached.values()))[0] if cached else None
-                cached[stack] = inplace_plans(stack, np.complex64, (-2, -1), memory=memory)
+                cached[stack] = inplace_plans(
+                    stack, np.complex64, (-2, -1), memory=memory, executions=runs
+                )
             return cached[stack]
 
         S = np.zeros(shape, dtype=np.complex64)

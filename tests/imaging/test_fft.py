@@ -130,3 +130,15 @@ def test_uncached_plan_is_new_every_time_and_the_cached_one_is_kept(rng):
     first.input_array[...] = a
     first.execute()
     np.testing.assert_allclose(first.output_array, np.fft.rfft2(a), rtol=0, atol=1e-12)
+
+
+def test_inplace_plans_are_measured_only_when_they_run_often(monkeypatch):
+    monkeypatch.setattr(hfft, "MEASURE_MIN_SIZE", 16)  # a small stack stands in for a large one
+    rarely = hfft.MEASURE_PAYS_AFTER - 1
+    _, forward, _ = hfft.inplace_plans((2, 8, 8), np.complex64, (-2, -1), threads=1,
+                                       executions=rarely)  # fmt: skip
+    assert "FFTW_ESTIMATE" in forward.flags and "FFTW_MEASURE" not in forward.flags
+    for often in (None, hfft.MEASURE_PAYS_AFTER):
+        _, forward, _ = hfft.inplace_plans((2, 8, 8), np.complex64, (-2, -1), threads=1,
+                                           executions=often)  # fmt: skip
+        assert "FFTW_MEASURE" in forward.flags
