@@ -530,19 +530,31 @@ class Guccione(_Uncoupled):
         B = self._weights()
         RT = np.swapaxes(R, -1, -2)
         Sbar = psi[..., None, None] * np.matmul(np.matmul(R, sig), RT)
-        # low-rank form of the tangent (module docstring): A = j^2 [K^T M K + ...]
-        X = np.swapaxes(G, -1, -2)[..., :, None, :, None] * RT[..., None, :, None, :]
+        # low-rank form of the tangent (module docstring): A = j^2 [K^T M K + ...]. The six
+        # strain factors are formed from the products g_a ⊗ r_b (columns of G and R) with
+        # the points along the last axis (contiguous rows; with the points first numpy's
+        # inner loops are 3 long), then moved into the (..., 9, 3, 3) layout in one copy.
+        flat = int(np.prod(batch))
+        g = np.ascontiguousarray(G.reshape(flat, 3, 3).transpose(2, 1, 0))  # (a, i, point)
+        r = np.ascontiguousarray(R.reshape(flat, 3, 3).transpose(2, 1, 0))  # (b, J, point)
+        c = Ct.reshape(flat, 3, 3).transpose(1, 2, 0)  # (a, b, point)
+        third = np.ascontiguousarray((1.0 / 3.0) * Hbar.reshape(flat, 3, 3).transpose(1, 2, 0))
+        psi_rows = psi.reshape(flat)
+        strain = np.empty((2, 6, 3, 3, flat))  # K, then MK
+        for k, (a, b) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+            Kk = strain[0, k]
+            np.multiply(g[a][:, None], r[b][None], out=Kk)
+            if a == b:
+                Kk -= c[a, a] * third
+            else:
+                Kk += g[b][:, None] * r[a][None]
+                Kk *= _SQRT_HALF
+                Kk -= (_SQRT2 * c[a, b]) * third
+            np.multiply(B[a, b] * psi_rows, Kk, out=strain[1, k])
         K = np.empty(batch + (9, 3, 3))
         MK = np.empty(batch + (9, 3, 3))
-        third = (1.0 / 3.0) * Hbar
-        for k, (a, b) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
-            if a == b:
-                K[..., k, :, :] = X[..., a, a, :, :] - Ct[..., a, a, None, None] * third
-            else:
-                K[..., k, :, :] = (X[..., a, b, :, :] + X[..., b, a, :, :]) * _SQRT_HALF - (
-                    _SQRT2 * Ct[..., a, b, None, None]
-                ) * third
-            MK[..., k, :, :] = (B[a, b] * psi)[..., None, None] * K[..., k, :, :]
+        K.reshape(flat, 9, 3, 3)[:, :6] = strain[0].transpose(3, 0, 1, 2)
+        MK.reshape(flat, 9, 3, 3)[:, :6] = strain[1].transpose(3, 0, 1, 2)
         K[..., 6, :, :] = P / (j * psi)[..., None, None]
         MK[..., 6, :, :] = (2.0 * psi)[..., None, None] * K[..., 6, :, :]
         K[..., 7, :, :] = Pbar
