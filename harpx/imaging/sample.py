@@ -81,8 +81,9 @@ class PhaseSampler:
         with ``body`` also requires the point to be tissue there (``body >= 0.5`` at its
         nearest voxel): partial-volume edge voxels carry a background-contaminated phase.
     chunk_size : int, default 1024
-        Points evaluated per vectorised batch (memory ~ 4 kB per point; small batches keep
-        the gathered taps in cache).
+        Points evaluated per vectorised batch of the cubic spline (memory ~ 4 kB per point;
+        small batches keep the gathered taps in cache); the linear spline, with 8 taps
+        instead of 64, takes batches of eight times as many points.
     region : array_like of shape (2, 3), optional
         Lower and upper corners (rows) of a box in mm, columns (x, y, z), that holds every
         point this sampler will be asked about. Only the grid inside it (plus a margin of
