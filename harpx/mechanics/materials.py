@@ -496,7 +496,8 @@ class Guccione(_Uncoupled):
         P, K, MK, pbar, Hbar, Sbar, j, H = self._tangent_parts(F, fiber)
         jj = (j * j)[..., None, None, None]
         Y = K
-        Z = MK * jj
+        Z = MK
+        Z *= jj  # in place: MK is not used again
         # factor 8 is Hbar = H / j: carried as Y = H exactly (the assembly adds its H ⊗ H
         # weight there), so its Z takes the 1/j
         Y[..., 8, :, :] = H
