@@ -67,7 +67,7 @@ _BUDGET_SHARE = 0.5
 def _new_pardiso(mtype: int) -> Any:
     """A new PyPardisoSolver, as its constructor makes it, without finding MKL again.
 
-    The constructor searches the environment's library folders for MKL (about 0.4 s); the
+    The constructor searches the environment's library folders for MKL, slowly; the
     one pypardiso made at import (``pypardiso.ps``) has found it, so a copy of it shares the
     loaded library, and everything a solver owns is reset to the constructor's values.
     """

@@ -366,11 +366,14 @@ def locate(
         the unit tetrahedron); 0 where ``cells == -1``.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    return _locator(mesh)(points, candidates=candidates, tol=tol)
+    return _locator(mesh, candidates, tol)(points)
 
 
-def _locator(mesh: Any) -> Callable[..., tuple[IntArray, FloatArray]]:
-    """:func:`locate` for one mesh, its search structures built once (called per chunk)."""
+def _locator(
+    mesh: Any, candidates: int = 8, tol: float = 1e-7
+) -> Callable[[FloatArray], tuple[IntArray, FloatArray]]:
+    """:func:`locate` of one mesh as a function of the points, its search structures built
+    once (for calls chunk by chunk)."""
     if isinstance(mesh, skfem.MeshHex2):
         raise NotImplementedError(
             "point location in curved hexahedra (skfem.MeshHex2, 27-node geometry) is not "
@@ -379,8 +382,9 @@ def _locator(mesh: Any) -> Callable[..., tuple[IntArray, FloatArray]]:
             "straight mesh (curved=False) to track or sample it"
         )
     if isinstance(mesh, (skfem.MeshTet1, skfem.MeshTet2)):
-        return functools.partial(_locate_tets, mesh)
-    return HexLocator(mesh.p.T, mesh.t.T, corners=SKFEM_CORNERS).locate
+        return functools.partial(_locate_tets, mesh, candidates=candidates, tol=tol)
+    locator = HexLocator(mesh.p.T, mesh.t.T, corners=SKFEM_CORNERS)
+    return functools.partial(locator.locate, candidates=candidates, tol=tol)
 
 
 def displacement_at(body: Any, u: ArrayLike, points: ArrayLike) -> FloatArray:
@@ -457,7 +461,7 @@ def interpolation_matrix(
     insides, values, nodes = [], [], []
     find = _locator(body.mesh)
     for a in range(0, len(X), chunk):  # chunks of points, not single points
-        cells, xi = find(X[a : a + chunk], candidates=8, tol=1e-7)  # locate's defaults
+        cells, xi = find(X[a : a + chunk])
         here = cells >= 0
         vals, _ = _shape_values(body.scalar_element, xi[here].T, nb)
         insides.append(here)

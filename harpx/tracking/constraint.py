@@ -438,6 +438,8 @@ class PhaseConstraint:
             points = self.current_points(near)
             reach = WINDOW_PERIODS * 2.0 * np.pi / self.min_wavenumber
             region = np.stack([points.min(axis=0) - reach, points.max(axis=0) + reach])
+            if not np.isfinite(region).all():  # no box to speak of: the whole grid
+                region = None
         # the previous frame's sampler is done with: its tap buffer is reused
         self._sampler = PhaseSampler(
             self.phase, int(time_index), order=self.spline_order, reuse=self._sampler,
