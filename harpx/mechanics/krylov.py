@@ -17,7 +17,7 @@ import numpy as np
 
 from harpx._typing import FloatArray
 
-__all__ = ["Measure", "Stop", "bicgstab", "cg", "vector_norm"]
+__all__ = ["Measure", "Stop", "bicgstab", "cg", "refine", "vector_norm"]
 
 #: What the ``reuse`` loop's tolerance bounds (``LinearSolver(reuse_measure=...)``)
 Measure = Literal["residual", "step"]
@@ -130,6 +130,33 @@ def cg(apply: _Operator, precondition: _Operator, b: FloatArray, stop: Stop) -> 
         rz_new = _dot(r, z)
         p = z + (rz_new / rz) * p
         rz = rz_new
+    return None
+
+
+def refine(
+    apply: _Operator, precondition: _Operator, b: FloatArray, stop: Stop
+) -> FloatArray | None:
+    """Iterative refinement from ``M⁻¹ b``; None: not converged within ``stop.limit`` steps.
+
+    Each step adds the correction ``c = M⁻¹ (b − K x)``, with the residual computed in double
+    precision; with ``M`` a factorisation of ``K`` itself in single precision the error falls
+    by about ``cond(K) × 6e-8`` a step, so one or two steps reach double-precision-worthy
+    accuracy on a matrix of condition below ~10⁶ (mixed-precision refinement: Moler 1967,
+    J. ACM 14:316; Carson & Higham 2018, SIAM J. Sci. Comput. 40:A817). Unlike conjugate
+    gradients it needs no definiteness. It stops when :meth:`Stop.reached` holds for the
+    residual and correction of the current ``x``, and returns ``x`` plus that correction.
+    """
+    x = precondition(b)
+    for k in range(1, stop.limit + 1):
+        r = b - apply(x)
+        norm = vector_norm(r)
+        correction = precondition(r)
+        stop.iterations = k
+        if not (np.isfinite(norm) and np.all(np.isfinite(correction))):
+            return None
+        if stop.reached(norm, x, correction):
+            return x + correction
+        x += correction
     return None
 
 

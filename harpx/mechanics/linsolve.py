@@ -19,6 +19,9 @@
   ``reuse_iterations``, raised for a matrix whose factorisation costs many loop iterations
   (PARDISO's own operation counts of its analysis; e.g. quadratic elements, whose factors
   fill in far more than their iterations cost).
+  With ``factors="single"`` the factorisations are in single precision (half the bytes
+  for every solve phase) and a fresh factorisation's solution is refined in double
+  precision to ``reuse``.
 * ``"superlu"`` — SuperLU with ``MMD_AT_PLUS_A`` ordering and symmetric mode for symmetric
   tangents (COLAMD for non-symmetric ones).
 * ``"superlu-colamd"`` — SuperLU with its default COLAMD ordering (reference).
@@ -44,7 +47,7 @@ from scipy.sparse import linalg as spla
 
 from harpx._typing import FloatArray
 from harpx.errors import ConvergenceError
-from harpx.mechanics.krylov import Measure, Stop, bicgstab, cg, vector_norm
+from harpx.mechanics.krylov import Measure, Stop, bicgstab, cg, refine, vector_norm
 
 __all__ = ["LinearSolver", "METHODS", "available_methods", "rigid_body_modes"]
 
@@ -62,6 +65,13 @@ _FACTOR_SPEEDUP = 6.0
 #: ``reuse_iterations``: a failed loop then costs at most this share on top of the
 #: factorisation that follows it.
 _BUDGET_SHARE = 0.5
+
+#: Steps of iterative refinement a single-precision factorisation may take to solve the
+#: matrix it factorised (``factors="single"``) before the solver goes over to double
+#: precision: with a condition number below ~10⁶ one or two steps reach ``reuse``.
+_REFINE_STEPS = 4
+
+Precision = Literal["double", "single"]
 
 
 def _new_pardiso(mtype: int) -> Any:
@@ -187,6 +197,15 @@ class LinearSolver:
         call), e.g. 1 where another thread of the caller keeps the other cores busy, or
         on a machine shared with other jobs, where spinning OpenMP threads wait for cores.
         None (default): MKL's own setting.
+    factors : {"double", "single"}, default "double"
+        PARDISO with ``reuse`` only: precision of the factorisation (PARDISO's
+        ``iparm[27]``). Single-precision factors take half the memory, and their solve
+        phase, which every iteration of the ``reuse`` loop runs, reads half the bytes; the
+        solution of a freshly factorised matrix is then refined in double precision to
+        ``reuse`` (:func:`~harpx.mechanics.krylov.refine`), and where a matrix is too
+        ill-conditioned for that (no convergence in ``_REFINE_STEPS`` steps) the solver
+        goes over to double-precision factors for good (:attr:`factors` says which).
+        Other methods ignore it.
     release_cores : bool, default False
         PARDISO only: let its threads sleep as soon as each call returns (the Intel OpenMP
         runtime's wait, ``kmp_set_blocktime(0)``, for the calling thread's team, restored
@@ -209,6 +228,9 @@ class LinearSolver:
     last_iterations : int
         Iterations of the last solve's Krylov loop (``reuse`` or ``"amg-cg"``); 0 when it
         factorised without trying one.
+    factors : str
+        Precision of the factorisations from now on: ``"single"`` only while single-precision
+        factors refine to ``reuse`` (see the parameter).
     iteration_budget : int
         With ``reuse``: the iteration limit of the Krylov loop on the current pattern, the
         larger of ``reuse_iterations`` and ``_BUDGET_SHARE`` times the iterations one
@@ -229,6 +251,7 @@ class LinearSolver:
         reuse_measure: Measure = "residual",
         threads: int | None = None,
         release_cores: bool = False,
+        factors: Precision = "double",
     ) -> None:
         if method not in METHODS:
             raise ValueError(f"linear_solver={method!r} is not one of {METHODS!r}")
@@ -255,6 +278,14 @@ class LinearSolver:
             raise ValueError(f"reuse_iterations={reuse_iterations!r} must be at least 1")
         if threads is not None and threads < 1:
             raise ValueError(f"threads={threads!r} must be at least 1, or None")
+        if factors not in ("double", "single"):
+            raise ValueError(f"factors={factors!r} is not 'double' or 'single'")
+        if factors == "single" and reuse is None:
+            raise ValueError(
+                "factors='single' needs reuse: the relative accuracy to which a "
+                "single-precision factorisation's solutions are refined"
+            )
+        self.factors: Precision = factors if method == "pardiso" else "double"
         self.threads = threads
         self.release_cores = bool(release_cores)
         self.reuse = None if reuse is None else float(reuse)
@@ -262,7 +293,7 @@ class LinearSolver:
         self.reuse_measure = reuse_measure
         self._fresh = True  # the next solve factorises (no reusable factorisation yet)
         # the data array of the factorised matrix, as PARDISO read it (phase 33 needs it)
-        self._held: FloatArray | None = None
+        self._held: NDArray[np.floating] | None = None
         self.analyses = 0
         self.factorizations = 0
         self.reused = 0
@@ -318,7 +349,7 @@ class LinearSolver:
             self._pardiso.set_iparm(13, 0 if symmetric else 1)  # weighted matching
             self._pardiso.set_iparm(18, -1)  # report the factors' entries (analysis)
             self._pardiso.set_iparm(19, -1)  # report the factorisation's Mflop (analysis)
-            self._pardiso.set_iparm(28, 0)
+            self._pardiso.set_iparm(28, 1 if self.factors == "single" else 0)
             self._pardiso.set_iparm(35, 1)  # zero-based indexing
             if symmetric:
                 rows = np.repeat(np.arange(K.shape[0]), np.diff(K.indptr))
@@ -349,10 +380,38 @@ class LinearSolver:
                     self.reused += 1
                     return x
                 self.reuse_failures += 1
-            x = self._factorise(data, indptr, indices, rhs, new_pattern)
+            if self.factors == "single":
+                x = self._factorise(data.astype(np.float32), indptr, indices, None, new_pattern)
+                if x is None:
+                    x = self._refined(data, indptr, indices, rhs, symmetric)
+            else:
+                x = self._factorise(data, indptr, indices, rhs, new_pattern)
             if new_pattern:
                 self.iteration_budget = self._budget(len(data))
-            return x
+        if x is None:  # too ill-conditioned for single precision: double from now on
+            self.factors = "double"
+            self.close()
+            return self._pardiso_solve(K, b, symmetric)
+        return x
+
+    def _refined(
+        self, data: FloatArray, indptr: Any, indices: Any, b: FloatArray, symmetric: bool
+    ) -> FloatArray | None:
+        """The solution of the matrix just factorised in single precision, refined in double
+        to ``reuse`` (:func:`~harpx.mechanics.krylov.refine`); None if it does not get there,
+        and then no factors are held."""
+        assert self.reuse is not None
+        apply, precondition = self._operators(data, indptr, indices, symmetric)
+        stop = Stop(b, self.reuse, _REFINE_STEPS, self.reuse_measure)
+        if stop.target == 0.0:
+            return np.zeros_like(b)
+        with np.errstate(all="ignore"):
+            x = refine(apply, precondition, b, stop)
+        self.last_iterations = stop.iterations
+        if x is None or not np.all(np.isfinite(x)):
+            self._held, self._fresh = None, True
+            return None
+        return x
 
     def _budget(self, stored: int) -> int:
         """The Krylov loop's iteration limit for the pattern just analysed (``stored``
@@ -369,20 +428,27 @@ class LinearSolver:
         return max(self.reuse_iterations, int(_BUDGET_SHARE * iterations))
 
     def _factorise(
-        self, data: FloatArray, indptr: Any, indices: Any, b: FloatArray, new_pattern: bool
-    ) -> FloatArray:
-        """PARDISO phase 13 (new pattern) or 23: factorise ``data`` and solve; hold the factors."""
+        self,
+        data: NDArray[np.floating],
+        indptr: Any,
+        indices: Any,
+        b: FloatArray | None,
+        new_pattern: bool,
+    ) -> FloatArray | None:
+        """PARDISO phase 13 (new pattern) or 23: factorise ``data`` and solve ``b``; hold the
+        factors. Without ``b``: phases 12 or 22, factorise only, and return None."""
         solver = self._pardiso
-        solver.set_phase(13 if new_pattern else 23)
+        solver.set_phase((13 if new_pattern else 23) - (b is None))
         solver.iparm[3] = 0  # no PARDISO-internal iterative solve: it may not return
         if new_pattern:
             self.analyses += 1
         self._held, self._fresh = None, True  # until this factorisation has succeeded
-        x = self._call(solver, data, indptr, indices, b)
+        rhs = np.zeros(len(indptr) - 1) if b is None else b
+        x = self._call(solver, data, indptr, indices, rhs)
         self.factorizations += 1
         if np.all(np.isfinite(x)):  # factors worth preconditioning with
             self._held, self._fresh = data, False
-        return x
+        return None if b is None else x
 
     def _krylov(
         self, data: FloatArray, indptr: Any, indices: Any, b: FloatArray, symmetric: bool
@@ -392,29 +458,8 @@ class LinearSolver:
         Returns None when the loop does not reach ``reuse`` in ``reuse_iterations``
         iterations, or its result or the preconditioner is not finite.
         """
-        assert self._held is not None and self.reuse is not None
-        n = len(b)
-        A = sparse.csr_matrix((data, indices, indptr), shape=(n, n))
-        if symmetric:  # the operator PARDISO reads: the upper triangle, mirrored
-            assert self._diagonal is not None
-            rows, positions = self._diagonal
-            diagonal = np.zeros(n)
-            diagonal[rows] = data[positions]
-            At = A.T
-
-            def apply(v: FloatArray) -> FloatArray:
-                return np.asarray(A @ v + At @ v - diagonal * v)
-        else:
-
-            def apply(v: FloatArray) -> FloatArray:
-                return np.asarray(A @ v)
-
-        solver, held = self._pardiso, self._held
-
-        def precondition(r: FloatArray) -> FloatArray:
-            solver.set_phase(33)  # solve only, with the factors of ``held``
-            return self._call(solver, held, indptr, indices, np.ascontiguousarray(r))
-
+        assert self.reuse is not None
+        apply, precondition = self._operators(data, indptr, indices, symmetric)
         # a breakdown (a singular or indefinite matrix) divides by zero: non-finite values,
         # caught below, not warnings
         stop = Stop(b, self.reuse, self.iteration_budget, self.reuse_measure)
@@ -433,6 +478,37 @@ class LinearSolver:
             if not vector_norm(b - apply(x)) <= stop.accepted_residual():
                 return None
         return x
+
+    def _operators(
+        self, data: FloatArray, indptr: Any, indices: Any, symmetric: bool
+    ) -> tuple[Any, Any]:
+        """``(apply, precondition)``: the product with the matrix ``data`` on the pattern
+        (the upper triangle mirrored where ``symmetric``, as PARDISO reads it), in double
+        precision, and PARDISO's solve phase (33) with the held factors."""
+        assert self._held is not None
+        n = len(indptr) - 1
+        A = sparse.csr_matrix((data, indices, indptr), shape=(n, n))
+        if symmetric:
+            assert self._diagonal is not None
+            rows, positions = self._diagonal
+            diagonal = np.zeros(n)
+            diagonal[rows] = data[positions]
+            At = A.T
+
+            def apply(v: FloatArray) -> FloatArray:
+                return np.asarray(A @ v + At @ v - diagonal * v)
+        else:
+
+            def apply(v: FloatArray) -> FloatArray:
+                return np.asarray(A @ v)
+
+        solver, held = self._pardiso, self._held
+
+        def precondition(r: FloatArray) -> FloatArray:
+            solver.set_phase(33)  # solve only, with the factors of ``held``
+            return self._call(solver, held, indptr, indices, r)
+
+        return apply, precondition
 
     @contextlib.contextmanager
     def _mkl_threads(self) -> Iterator[None]:
@@ -453,12 +529,15 @@ class LinearSolver:
 
     @staticmethod
     def _call(
-        solver: Any, data: FloatArray, indptr: Any, indices: Any, b: FloatArray
+        solver: Any, data: NDArray[np.floating], indptr: Any, indices: Any, b: FloatArray
     ) -> FloatArray:
+        """One PARDISO call at ``solver.phase`` in the precision of ``data`` (float64, or
+        float32 for single-precision factors); the solution is returned in float64."""
+        b = np.ascontiguousarray(b, dtype=data.dtype)
         x = np.zeros_like(b)
         err = ctypes.c_int32(0)
         i32 = ctypes.POINTER(ctypes.c_int32)
-        f64 = ctypes.POINTER(ctypes.c_double)
+        real = ctypes.POINTER(ctypes.c_float if data.dtype == np.float32 else ctypes.c_double)
         n = len(indptr) - 1
         solver._mkl_pardiso(
             solver.pt.ctypes.data_as(ctypes.POINTER(solver._pt_type[0])),
@@ -467,15 +546,15 @@ class LinearSolver:
             ctypes.byref(ctypes.c_int32(solver.mtype)),
             ctypes.byref(ctypes.c_int32(solver.phase)),
             ctypes.byref(ctypes.c_int32(n)),
-            data.ctypes.data_as(f64),
+            data.ctypes.data_as(real),
             indptr.ctypes.data_as(i32),
             indices.ctypes.data_as(i32),
             solver.perm.ctypes.data_as(i32),
             ctypes.byref(ctypes.c_int32(1)),
             solver.iparm.ctypes.data_as(i32),
             ctypes.byref(ctypes.c_int32(0)),
-            b.ctypes.data_as(f64),
-            x.ctypes.data_as(f64),
+            b.ctypes.data_as(real),
+            x.ctypes.data_as(real),
             ctypes.byref(err),
         )
         if err.value != 0:
@@ -483,7 +562,7 @@ class LinearSolver:
                 f"PARDISO failed with error {err.value} (e.g. -4: zero pivot, the tangent is "
                 "singular); check the Dirichlet conditions remove all rigid-body modes"
             )
-        return np.ascontiguousarray(x)
+        return np.asarray(x, dtype=np.float64)
 
     # ------------------------------------------------------------------ public
     def refresh(self) -> None:

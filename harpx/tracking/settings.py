@@ -116,6 +116,13 @@ class SolverTuning:
         factorises every tangent. An inexact Newton method converges with such steps
         (Dembo, Eisenstat & Steihaug 1982): the increments that decide convergence stop at
         ``tolerance``, where a 1 % error of the step is far below it.
+    factor_precision : {"single", "double"}, default "single"
+        Precision of those factorisations (``LinearSolver(factors=...)``): single-precision
+        factors halve the bytes every preconditioning solve reads, and a fresh
+        factorisation's step is refined in double precision to ``step_accuracy``, so the
+        steps are as accurate as with double-precision factors; a tangent too
+        ill-conditioned for that turns the solver to double precision. Ignored without
+        ``step_accuracy`` (every tangent is then factorised and solved in double precision).
 
     Raises
     ------
@@ -144,6 +151,7 @@ class SolverTuning:
     raise_move: float = 0.5
     first_pass_voxels: float = 0.1
     step_accuracy: float | None = 0.01
+    factor_precision: Literal["single", "double"] = "single"
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -165,6 +173,10 @@ class SolverTuning:
         if accuracy is not None and accuracy >= 1.0:
             raise ValueError(f"step_accuracy={accuracy!r} must lie in (0, 1), or be None")
         set_(self, "step_accuracy", accuracy)
+        if self.factor_precision not in ("single", "double"):
+            raise ValueError(
+                f"factor_precision={self.factor_precision!r} is not 'single' or 'double'"
+            )
         for name in ("ramp_iterations", "damp_after", "damp_small_after"):
             set_(self, name, _count(name, getattr(self, name), minimum=1))
         factors = tuple(float(a) for a in self.predictor_factors)

@@ -292,6 +292,7 @@ def track(
         reuse=settings.tuning.step_accuracy,
         reuse_measure="step",
         release_cores=True,
+        factors=settings.tuning.factor_precision if settings.tuning.step_accuracy else "double",
     )
     # one worker samples the images at each trial step while the solve assembles there
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="harpx-sampling") as pool:

@@ -397,6 +397,7 @@ def test_predictor_keeps_the_steady_motion_unless_another_start_is_clearly_bette
         pytest.param({"raise_move": -1.0}, "raise_move=-1.0 must be a positive"),
         pytest.param({"step_accuracy": 1.0}, r"step_accuracy=1.0 must lie in \(0, 1\)"),
         pytest.param({"step_accuracy": 0.0}, "step_accuracy=0.0 must be a positive"),
+        pytest.param({"factor_precision": "half"}, "factor_precision='half' is not 'single'"),
     ],
 )
 def test_predictor_tuning_names_what_is_wrong(kwargs, match):
