@@ -318,14 +318,36 @@ class PhaseSampler:
 
         ``valid`` has shape (n,), or (n, ntag) with ``per_tag`` (as in :meth:`sample`).
         """
-        pts = _as_points(points)
-        values, _, valid_tags = self._evaluate(pts, derivatives=False)
+        phi, _, valid = self._phase(_as_points(points), per_tag)
+        return phi, valid
+
+    def phase_and_magnitude(
+        self, points: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+        """:meth:`phase` (``per_tag=True``) and :meth:`magnitude` from one evaluation.
+
+        Returns
+        -------
+        phi, magnitude : numpy.ndarray, shape (n, ntag)
+            Wrapped phase (rad; 0 where invalid) and ``|H|`` (as :meth:`magnitude`).
+        valid : numpy.ndarray of bool, shape (n, ntag)
+            As :meth:`phase` with ``per_tag=True``; ``valid.all(axis=1)`` is the validity
+            :meth:`magnitude` reports.
+        """
+        phi, size, valid = self._phase(_as_points(points), True)
+        return phi, np.ascontiguousarray(size.T, dtype=np.float64), valid
+
+    def _phase(
+        self, pts: NDArray[np.float64], per_tag: bool
+    ) -> tuple[NDArray[np.float64], NDArray[np.floating], NDArray[np.bool_]]:
+        """``(phi, |D| (ntag, n), valid)`` of :meth:`phase`."""
+        values, size, valid_tags = self._evaluate(pts, derivatives=False)
         valid = valid_tags if per_tag else cast(NDArray[np.bool_], valid_tags.all(axis=1))
         phi = self._remodulate(pts, values[0, : self._ntag], values[0, self._ntag :])
         np.copyto(
             phi, 0.0, where=~(valid_tags if per_tag else valid_tags.all(axis=1, keepdims=True))
         )
-        return phi, valid
+        return phi, size, valid
 
     def magnitude(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         """Harmonic magnitude ``|H|`` of every tag: ``(magnitude (n, ntag), valid (n,))``.

@@ -82,6 +82,10 @@ def shear_modulus(body: Body) -> float:
 #: images be prepared on the whole grid.
 WINDOW_PERIODS = 2.0
 
+#: Phase samplings of a frame (:meth:`PhaseConstraint.epsilon_at`, e.g. the predictor's
+#: candidates) whose harmonic magnitudes are kept for a noise floor at one of them
+_MAGNITUDE_MEMO = 4
+
 
 def constraint_quadrature(body: Body, spacing: float) -> tuple[FloatArray, FloatArray]:
     """Tensor Gauss rule whose points are at most about ``spacing`` mm apart in every cell.
@@ -310,15 +314,18 @@ class PhaseConstraint:
         self.reference_noise = reference_residual(
             self.points, self.volume, phi0, valid0, self.wavevectors
         )
-        self.reference_magnitude = self._mean_magnitude(reference, self.points, valid0)
+        point_magnitude = reference.magnitude(self.points)[0]
+        self.reference_magnitude = self._mean_magnitude(point_magnitude, valid0)
         self.harmonic_noise = _harmonic_noise(phase)
-        self._reference_point_magnitude = (
-            None if self.harmonic_noise is None else reference.magnitude(self.points)[0]
-        )
+        self._reference_point_magnitude = None if self.harmonic_noise is None else point_magnitude
         self.observability: Observability | None = None
         self.penalty = 0.0
         self.multipliers = np.zeros_like(phi0)
         self._sampler: PhaseSampler | None = None
+        # the harmonic magnitudes of the last few phase samplings of this frame (epsilon_at),
+        # for a noise floor at one of their displacements: (u, sampler, |H| (nq, ntag),
+        # valid (nq,))
+        self._magnitudes: list[tuple[FloatArray, PhaseSampler, FloatArray, np.ndarray]] = []
         self.frame = 0
         k = 2.0 * np.pi * np.asarray(phase["tag_frequency"], dtype=float)
         self.wavenumber = float(np.sqrt(np.mean(k**2)))
@@ -351,10 +358,8 @@ class PhaseConstraint:
         )
         return self.observability
 
-    def _mean_magnitude(
-        self, sampler: PhaseSampler, points: FloatArray, valid: np.ndarray
-    ) -> FloatArray:
-        magnitude, _ = sampler.magnitude(points)
+    def _mean_magnitude(self, magnitude: FloatArray, valid: np.ndarray) -> FloatArray:
+        """Volume-weighted mean of ``magnitude`` (nq, ntag) over the ``valid`` points, per tag."""
         w = self.volume[:, None] * valid
         total = w.sum(axis=0)
         return np.where(total > 0, (w * magnitude).sum(axis=0) / np.where(total > 0, total, 1), 0)
@@ -370,8 +375,7 @@ class PhaseConstraint:
             if self.frame == 0 or self._sampler is None:
                 magnitude, valid = self._reference_point_magnitude, self.reference_valid
             else:
-                points = self.current_points(u)
-                magnitude, now = self._frame_sampler(points).magnitude(points)
+                magnitude, now = self._point_magnitude(u)
                 valid = self.reference_valid & now[:, None]
             return noise_floor(
                 self.harmonic_noise, self._reference_point_magnitude, magnitude, self.volume,
@@ -382,9 +386,18 @@ class PhaseConstraint:
         if self.frame == 0 or self._sampler is None:
             ok = np.isfinite(self.reference_noise)
             return float((share[ok] * self.reference_noise[ok]).sum() / share[ok].sum())
-        points = self.current_points(u)
-        magnitude = self._mean_magnitude(self._frame_sampler(points), points, self.reference_valid)
+        magnitude = self._mean_magnitude(self._point_magnitude(u)[0], self.reference_valid)
         return epsilon_floor(self.reference_noise, self.reference_magnitude, magnitude, share)
+
+    def _point_magnitude(self, u: FloatArray) -> tuple[FloatArray, np.ndarray]:
+        """``|H|`` (nq, ntag) of the current frame at the points displaced by ``u``, and
+        which points are valid for every tag (nq,): from :meth:`epsilon_at`'s sampling at
+        the same ``u`` in this frame if there was one, else sampled."""
+        for seen, sampler, magnitude, valid in self._magnitudes:
+            if sampler is self._sampler and np.array_equal(seen, u):
+                return magnitude, valid
+        points = self.current_points(u)
+        return self._frame_sampler(points).magnitude(points)
 
     def replace_images(self, phase: xr.Dataset) -> None:
         """Read later frames from ``phase`` (same grid and tags, frame 0 unchanged).
@@ -417,12 +430,18 @@ class PhaseConstraint:
                 "replace_images needs images on the same grid and tags with frame 0 unchanged"
             )
         self.phase = phase
-        self._sampler = None
+        self._use_sampler(None)
 
     def release_frame(self) -> None:
         """Drop the sampler of the current frame (its grid-sized buffers) until the next
         :meth:`set_frame`; evaluating the constraint before that raises RuntimeError."""
-        self._sampler = None
+        self._use_sampler(None)
+
+    def _use_sampler(self, sampler: PhaseSampler | None) -> None:
+        """Sample the current frame with ``sampler`` from now on (None: no frame ready); the
+        magnitudes kept from another sampler no longer apply."""
+        self._sampler = sampler
+        self._magnitudes = []
 
     def set_frame(self, time_index: int, near: FloatArray | None = None) -> None:
         """Target the phase images of frame ``time_index`` (prepares them once).
@@ -441,10 +460,10 @@ class PhaseConstraint:
             if not np.isfinite(region).all():  # no box to speak of: the whole grid
                 region = None
         # the previous frame's sampler is done with: its tap buffer is reused
-        self._sampler = PhaseSampler(
+        self._use_sampler(PhaseSampler(
             self.phase, int(time_index), order=self.spline_order, reuse=self._sampler,
             region=region,
-        )  # fmt: skip
+        ))  # fmt: skip
         self.frame = int(time_index)
 
     def _frame_sampler(self, points: FloatArray) -> PhaseSampler:
@@ -455,7 +474,7 @@ class PhaseConstraint:
             raise RuntimeError("call set_frame(time_index) before evaluating the constraint")
         if sampler.outside_window(points):
             sampler = PhaseSampler(self.phase, self.frame, order=self.spline_order, reuse=sampler)
-            self._sampler = sampler
+            self._use_sampler(sampler)
         return sampler
 
     def current_points(self, u: FloatArray) -> FloatArray:
@@ -483,7 +502,10 @@ class PhaseConstraint:
     def epsilon_at(self, u: FloatArray) -> float:
         """Tracking residual ε at displacement ``u`` (phase only, no gradients), rad."""
         points = self.current_points(u)
-        phi, valid = self._frame_sampler(points).phase(points, per_tag=True)
+        sampler = self._frame_sampler(points)
+        phi, magnitude, valid = sampler.phase_and_magnitude(points)
+        seen = (np.array(u, dtype=np.float64), sampler, magnitude, np.all(valid, axis=1))
+        self._magnitudes = [*self._magnitudes, seen][-_MAGNITUDE_MEMO:]
         ok = valid & self.reference_valid
         return _epsilon(self.volume, ok, np.where(ok, wrap(phi - self.reference_phase), 0.0))
 

@@ -118,3 +118,35 @@ def test_tracker_noise_floor_is_the_residual_of_noise_at_the_true_motion():
         quiet = PhaseConstraint(body, extract_phase(clean))
         quiet.set_frame(1)
         assert quiet.epsilon_floor(still_u) < 0.05 * floor
+
+
+@pytest.mark.parametrize("with_noise", [True, False], ids=["harmonic_noise", "affine"])
+def test_a_noise_floor_where_the_phase_was_just_sampled_reuses_those_magnitudes(
+    with_noise, monkeypatch
+):
+    # the predictor samples its candidates' phase (epsilon_at); the noise floor at the chosen
+    # one takes the magnitudes of that sampling: the same floor to the bit, no new sampling.
+    # Another displacement or another preparation of the frame samples again.
+    from harpx.imaging.sample import PhaseSampler
+    from harpx.mechanics.body import Body
+    from harpx.mechanics.materials import NeoHookean
+    from harpx.mechanics.mesh import tube
+    from harpx.tracking.constraint import PhaseConstraint
+
+    mesh = tube(9.0, 15.0, 12.0, n_radial=2, n_circumferential=16, n_axial=2,
+                center=(0.0, 0.0, -6.0))  # fmt: skip
+    body = Body(mesh, NeoHookean(c1=1.0, kappa=50.0))
+    phase = extract_phase(_pair("CSPAMM", snr=10.0)[0])
+    constraint = PhaseConstraint(body, phase if with_noise else phase.drop_vars("harmonic_noise"))
+    constraint.set_frame(1)
+    u = np.random.default_rng(3).normal(0.0, 0.3, body.ndof)
+    fresh = constraint.epsilon_floor(u)
+    calls = []
+    sample = PhaseSampler.magnitude
+    monkeypatch.setattr(PhaseSampler, "magnitude", lambda s, p: calls.append(1) or sample(s, p))
+    constraint.epsilon_at(u + 0.2)
+    constraint.epsilon_at(u.copy())
+    assert constraint.epsilon_floor(u) == fresh and not calls
+    assert constraint.epsilon_floor(u + 0.1) != fresh and len(calls) == 1
+    constraint.set_frame(1)
+    assert constraint.epsilon_floor(u) == fresh and len(calls) == 2
