@@ -493,7 +493,9 @@ class PhaseConstraint:
         grad = np.where(ok[..., None], grad, 0.0)
         if self.observability is not None and (self.observability.point_rank < 3).any():
             # the force acts along seen directions only (module notes of observability)
-            grad = np.einsum("qtj,qij->qti", grad, self.observability.projectors)
+            # P g per point and tag, as g P: the projectors are symmetric (V Vᵀ), and a
+            # batched matmul is four times as fast as the einsum
+            grad = np.matmul(grad, self.observability.projectors)
         robust = None
         if self.robust_scale is not None:
             robust = 1.0 / (1.0 + (residual / self.robust_scale) ** 2)
