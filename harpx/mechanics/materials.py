@@ -389,8 +389,8 @@ class NeoHookean(_Uncoupled):
 
 def _transposed(A: FloatArray) -> FloatArray:
     """``A^T`` of a stack of 3×3 matrices, contiguous: numpy's batched matmul of a
-    transposed view takes a strided path three times as slow as the copy and a contiguous
-    product together."""
+    transposed view takes a slow strided path, slower than the copy and a contiguous
+    product together (benchmarks/results/tracking_speed.md)."""
     return np.ascontiguousarray(np.swapaxes(A, -1, -2))
 
 

@@ -493,8 +493,8 @@ class PhaseConstraint:
         grad = np.where(ok[..., None], grad, 0.0)
         if self.observability is not None and (self.observability.point_rank < 3).any():
             # the force acts along seen directions only (module notes of observability)
-            # P g per point and tag, as g P: the projectors are symmetric (V Vᵀ), and a
-            # batched matmul is four times as fast as the einsum
+            # P g per point and tag, written g P (the projectors are symmetric, V Vᵀ): a
+            # batched matmul, much faster than the equivalent einsum
             grad = np.matmul(grad, self.observability.projectors)
         robust = None
         if self.robust_scale is not None:
