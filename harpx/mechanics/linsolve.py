@@ -226,8 +226,9 @@ class LinearSolver:
         Number of Krylov loops (``reuse``) that did not reach the tolerance, so that the
         matrix was factorised afresh.
     last_iterations : int
-        Iterations of the last solve's Krylov loop (``reuse`` or ``"amg-cg"``); 0 when it
-        factorised without trying one.
+        Iterations of the last solve's Krylov loop (``reuse`` or ``"amg-cg"``), or of the
+        refinement of a fresh single-precision factorisation (``factors="single"``); 0 when
+        it factorised in double precision without trying a loop.
     factors : str
         Precision of the factorisations from now on: ``"single"`` only while single-precision
         factors refine to ``reuse`` (see the parameter).
@@ -381,9 +382,8 @@ class LinearSolver:
                     return x
                 self.reuse_failures += 1
             if self.factors == "single":
-                x = self._factorise(data.astype(np.float32), indptr, indices, None, new_pattern)
-                if x is None:
-                    x = self._refined(data, indptr, indices, rhs, symmetric)
+                self._factorise(data.astype(np.float32), indptr, indices, None, new_pattern)
+                x = self._refined(data, indptr, indices, rhs, symmetric)
             else:
                 x = self._factorise(data, indptr, indices, rhs, new_pattern)
             if new_pattern:
