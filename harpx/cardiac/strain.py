@@ -28,9 +28,13 @@ apical sector k on ``anterior - 90° (k-1)``, so the septum lies at ``anterior -
 lateral wall at ``anterior + 90°``. The template has no right ventricle: ``anterior`` comes
 from the caller or from the template's ``anterior`` attribute when it has one (the
 direction of the anterior wall, e.g. midway between the right-ventricular insertions
-rotated by 90° towards the lateral wall). Segment values are volume-weighted means over the
-cells (or voxels) with image data whose centre lies in the segment; what that leaves out,
-and which components the tags observed, is described in :mod:`harpx.cardiac.quality`.
+rotated by 90° towards the lateral wall). Segment values are volume integrals over the
+segment's points with image data, divided by their volume: for trilinear (hex8) cells the
+2 × 2 × 2 Gauss points of every cell, each with the strain and volume it carries there, so
+that a cell across a segment border adds to both segments in proportion; for other
+elements one point per cell (its centre, with the cell's mean strain); for a grid result
+the voxels. What that leaves out, and which components the tags observed, is described in
+:mod:`harpx.cardiac.quality`.
 
 Rotation, twist, torsion
 ------------------------
@@ -245,7 +249,7 @@ def lv_measures(
     Parameters
     ----------
     points : array_like, shape (n, 3)
-        Reference positions (cell centres or voxel centres), mm.
+        Reference positions (Gauss points, cell centres or voxel centres), mm.
     green_strain : array_like, shape (ntime, n, 3, 3)
         Green–Lagrange strain at the points (dimensionless); NaN points are left out.
     current : array_like, shape (ntime, n, 3)
@@ -424,6 +428,34 @@ def _cell_weights(points: FloatArray, cells: IntArray) -> FloatArray:
     return np.abs(np.linalg.det(d))
 
 
+def _hex8_gauss_points(
+    points: FloatArray, cells: IntArray, displacement: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Reference positions (8 ncell, 3), Green strain (time, 8 ncell, 3, 3), current
+    positions (time, 8 ncell, 3) and volumes (8 ncell,) mm³ of the 2 × 2 × 2 Gauss points
+    of trilinear hexahedra (corner order of ``_SIGNS``), cell by cell, from the nodal
+    ``displacement`` (time, node, 3) mm: the field the tracker's hex8 cells carry."""
+    xi = _SIGNS / np.sqrt(3.0)  # the Gauss points, in the corners' order, (q, k)
+    factors = 1.0 + xi[:, None, :] * _SIGNS[None, :, :]  # (q, a, k): 1 + ξ_ak ξ_qk
+    shape = factors.prod(axis=2) / 8.0  # N_a(ξ_q)
+    dshape = np.empty((8, 8, 3))  # ∂N_a/∂ξ_k at ξ_q
+    for k in range(3):  # the three reference axes
+        others = [m for m in range(3) if m != k]
+        dshape[:, :, k] = _SIGNS[None, :, k] * factors[:, :, others].prod(axis=2) / 8.0
+    x = points[cells[:, :8]]  # (e, a, i)
+    jac = np.einsum("eai,qak->eqik", x, dshape)  # ∂X_i/∂ξ_k
+    inverse = np.linalg.inv(jac)
+    grad = np.einsum("qak,eqkj->eqaj", dshape, inverse)  # ∂N_a/∂X_j
+    weights = np.abs(np.linalg.det(jac)).reshape(-1)  # Gauss weights 1
+    ue = displacement[:, cells[:, :8]]  # (t, e, a, i)
+    F = np.einsum("teai,eqaj->teqij", ue, grad) + np.eye(3)
+    E = 0.5 * (np.einsum("teqki,teqkj->teqij", F, F) - np.eye(3))
+    X = np.einsum("qa,eai->eqi", shape, x)
+    current = X[None] + np.einsum("qa,teai->teqi", shape, ue)
+    nt, ne = ue.shape[:2]
+    return X.reshape(-1, 3), E.reshape(nt, ne * 8, 3, 3), current.reshape(nt, ne * 8, 3), weights
+
+
 def _grid_strain(u: xr.DataArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Voxel centres (n, 3), Green strain (time, n, 3, 3), current positions (time, n, 3)."""
     u = u.transpose("time", "axis", "z", "y", "x")
@@ -552,15 +584,25 @@ def cardiac_strain(
         cells = np.asarray(tracked["cells"].values, dtype=np.int64)
         disp = np.asarray(tracked["displacement"].transpose("time", "node", "axis").values)
         centres = pts[cells[:, :8]].mean(axis=1)
-        current = (pts[None] + disp)[:, cells[:, :8]].mean(axis=2)
         E = np.asarray(tracked["green_strain"].transpose("time", "cell", "i", "j").values)
         observed, has_data = _observation(tracked)
         if observed is None:
             _warn_not_recorded("this finite-element dataset")
-        measures = lv_measures(
-            centres, E, current, _cell_weights(pts, cells), template, observed=observed,
-            has_data=has_data, **options,
-        )  # fmt: skip
+        if tracked["cells"].attrs.get("element", "hex8") == "hex8":
+            # the segment means as volume integrals on each cell's Gauss points: a cell
+            # across a segment border adds to both sides, not wholly to its centre's
+            X, E_points, current, weights = _hex8_gauss_points(pts, cells, disp)
+            measures = lv_measures(
+                X, E_points, current, weights, template,
+                observed=None if observed is None else np.repeat(observed, 8, axis=0),
+                has_data=None if has_data is None else np.repeat(has_data, 8), **options,
+            )  # fmt: skip
+        else:  # other elements: one point per cell, its centre, with the cell-mean strain
+            current = (pts[None] + disp)[:, cells[:, :8]].mean(axis=2)
+            measures = lv_measures(
+                centres, E, current, _cell_weights(pts, cells), template, observed=observed,
+                has_data=has_data, **options,
+            )  # fmt: skip
         basis = template.local_basis(centres)
         local = _local_strain(E, basis)
         dims = ("time", "cell", "component")

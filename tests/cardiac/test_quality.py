@@ -126,14 +126,22 @@ def test_cells_without_tag_data_leave_their_segments_empty():
     segment = aha_segments(centres, TEMPLATE, anterior=0.0)
     rank = np.where(np.isin(segment, [7, 8, 10, 11]), 0, 3)
     full = cardiac_strain(fe_dataset(_shrink, body), TEMPLATE, anterior=0.0)
-    with pytest.warns(HarpxWarning, match=r"segment\(s\) 7-8, 10-11: 7 mid anterior \(0\.00\)"):
+    # the segment means integrate over each cell's Gauss points: the cells of the
+    # neighbouring segments that reach across the border cover 3-4 % of each empty segment
+    # (32 cells around the ring, 6 segments: a border every 5.3 cells), below min_coverage
+    with pytest.warns(HarpxWarning, match=r"segment\(s\) 7-8, 10-11: 7 mid anterior \(0\.03\)"):
         out = cardiac_strain(fe_dataset(_shrink, body, rank=rank), TEMPLATE, anterior=0.0)
     empty = [7, 8, 10, 11]
     assert out.attrs["segments_without_data"].tolist() == empty
     assert np.isnan(out.segment_strain.sel(segment=empty)).all()
-    assert (out.segment_coverage.sel(segment=empty) == 0).all()
+    assert (out.segment_coverage.sel(segment=empty) < 0.05).all()
     others = [k for k in range(1, 18) if k not in empty]
-    assert np.array_equal(out.peak_strain.sel(segment=others), full.peak_strain.sel(segment=others))
+    # the other segments lose only the Gauss points of the empty cells that reach into
+    # them; the shrink's strain in the local frame hardly varies across a segment (largest
+    # change measured 2.6e-6 of peak strains ~0.08)
+    np.testing.assert_allclose(
+        out.peak_strain.sel(segment=others), full.peak_strain.sel(segment=others), atol=1e-5
+    )
 
 
 def test_in_plane_tags_leave_longitudinal_strain_and_twist_inferred():
@@ -226,3 +234,28 @@ def test_cardiac_strain_warns_and_flags_under_reported_thickening():
     ds.attrs.update(phase_radius=0.8, blur_passes_applied=3)
     out = cardiac_strain(ds, TEMPLATE, anterior=0.0)  # no warning (they are errors here)
     assert out.attrs["radial_strain_caution"] == ""
+
+
+def test_segment_means_integrate_over_the_gauss_points_of_trilinear_cells(rng):
+    # independent truths: an affine motion has F = I + A at every point; for any motion the
+    # Gauss points' volumes add up to skfem's cell volumes and their volume-weighted strain
+    # is the cell mean harpx's Body integrates with its own 2 × 2 × 2 rule
+    from harpx.cardiac.strain import _hex8_gauss_points
+
+    body = body_of()
+    points = body.dof_points
+    cells = np.asarray(body.cells, dtype=np.int64)
+    A = 0.05 * rng.standard_normal((3, 3))
+    affine = (points @ A.T)[None]
+    X, E, current, weights = _hex8_gauss_points(points, cells, affine)
+    F = np.eye(3) + A
+    np.testing.assert_allclose(E[0], np.broadcast_to(0.5 * (F.T @ F - np.eye(3)), E[0].shape),
+                               atol=1e-13)  # fmt: skip
+    np.testing.assert_allclose(current[0], X + X @ A.T, atol=1e-12)
+    np.testing.assert_allclose(weights.reshape(-1, 8).sum(axis=1), body.cell_volume, rtol=1e-12)
+    bent = points + 0.002 * np.stack([points[:, 1] ** 2, points[:, 2] * points[:, 0],
+                                      np.zeros(len(points))], axis=1)  # fmt: skip
+    _, E, _, weights = _hex8_gauss_points(points, cells, (bent - points)[None])
+    w = weights.reshape(-1, 8, 1, 1)
+    mean = (w * E[0].reshape(-1, 8, 3, 3)).sum(axis=1) / w.sum(axis=1)
+    np.testing.assert_allclose(mean, body.green_strain((bent - points).ravel()), atol=1e-12)
