@@ -8,7 +8,7 @@ from scipy import sparse
 from scipy.sparse import linalg as spla
 
 from harpx.mechanics.linsolve import LinearSolver, available_methods
-from tests.mechanics.test_linsolve_reuse import _laplacian
+from tests.mechanics.test_linsolve_reuse import _convection, _laplacian
 
 pytestmark = pytest.mark.skipif(
     "pardiso" not in available_methods(), reason="PARDISO (pypardiso) is not available"
@@ -35,6 +35,19 @@ def test_single_factors_solve_fresh_and_nearby_matrices_to_double_accuracy(rng):
         x = solver.solve(K, b)
         assert _relative_error(K, x, b) <= 1e-7, k
         assert np.linalg.norm(K @ x - b) <= 1e-8 * np.linalg.norm(b), k
+    assert (solver.factors, solver.factorizations, solver.reused) == ("single", 1, 3)
+
+
+def test_single_factors_of_nearby_non_symmetric_matrices_reach_the_accuracy_asked(rng):
+    # the non-symmetric mode (scaling and weighted matching) in single precision: the fresh
+    # factorisation refined, the later matrices by BiCGSTAB with those factors
+    b = rng.standard_normal(10**3)
+    solver = LinearSolver("pardiso", reuse=1e-8, factors="single")
+    for k, speed in enumerate((1.0, 1.05, 1.1, 1.12)):
+        K = _convection(10, speed, 0.1)
+        x = solver.solve(K, b, symmetric=False)
+        assert np.linalg.norm(K @ x - b) <= 1e-8 * np.linalg.norm(b), k
+        assert _relative_error(K, x, b) <= 1e-6, k
     assert (solver.factors, solver.factorizations, solver.reused) == ("single", 1, 3)
 
 
