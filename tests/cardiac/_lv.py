@@ -55,7 +55,7 @@ def fe_dataset(
     ds = xr.Dataset(
         {
             "points": (("node", "axis"), body.dof_points),
-            "cells": (("cell", "vertex"), body.cells, {"element": "hex8"}),
+            "cells": (("cell", "vertex"), body.cells, {"element": body.element}),
             "displacement": (("time", "node", "axis"), disp),
             "green_strain": (("time", "cell", "i", "j"), strain),
         },
