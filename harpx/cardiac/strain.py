@@ -421,8 +421,17 @@ def lv_measures(
     return out
 
 
-def _cell_weights(points: FloatArray, cells: IntArray) -> FloatArray:
-    """Volume estimate |det J(centre)|·8 of hexahedra from their 8 corner vertices, mm³."""
+def _corners(element: str) -> int:
+    """Corner vertices of a cell of ``element`` (they come first in its vertex list)."""
+    return 4 if element.startswith("tet") else 8
+
+
+def _cell_weights(points: FloatArray, cells: IntArray, element: str) -> FloatArray:
+    """Cell volumes from the corner vertices, mm³: exact for straight tetrahedra; for
+    hexahedra the estimate |det J(centre)|·8."""
+    if _corners(element) == 4:
+        x = points[cells[:, :4]]
+        return np.abs(np.linalg.det(x[:, 1:] - x[:, :1])) / 6.0
     x = points[cells[:, :8]]
     d = np.einsum("nai,aj->nij", x, _SIGNS) / 4.0
     return np.abs(np.linalg.det(d))
@@ -583,12 +592,14 @@ def cardiac_strain(
         pts = np.asarray(tracked["points"].values, dtype=np.float64)
         cells = np.asarray(tracked["cells"].values, dtype=np.int64)
         disp = np.asarray(tracked["displacement"].transpose("time", "node", "axis").values)
-        centres = pts[cells[:, :8]].mean(axis=1)
+        element = str(tracked["cells"].attrs.get("element", "hex8"))
+        corners = cells[:, : _corners(element)]
+        centres = pts[corners].mean(axis=1)
         E = np.asarray(tracked["green_strain"].transpose("time", "cell", "i", "j").values)
         observed, has_data = _observation(tracked)
         if observed is None:
             _warn_not_recorded("this finite-element dataset")
-        if tracked["cells"].attrs.get("element", "hex8") == "hex8":
+        if element == "hex8":
             # the segment means as volume integrals on each cell's Gauss points: a cell
             # across a segment border adds to both sides, not wholly to its centre's
             X, E_points, current, weights = _hex8_gauss_points(pts, cells, disp)
@@ -598,10 +609,10 @@ def cardiac_strain(
                 has_data=None if has_data is None else np.repeat(has_data, 8), **options,
             )  # fmt: skip
         else:  # other elements: one point per cell, its centre, with the cell-mean strain
-            current = (pts[None] + disp)[:, cells[:, :8]].mean(axis=2)
+            current = (pts[None] + disp)[:, corners].mean(axis=2)
             measures = lv_measures(
-                centres, E, current, _cell_weights(pts, cells), template, observed=observed,
-                has_data=has_data, **options,
+                centres, E, current, _cell_weights(pts, cells, element), template,
+                observed=observed, has_data=has_data, **options,
             )  # fmt: skip
         basis = template.local_basis(centres)
         local = _local_strain(E, basis)
