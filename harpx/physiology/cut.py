@@ -16,9 +16,11 @@ third node above them fixed against rotation about it), which adds (almost) no r
 to a self-equilibrated residual stress: only the small tilt of the line from the first to
 the second node out of the short-axis plane makes the support slightly redundant. The
 *mid-line* of each face is the principal direction of its nodes projected on the
-short-axis plane, oriented outwards; the opening angle is the
-signed angle from the mid-line of the clockwise face to that of the counter-clockwise face
-(positive when the ring opens, 0 for the intact ring).
+short-axis plane, oriented from the inner to the outer wall; the opening angle is the
+turn of the counter-clockwise face's mid-line minus that of the clockwise face (positive
+when the ring opens, 0 for the intact ring). Each face is measured against its own
+reference direction, so openings beyond 180° are reported as they are (up to a turn of
+180° per face, an opening of about 360°).
 
 References
 ----------
@@ -105,12 +107,16 @@ class OpeningAngle:
     info: dict = field(default_factory=dict)
 
 
-def _face_direction(points: FloatArray, centre: FloatArray) -> FloatArray:
-    """Outward principal direction (unit, in the x-y plane) of face nodes."""
+def _face_direction(points: FloatArray, radius: FloatArray) -> FloatArray:
+    """Principal in-plane direction (unit) of face nodes, from the inner to the outer wall.
+
+    The sign comes from the nodes' reference radii (material data), not from their
+    position about a centre, so a face that has turned by more than 90° keeps it.
+    """
     q = points[:, :2] - points[:, :2].mean(axis=0)
     _, _, vt = np.linalg.svd(q, full_matrices=False)
     d = vt[0]
-    if np.dot(points[:, :2].mean(axis=0) - centre, d) < 0:
+    if np.dot(radius - radius.mean(), q @ d) < 0:
         d = -d
     return d
 
@@ -118,6 +124,11 @@ def _face_direction(points: FloatArray, centre: FloatArray) -> FloatArray:
 def _signed_angle(a: FloatArray, b: FloatArray) -> float:
     """Angle from 2-D direction ``a`` to ``b`` in degrees, in (-180, 180]."""
     return float(np.degrees(np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b)))
+
+
+def _face_turn(before: FloatArray, after: FloatArray, radius: FloatArray) -> float:
+    """Rotation of one cut face about z from ``before`` to ``after`` positions, degrees."""
+    return _signed_angle(_face_direction(before, radius), _face_direction(after, radius))
 
 
 def opening_angle(
@@ -252,11 +263,16 @@ def opening_angle(
     result = release(ring, [support], tol=tol)
     u = result.u
     cur = pts + u.reshape(-1, 3)
+    # each face's own turn (about half the opening each, the support between them holds
+    # still): their difference stays unwrapped past 180°, where the angle between the two
+    # faces would wrap to its negative
     ccw, cw = faces
-    before = _signed_angle(_face_direction(pts[cw], c0), _face_direction(pts[ccw], c0))
-    after = _signed_angle(_face_direction(cur[cw], c0), _face_direction(cur[ccw], c0))
+    radius = np.hypot(*(pts[:, :2] - c0).T)
+    opening = _face_turn(pts[ccw], cur[ccw], radius[ccw]) - _face_turn(
+        pts[cw], cur[cw], radius[cw]
+    )
     return OpeningAngle(
-        degrees=after - before,
+        degrees=opening,
         ring=ring,
         u=u,
         faces=faces,

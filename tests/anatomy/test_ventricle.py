@@ -213,14 +213,18 @@ def test_a_stress_free_ring_does_not_open():
     np.testing.assert_array_equal(result.u, 0.0)
 
 
-@pytest.mark.parametrize(("stretch", "expected"), [(1.05, -18.0), (0.95, 18.0)])
-def test_uniform_circumferential_growth_closes_or_opens_by_its_angle(stretch, expected):
+@pytest.mark.parametrize(
+    ("stretch", "expected", "bound"), [(1.05, -18.0, 0.4), (0.95, 18.0, 0.4), (0.45, 198.0, 1.0)]
+)
+def test_uniform_circumferential_growth_closes_or_opens_by_its_angle(stretch, expected, bound):
     # growth diag(1, θ) in (r, ψ) is compatible with a stress-free sector of angle 2π θ, so
     # the released ring subtends 360 θ degrees: opening angle = 360 (1 - θ) exactly in the
-    # continuum; 24 straight-edged cells miss it by O(h²) (measured 0.22°, and 0.055° with
-    # 48 cells: second order), so 0.4° bounds the discretisation error
+    # continuum; 24 straight-edged cells miss it by O(h²) (measured 0.22° at ±18°, and
+    # 0.055° with 48 cells: second order; 0.74° at 198°). An opening past 180° is reported
+    # as such, not wrapped to its negative (-162.7° before each face's turn was measured on
+    # its own)
     result = opening_angle(_ring(lambda r: np.full(r.shape, stretch)), slab=(0.0, 4.0))
-    assert abs(result.degrees - expected) < 0.4, result.degrees
+    assert abs(result.degrees - expected) < bound, result.degrees
 
 
 def test_a_growth_gradient_opens_the_ring():
