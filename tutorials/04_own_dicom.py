@@ -125,9 +125,10 @@ for w in caught:
     print("warning:", str(w.message)[:160])
 template_sa = fit_sa.template
 g_sa = template_sa.geometry
+apex_sa = float(template_sa.to_image([[0.0, 0.0, -g_sa.inner[1]]])[0, 2])
 print(f"short-axis fit: inner {np.round(g_sa.inner, 2)}, outer {np.round(g_sa.outer, 2)} mm, "
-      f"axis {np.round(template_sa.axis, 3)}; voxels per AHA segment "
-      f"{fit_sa.segment_voxels.tolist()}")  # fmt: skip
+      f"endocardial apex at z = {apex_sa:.1f} mm, axis {np.round(template_sa.axis, 3)}; "
+      f"voxels per AHA segment {fit_sa.segment_voxels.tolist()}")  # fmt: skip
 
 # %% [markdown]
 # A mask that is not a ventricle — here the myocardium with its blood pool filled in, as

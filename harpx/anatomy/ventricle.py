@@ -71,6 +71,7 @@ import skfem
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
+from harpx.anatomy.aha import segments_local
 from harpx.mechanics.mesh import (
     MeshSpec,
     curved_hex_mesh,
@@ -411,26 +412,10 @@ def _orient(points: FloatArray, cells: IntArray) -> IntArray:
     return out
 
 
-def _aha_segments(theta: FloatArray, sigma: FloatArray, sigma_cap: float) -> dict[str, IntArray]:
-    """AHA-like 17 segments from cell angle (rad) and arc fraction."""
-    apex = sigma < 0.5 * sigma_cap
-    apical = ~apex & (sigma < 0.45)
-    mid = (sigma >= 0.45) & (sigma < 0.75)
-    basal = sigma >= 0.75
-    # the sectors of harpx.cardiac.strain.aha_segments with the anterior wall at +x:
-    # numbered counter-clockwise seen from the apex (a negative turn about +z), segments
-    # 1, 7 and 13 centred on +x
-    turn = -theta
-    six = np.floor(np.mod(turn + np.pi / 6.0, 2.0 * np.pi) / (np.pi / 3.0)).astype(np.int64) % 6
-    four = np.floor(np.mod(turn + np.pi / 4.0, 2.0 * np.pi) / (np.pi / 2.0)).astype(np.int64) % 4
-    out: dict[str, IntArray] = {}
-    for k in range(6):  # 17 named sets
-        out[f"aha_{k + 1:02d}"] = np.nonzero(basal & (six == k))[0]
-        out[f"aha_{k + 7:02d}"] = np.nonzero(mid & (six == k))[0]
-    for k in range(4):
-        out[f"aha_{k + 13:02d}"] = np.nonzero(apical & (four == k))[0]
-    out["aha_17"] = np.nonzero(apex)[0]
-    return out
+def _aha_segments(centres: FloatArray, geometry: VentricleGeometry) -> dict[str, IntArray]:
+    """The 17 AHA segments of cells by their centres (anterior wall at +x), as named sets."""
+    labels = segments_local(centres, geometry, 0.0)
+    return {f"aha_{k:02d}": np.nonzero(labels == k)[0] for k in range(1, 18)}
 
 
 def ventricle(
@@ -469,14 +454,15 @@ def ventricle(
     fiber_endo, fiber_epi : float, default 60, -60
         Helix angles in degrees at the endocardium and epicardium (linear in between).
     segments : bool, default True
-        Also name AHA-like segments ``"aha_01"`` ... ``"aha_17"``: basal and mid rings of
-        six 60° sectors and four apical 90° sectors numbered counter-clockwise seen from
-        the apex with segments 1, 7 and 13 centred on +x (the sectors of
-        :func:`harpx.cardiac.strain.aha_segments` with ``anterior=0``; the template has no
-        right ventricle, so +x stands for the anterior wall), and the apex cap. The rings
-        split the wall by arc length along the meridian, so near a ring border a cell may
-        fall in the neighbouring ring of the cardiac analysis, which splits the cavity's
-        length in thirds.
+        Also name the AHA segments ``"aha_01"`` ... ``"aha_17"``: each cell in the segment
+        of its centre (:func:`harpx.anatomy.aha.segments_local` with the anterior wall at
+        +x, the segments :func:`harpx.cardiac.strain.aha_segments` reads: the cavity's
+        length in basal, mid and apical thirds, six 60° sectors in the basal and mid rings
+        and four 90° sectors in the apical one, numbered counter-clockwise seen from the
+        apex with segments 1, 7 and 13 centred on +x; the apex cap below the cavity). With
+        ``n_circumferential`` a multiple of 24 every sector border is a cell border.
+        :meth:`~harpx.anatomy.ventricle_fit.VentricleTemplate.mesh` turns the mesh to the
+        template's ``anterior``.
     curved : bool, default False
         Return curved hexahedra (a :class:`skfem.MeshHex2`, 27-node triquadratic
         geometry; :func:`~harpx.mechanics.mesh.curved_hex_mesh`) for an isoparametric
@@ -583,11 +569,7 @@ def ventricle(
     fibers = geom.fibers(centres, fiber_endo=fiber_endo, fiber_epi=fiber_epi)
     regions: dict[str, IntArray] = {"myocardium": np.arange(len(cells), dtype=np.int64)}
     if segments:
-        quad_sigma = sigma_nodes[quads].mean(axis=1)
-        quad_theta = np.arctan2(
-            np.sin(theta_nodes[quads]).mean(axis=1), np.cos(theta_nodes[quads]).mean(axis=1)
-        )
-        regions |= _aha_segments(np.tile(quad_theta, nt), np.tile(quad_sigma, nt), sigma_cap)
+        regions |= _aha_segments(centres, geom)
     spec = labelled_spec(mesh, regions, boundaries, fibers)
     if not curved:
         return spec

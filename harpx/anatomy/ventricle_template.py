@@ -250,12 +250,18 @@ class VentricleTemplate:
         -------
         MeshSpec
             Regions, boundaries ``endo``/``epi``/``base`` and helical fibres of the
-            template mesh, moved rigidly into the image.
+            template mesh, moved rigidly into the image and turned about the long axis by
+            ``anterior`` (0 when unknown): its ``aha_XX`` regions are the segments
+            :func:`harpx.cardiac.strain.aha_segments` gives this template, and with
+            ``n_circumferential`` a multiple of 24 (the default 48 is) every sector border
+            is a cell border, so no segment mean takes part of a cell.
         """
         spec = self.geometry.mesh(**options)
-        points = self.to_image(spec.mesh.p.T)
+        a = np.deg2rad(self.anterior or 0.0)
+        turn = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0, 0, 1]])
+        points = self.to_image(spec.mesh.p.T @ turn.T)
         moved = hex_mesh(points, _vtk_cells(spec.mesh))
-        fibers = None if spec.fibers is None else spec.fibers @ self.rotation.T
+        fibers = None if spec.fibers is None else spec.fibers @ (self.rotation @ turn).T
         return labelled_spec(moved, spec.regions, spec.boundaries, fibers)
 
 

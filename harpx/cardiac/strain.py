@@ -108,7 +108,7 @@ _SIGNS = (
 )
 
 
-def aha_segments(points: ArrayLike, template: Any, *, anterior: float = 0.0) -> IntArray:
+def aha_segments(points: ArrayLike, template: Any, *, anterior: float | None = None) -> IntArray:
     """AHA segment (1–17) of wall points.
 
     Parameters
@@ -117,9 +117,10 @@ def aha_segments(points: ArrayLike, template: Any, *, anterior: float = 0.0) -> 
         Image points in mm (in the wall).
     template : VentricleTemplate
         The fitted ventricle.
-    anterior : float, default 0
+    anterior : float, optional
         Direction of the anterior wall (centre of segments 1, 7, 13), degrees about the
         long axis (right-handed about the apex-to-base axis) from the template's +x axis.
+        Default: the template's ``anterior`` (0 when it has none).
 
     Returns
     -------
@@ -137,6 +138,8 @@ def aha_segments(points: ArrayLike, template: Any, *, anterior: float = 0.0) -> 
     >>> aha_segments([[30.0, 1.0, 0.0], [-1.0, -30.0, -40.0], [0.0, 0.0, -74.0]], t).tolist()
     [1, 9, 17]
     """
+    if anterior is None:
+        anterior = getattr(template, "anterior", None) or 0.0
     q = template.to_local(points)
     return segments_local(q, template.geometry, float(anterior))
 

@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
-from harpx.errors import CoincidentNodesWarning
+from harpx.errors import CoincidentNodesWarning, HarpxWarning
 from harpx.mechanics.body import Body
 from harpx.mechanics.mesh import hex_mesh
 from harpx.physiology.growth import release, set_growth
@@ -80,6 +80,11 @@ class NodeFixed:
 # ---------------------------------------------------------------------------- radial cut
 
 
+#: A released ring whose faces' centres are further apart along z than this fraction of
+#: its height has left its plane (:attr:`OpeningAngle.planar`)
+_PLANAR_LIMIT = 0.5
+
+
 @dataclass
 class OpeningAngle:
     """Result of :func:`opening_angle`.
@@ -87,7 +92,16 @@ class OpeningAngle:
     Attributes
     ----------
     degrees : float
-        Opening angle in degrees (positive: the ring springs open).
+        Opening angle in degrees (positive: the ring springs open): the in-plane turn of
+        the faces, meaningful while the released ring stays in its plane (``planar``).
+    gap : float
+        Mean distance between the two faces' paired nodes after the release, mm (0 for
+        the intact ring): the edges' separation, also where the ring leaves its plane.
+    planar : bool
+        False when the released ring has left its short-axis plane (its faces' centres
+        lie further apart along z than half the ring's height, e.g. helical fibre growth
+        twisting it into a helix): ``degrees`` then does not describe it, which is warned
+        (:class:`~harpx.errors.HarpxWarning`).
     ring : Body
         The cut ring (reference configuration = the slab at ``u_reference``).
     u : ndarray, shape (ring.ndof,)
@@ -105,20 +119,24 @@ class OpeningAngle:
     faces: tuple[IntArray, IntArray]
     iterations: int = 0
     info: dict = field(default_factory=dict)
+    gap: float = 0.0
+    planar: bool = True
 
 
-def _face_direction(points: FloatArray, radius: FloatArray) -> FloatArray:
-    """Principal in-plane direction (unit) of face nodes, from the inner to the outer wall.
+def _face_direction(points: FloatArray, reference: FloatArray, centre: FloatArray) -> FloatArray:
+    """In-plane direction (unit) in which a face runs from the inner to the outer wall.
 
-    The sign comes from the nodes' reference radii (material data), not from their
-    position about a centre, so a face that has turned by more than 90° keeps it.
+    The face's in-plane positions are fitted as ``a + b r + c z`` over its nodes' reference
+    radius ``r`` and height ``z``; the direction is ``b``: the transmural direction of the
+    face, apart from its longitudinal spread (a slab of a cone tilts as it opens) and
+    signed by the material (its reference radii), not by a position about a centre, so a
+    face that has turned by more than 90° keeps it.
     """
-    q = points[:, :2] - points[:, :2].mean(axis=0)
-    _, _, vt = np.linalg.svd(q, full_matrices=False)
-    d = vt[0]
-    if np.dot(radius - radius.mean(), q @ d) < 0:
-        d = -d
-    return d
+    r = np.hypot(*(reference[:, :2] - centre).T)
+    basis = np.column_stack([np.ones(len(r)), r, reference[:, 2]])
+    coef, *_ = np.linalg.lstsq(basis, points[:, :2], rcond=None)
+    d = coef[1]
+    return d / np.linalg.norm(d)
 
 
 def _signed_angle(a: FloatArray, b: FloatArray) -> float:
@@ -126,9 +144,11 @@ def _signed_angle(a: FloatArray, b: FloatArray) -> float:
     return float(np.degrees(np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b)))
 
 
-def _face_turn(before: FloatArray, after: FloatArray, radius: FloatArray) -> float:
+def _face_turn(before: FloatArray, after: FloatArray, centre: FloatArray) -> float:
     """Rotation of one cut face about z from ``before`` to ``after`` positions, degrees."""
-    return _signed_angle(_face_direction(before, radius), _face_direction(after, radius))
+    return _signed_angle(
+        _face_direction(before, before, centre), _face_direction(after, before, centre)
+    )
 
 
 def opening_angle(
@@ -166,7 +186,13 @@ def opening_angle(
     Returns
     -------
     OpeningAngle
-        ``degrees`` (positive when the ring opens), the ring body and its displacement.
+        ``degrees`` (positive when the ring opens), ``gap`` (mm), ``planar``, the ring
+        body and its displacement.
+
+    Warns
+    -----
+    HarpxWarning
+        If the released ring leaves its plane (``planar`` False).
 
     Raises
     ------
@@ -267,15 +293,27 @@ def opening_angle(
     # still): their difference stays unwrapped past 180°, where the angle between the two
     # faces would wrap to its negative
     ccw, cw = faces
-    radius = np.hypot(*(pts[:, :2] - c0).T)
-    opening = _face_turn(pts[ccw], cur[ccw], radius[ccw]) - _face_turn(
-        pts[cw], cur[cw], radius[cw]
-    )
+    opening = _face_turn(pts[ccw], cur[ccw], c0) - _face_turn(pts[cw], cur[cw], c0)
+    gap = float(np.linalg.norm(cur[ccw] - cur[cw], axis=1).mean())
+    height = float(np.ptp(pts[:, 2]))
+    apart = abs(float(cur[ccw, 2].mean() - cur[cw, 2].mean()))
+    planar = apart <= _PLANAR_LIMIT * height
+    if not planar:
+        warnings.warn(
+            f"the released ring left its plane: its cut faces' centres are {apart:.1f} mm "
+            f"apart along z (the ring is {height:.1f} mm high), so the in-plane opening "
+            f"angle {opening:.1f}° does not describe it; the faces' gap is {gap:.1f} mm",
+            HarpxWarning,
+            stacklevel=2,
+        )
     return OpeningAngle(
+        gap=gap,
+        planar=planar,
         degrees=opening,
         ring=ring,
         u=u,
         faces=faces,
         iterations=result.iterations,
-        info={"slab": tuple(slab), "cells": int(keep.size), "support": (int(A), int(B), int(C))},
+        info={"slab": tuple(slab), "cells": int(keep.size), "support": (int(A), int(B), int(C)),
+              "faces_apart_z": apart},  # fmt: skip
     )

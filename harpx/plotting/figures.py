@@ -228,7 +228,10 @@ def opening_angle_view(result: Any, ax: Any = None, *, scale: float = 1.0) -> An
     ax.set_aspect("equal")
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
-    ax.set_title(f"opening angle {result.degrees:.1f}°")
+    if result.planar:
+        ax.set_title(f"opening angle {result.degrees:.1f}°")
+    else:  # a helix: the in-plane angle does not describe it
+        ax.set_title(f"edges {result.gap:.1f} mm apart, out of plane")
     return ax
 
 

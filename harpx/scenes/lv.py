@@ -182,8 +182,9 @@ SIZES: dict[str, LVSize] = {
     # the paper's acquisition: 12 SA and 8 LA slices, 1.25 mm pixels, 6528-cell hex8 model;
     # truth on a mesh 4/3 finer in-plane and 5/4 across the wall (14.7 k cells)
     "paper": LVSize((48, 27, 4), (64, 36, 5), 10, 30.0, 1.25, 12, 8, 8.0, 6.0, 2),
-    # reduced for tests and tutorials: same heart and physics, coarser everything
-    "small": LVSize((16, 6, 2), (24, 9, 3), 5, 60.0, 2.0, 8, 6, 8.0, 6.0, 2),
+    # reduced for tests and tutorials: same heart and physics, coarser everything; 24 cells
+    # around put a cell border on every AHA sector border (anterior +y), the truth 36
+    "small": LVSize((24, 6, 2), (36, 9, 3), 5, 60.0, 2.0, 8, 6, 8.0, 6.0, 2),
 }
 
 
@@ -364,7 +365,7 @@ def fiber_shortening(tracked: xr.Dataset, body: Body, *, frame: int = -1) -> dic
     return {
         "reference": float(1.0 - (w * lam).sum()),
         "stress_free": float(1.0 - (w * lam * pre).sum()),
-        "prestretch": float((w * pre).sum() - 1.0),
+        "prestretch": float((w * (pre - 1.0)).sum()),
     }
 
 
@@ -478,9 +479,13 @@ class LVScene:
 def _ventricle_mesh(
     geometry: VentricleGeometry, divisions: tuple[int, int, int], *, segments: bool = True
 ) -> MeshSpec:
-    """The scene's ventricle meshed with (circumferential, longitudinal, transmural) cells."""
+    """The scene's ventricle meshed with (circumferential, longitudinal, transmural) cells.
+
+    The scene template's mesh: its ``aha_XX`` regions are the segments of the scene's
+    anterior direction (+y).
+    """
     nc, nl, nt = divisions
-    return geometry.mesh(
+    return _template(geometry).mesh(
         n_circumferential=nc, n_longitudinal=nl, n_transmural=nt, segments=segments
     )
 
@@ -506,7 +511,7 @@ def lv(
     size : {"paper", "small"}, default "paper"
         ``"paper"``: 10 frames, 12 SA + 8 LA slices of 1.25 mm pixels, a 6528-cell
         tracking model and a 14.7 k-cell truth; ``"small"``: 5 frames, 8 SA + 6 LA slices of
-        2 mm pixels, 256 and 900 cells, for tests and tutorials.
+        2 mm pixels, 456 and 1539 cells, for tests and tutorials.
     snr : float or None, default 20
         Image signal-to-noise ratio (None: noise free).
     seed : int, default 0
