@@ -314,6 +314,10 @@ def opening_angle(
         u=u,
         faces=faces,
         iterations=result.iterations,
-        info={"slab": tuple(slab), "cells": int(keep.size), "support": (int(A), int(B), int(C)),
-              "faces_apart_z": apart},  # fmt: skip
+        info={
+            "slab": tuple(slab),
+            "cells": int(keep.size),
+            "support": (int(A), int(B), int(C)),
+            "faces_apart_z": apart,
+        },  # fmt: skip
     )
