@@ -168,7 +168,7 @@ def test_radial_cut_separates_the_prestretched_ring_only(tracked):
     # stress free: nothing to release (exactly 0)
     assert sfr.degrees == 0.0 and sfr.gap == 0.0 and sfr.planar
     # the growth runs along helical fibres: the released ring twists into a helix whose
-    # cut faces end 82 mm apart along z (ring 22 mm high), which is warned and flagged
+    # cut faces end 82 mm apart along z (ring 10 mm high), which is warned and flagged
     # rather than read as an in-plane angle (it had been reported as an opening of 139°,
     # the angle between a face's transmural line before and its longitudinal line after);
     # the edges' gap measured 85.6 mm (85.2 mm on a 16-cell ring)
