@@ -306,18 +306,6 @@ def opening_angle(
             HarpxWarning,
             stacklevel=2,
         )
-    return OpeningAngle(
-        gap=gap,
-        planar=planar,
-        degrees=opening,
-        ring=ring,
-        u=u,
-        faces=faces,
-        iterations=result.iterations,
-        info={
-            "slab": tuple(slab),
-            "cells": int(keep.size),
-            "support": (int(A), int(B), int(C)),
-            "faces_apart_z": apart,
-        },  # fmt: skip
-    )
+    info = {"slab": tuple(slab), "cells": int(keep.size), "faces_apart_z": apart,
+            "support": (int(A), int(B), int(C))}  # fmt: skip
+    return OpeningAngle(opening, ring, u, faces, result.iterations, info, gap=gap, planar=planar)
