@@ -15,8 +15,10 @@ the cut (one node fixed, a second node on the same radial line fixed across that
 third node above them fixed against rotation about it), which adds (almost) no reaction
 to a self-equilibrated residual stress: only the small tilt of the line from the first to
 the second node out of the short-axis plane makes the support slightly redundant. The
-*mid-line* of each face is the principal direction of its nodes projected on the
-short-axis plane, oriented from the inner to the outer wall; the opening angle is the
+*mid-line* of each face is its transmural direction in the short-axis plane: the
+coefficient of the reference radius when the face nodes' in-plane positions are fitted as
+linear in their reference radius and height, so it points from the inner to the outer
+wall whatever the face's longitudinal spread; the opening angle is the
 turn of the counter-clockwise face's mid-line minus that of the clockwise face (positive
 when the ring opens, 0 for the intact ring). Each face is measured against its own
 reference direction, so openings beyond 180° are reported as they are (up to a turn of
