@@ -12,7 +12,10 @@ frame is averaged over the 17 AHA segments for
   mask (``mesh_from_labels``, names, fibres and base conditions from the fitted template);
 * conventional HARP (per voxel), its strain by central differences between voxel centres;
 * the truth's displacement on the same voxels, differentiated the same way (what a voxel
-  method could at best reach on this grid).
+  method could at best reach on this grid);
+* the truth's displacement at the tracking mesh's nodes, interpolated by its cells: the
+  tracking mesh's own discretisation error (not a strict floor: a fit to the images can
+  come closer than the nodal interpolant).
 
 Phase extraction: upsample 2 (the library's default) and band-pass radius 0.8 (``--radius``;
 the library's default is 0.5, which SPAMM's DC peak needs): CSPAMM has no DC peak, and the
@@ -122,6 +125,34 @@ def _tube_truth(scene, template):
         U[n, body.node_dofs] = m(body.dof_points, float(t))
     known = {"observed_fraction": (("cell", "axis"), np.ones((body.ncell, 3)))}
     return cardiac_strain(tracked_dataset(body, U, scene.tagged, known, {}), template)
+
+
+def _truth_on_mesh(scene, body):
+    """The truth's displacement at the tracking mesh's nodes, as a ``tracked/1`` result.
+
+    The tracking mesh's nodal interpolant of the true motion (its discretisation error).
+    Nodes just outside the truth's own faceted mesh are sampled a little inside it: moved
+    towards their nearest truth node in steps until located (at most the whole way).
+    """
+    from scipy.spatial import cKDTree
+
+    from harpx.tracking.results import tracked_dataset
+
+    times = scene.tagged.time.values
+    X0 = body.dof_points
+    X = X0.copy()
+    _, nearest = cKDTree(scene.truth.body.nodes).query(X0)
+    towards = scene.truth.body.nodes[nearest] - X0
+    for step in (0.05, 0.1, 0.2, 0.4, 0.7, 1.0):
+        outside = ~np.isfinite(scene.truth(X, float(times[0]))[:, 0])
+        if not outside.any():
+            break
+        X[outside] = X0[outside] + step * towards[outside]
+    U = np.zeros((times.size, body.ndof))
+    for n, t in enumerate(times):
+        U[n, body.node_dofs] = scene.truth(X, float(t))
+    known = {"observed_fraction": (("cell", "axis"), np.ones((body.ncell, 3)))}
+    return tracked_dataset(body, U, scene.tagged, known, {})
 
 
 def radius_study(radii: list[float]) -> None:
@@ -334,6 +365,9 @@ def main() -> None:
         seg_name: cardiac_strain(seg_tracked, template),
         harp_name: cardiac_strain(harp, template, body=phase["body"] > 0.5),
         "truth displacement on voxels": cardiac_strain(tagged, template),
+        "truth displacement on the tracking mesh": cardiac_strain(
+            _truth_on_mesh(scene, body), template
+        ),
     }
     wall = {fe_name: t_fe, seg_name: t_seg, harp_name: t_harp}
     displacement = {
