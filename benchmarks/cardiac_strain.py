@@ -22,7 +22,8 @@ the library's default is 0.5, which SPAMM's DC peak needs): CSPAMM has no DC pea
 wider filter blurs the 10 mm wall less (``benchmarks/results/infarct_radius.md``).
 ``--blur-passes`` sets the tracker's blur-correction passes (default: the tracker's, 1);
 ``--set NAME=VALUE ...`` any other numeric tracker setting (e.g. ``epsilon_factor=1.0``);
-``--divisions NC NL NT`` a template tracking mesh other than the scene's.
+``--divisions NC NL NT`` a template tracking mesh other than the scene's; ``--snr`` the
+images' signal-to-noise ratio (``none``: noise free).
 
 Summary statistics are over segments 1-16 (the short-axis segments; HARP has no value in
 the apical cap 17, which only long-axis slices image); segment 17 is listed per segment.
@@ -292,6 +293,12 @@ def main() -> None:
     parser.add_argument("--infarct", type=int, nargs="*", default=[])
     parser.add_argument("--scar-activation", type=float, default=0.0)
     parser.add_argument(
+        "--snr",
+        type=lambda v: None if v.lower() == "none" else float(v),
+        default=20.0,
+        help="image signal-to-noise ratio of the scene ('none': noise free; default 20)",
+    )
+    parser.add_argument(
         "--radius-study",
         type=float,
         nargs="+",
@@ -322,7 +329,8 @@ def main() -> None:
             settings[name] = value
 
     start = time.perf_counter()
-    scene = lv(size=args.size, infarct=tuple(args.infarct), scar_activation=args.scar_activation)
+    scene = lv(size=args.size, infarct=tuple(args.infarct), scar_activation=args.scar_activation,
+               snr=args.snr)  # fmt: skip
     t_scene = time.perf_counter() - start
     tagged = scene.tagged
 

@@ -87,6 +87,7 @@ __all__ = [
     "OBSERVED_MIN",
     "THICKENING_PASSES",
     "THICKENING_RADIUS",
+    "THICKENING_EPSILON_MIN",
     "THICKENING_UPSAMPLE",
     "WALL_TOLERANCE",
     "VentricleShapeError",
@@ -114,6 +115,9 @@ THICKENING_RADIUS = 0.8
 THICKENING_PASSES = 3
 #: least in-plane upsampling of the phase for an unbiased radial strain
 THICKENING_UPSAMPLE = 2
+#: least default tracking target (rad) when the images show almost no noise: the
+#: residual the blur correction leaves is about this, and a tighter fit follows it
+THICKENING_EPSILON_MIN = 0.03
 
 
 class VentricleShapeError(HarpxError, ValueError):
@@ -318,7 +322,7 @@ def source_labels(fraction: ArrayLike, has_data: BoolArray | None = None) -> Any
     return out
 
 
-def radial_strain_caution(attrs: Mapping[str, Any]) -> str:
+def radial_strain_caution(attrs: Mapping[str, Any], targets: ArrayLike | None = None) -> str:
     """Why a tracked result's radial strain (wall thickening) is likely under-reported.
 
     Parameters
@@ -327,7 +331,12 @@ def radial_strain_caution(attrs: Mapping[str, Any]) -> str:
         The attributes of a ``tracked/1`` dataset: ``method`` (``"harp"`` for
         conventional HARP), ``phase_radius``, ``phase_upsample`` and ``sequence`` (the
         phase extraction's, recorded by the trackers), ``blur_passes_applied``
-        (finite-element tracking).
+        (finite-element tracking), ``setting_epsilon`` and ``setting_epsilon_min`` (its
+        target settings).
+    targets : array_like, shape (ntime,), optional
+        The finite-element result's ``epsilon_target`` per frame, rad: with the default
+        target, frames whose target fell to ``epsilon_min`` below
+        :data:`THICKENING_EPSILON_MIN` (images with almost no noise) are named.
 
     Returns
     -------
@@ -375,9 +384,27 @@ def radial_strain_caution(attrs: Mapping[str, Any]) -> str:
             f"{passes} blur-correction pass(es) < {THICKENING_PASSES} "
             f"(track(..., blur_passes={THICKENING_PASSES}))"
         )
+    reasons += _tight_target(attrs, targets)
     if not reasons:
         return ""
     return (
         "the radial strain (wall thickening) is likely under-reported: the band-pass blur "
         "across the wall is not fully removed with " + " and ".join(reasons)
     )
+
+
+def _tight_target(attrs: Mapping[str, Any], targets: ArrayLike | None) -> list[str]:
+    """The reason a default target at a low ``epsilon_min`` gives, if it does."""
+    floor_min = attrs.get("setting_epsilon_min")
+    if targets is None or attrs.get("setting_epsilon") != "auto" or floor_min is None:
+        return []
+    floor_min = float(floor_min)
+    t = np.asarray(targets, dtype=np.float64)[1:]
+    frames = np.nonzero(np.isclose(t, floor_min, rtol=1e-9))[0] + 1
+    if floor_min >= THICKENING_EPSILON_MIN or frames.size == 0:
+        return []
+    return [
+        f"a tracking target at epsilon_min={floor_min:g} rad in frame(s) {frames.tolist()} "
+        "(images with almost no noise: a fit that tight follows the phase the correction "
+        f"leaves; track(..., epsilon_min={THICKENING_EPSILON_MIN:g}))"
+    ]

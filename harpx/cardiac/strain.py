@@ -678,7 +678,8 @@ def cardiac_strain(
 
 def _flag_radial(out: xr.Dataset) -> xr.Dataset:
     """Record (and warn) when the result's settings under-report radial strain."""
-    caution = radial_strain_caution(out.attrs)
+    targets = out["epsilon_target"].values if "epsilon_target" in out else None
+    caution = radial_strain_caution(out.attrs, targets)
     out.attrs["radial_strain_caution"] = caution
     if caution:
         warnings.warn(

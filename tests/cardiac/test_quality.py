@@ -225,6 +225,23 @@ def test_radial_strain_caution_names_the_settings_that_under_report_thickening(a
         assert "radius=0.8" not in caution
 
 
+def test_a_default_target_at_a_low_epsilon_min_is_named():
+    # noise-free images (floor 0): the default target falls to epsilon_min. On the small LV
+    # infarct scene without noise (radius 0.8, 3 passes) the radial error was 31.7 % at
+    # epsilon_min = 0.02 against 6.4 % at 0.03 (and at SNR 20, where the floor sets 0.05)
+    from harpx.cardiac.quality import radial_strain_caution
+
+    attrs = {"sequence": "CSPAMM", "phase_radius": 0.8, "blur_passes_applied": 3,
+             "setting_epsilon": "auto", "setting_epsilon_min": 0.02}  # fmt: skip
+    caution = radial_strain_caution(attrs, [0.0, 0.02, 0.045, 0.02])
+    assert "epsilon_min=0.02 rad in frame(s) [1, 3]" in caution and "epsilon_min=0.03" in caution
+    # the noise set every target, the user set epsilon_min or epsilon: nothing to name
+    assert radial_strain_caution(attrs, [0.0, 0.045, 0.05]) == ""
+    assert radial_strain_caution({**attrs, "setting_epsilon_min": 0.03}, [0.0, 0.03]) == ""
+    assert radial_strain_caution({**attrs, "setting_epsilon": 0.02}, [0.0, 0.02]) == ""
+    assert radial_strain_caution(attrs) == ""
+
+
 def test_cardiac_strain_warns_and_flags_under_reported_thickening():
     ds = fe_dataset(_shrink)
     ds.attrs.update(sequence="CSPAMM", phase_radius=0.5, blur_passes_applied=1)
