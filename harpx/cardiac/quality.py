@@ -335,8 +335,9 @@ def radial_strain_caution(attrs: Mapping[str, Any], targets: ArrayLike | None = 
         target settings).
     targets : array_like, shape (ntime,), optional
         The finite-element result's ``epsilon_target`` per frame, rad: with the default
-        target, frames whose target fell to ``epsilon_min`` below
-        :data:`THICKENING_EPSILON_MIN` (images with almost no noise) are named.
+        target, frames whose target fell to an ``epsilon_min`` below
+        :data:`THICKENING_EPSILON_MIN` (the noise floor asked for less, e.g. noise-free
+        images) are named.
 
     Returns
     -------
@@ -405,6 +406,6 @@ def _tight_target(attrs: Mapping[str, Any], targets: ArrayLike | None) -> list[s
         return []
     return [
         f"a tracking target at epsilon_min={floor_min:g} rad in frame(s) {frames.tolist()} "
-        "(images with almost no noise: a fit that tight follows the phase the correction "
-        f"leaves; track(..., epsilon_min={THICKENING_EPSILON_MIN:g}))"
+        "(the images' noise floor asked for less: a fit that tight follows the phase the "
+        f"correction leaves; track(..., epsilon_min={THICKENING_EPSILON_MIN:g}))"
     ]
