@@ -170,13 +170,13 @@ def test_track_fixes_named_faces_and_takes_the_penalty(tmp_path, capsys):
     out = tmp_path / "tracked.nc"
     args = ["track", str(phase), str(out), "--mesh", str(mesh), "--no-progress"]
     # the images turn the whole cylinder rigidly, so holding its bottom contradicts them: the
-    # last frame cannot reach its target ε (0.14 rad against 0.02) and the tracker warns
+    # last frame cannot reach its target ε (0.14 rad against 0.03) and the tracker warns
     code = main([*args, "--fix", "bottom", "--fix", "top:z", "--penalty", "2"])
     captured = capsys.readouterr()
     assert code == 0, captured.err
     # ...and the summary says which frame, with the warning's count and first line
     text = captured.out
-    assert "| 2 | 36 | 0.14 | 0.02 | " in text and text.count("target missed |") == 1, text
+    assert "| 2 | 36 | 0.14 | 0.03 | " in text and text.count("target missed |") == 1, text
     assert "2 frames tracked: target missed in frame 2; plateau in frame 1" in text
     assert "warnings (1):\n  - HarpxWarning: 1 frame(s) missed the tracking target: frame 2" in (
         text

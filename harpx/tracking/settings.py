@@ -218,9 +218,12 @@ class TrackingSettings:
         ``plateau_factor`` times the target (dimensionless, ≥ 1); it is marked ``plateau``
         and counts as reached. Above that it is a miss (warned). A user-given ``epsilon``
         is never relaxed.
-    epsilon_min : float, default 0.02
-        Lowest default target, rad (0.3 % of a tag period): on clean data (an estimated
-        floor near 0) the target is this; on noisy images the floor decides.
+    epsilon_min : float, default 0.03
+        Lowest default target, rad (0.5 % of a tag period): on clean data (an estimated
+        floor near 0) the target is this; on noisy images the floor decides. About the
+        phase the band-pass blur correction leaves at a wall: a tighter default fit
+        follows that leftover instead of the tissue (wall thickening under-reported on
+        noise-free images; user guide, "Wall thickening").
     penalty : float, default 1.0
         Starting λ_max relative to material stiffness and tag wavenumber (dimensionless;
         1 makes the data stiffness λ|k|² equal to μ/h² at the element scale h). The tracker
@@ -297,7 +300,7 @@ class TrackingSettings:
     >>> TrackingSettings(epsilon=0.1).target(0.2)
     0.1
     >>> round(TrackingSettings().target(0.1), 3), TrackingSettings().target(0.0)
-    (0.15, 0.02)
+    (0.15, 0.03)
     >>> TrackingSettings(ramp=float("nan"))
     Traceback (most recent call last):
     ...
@@ -308,7 +311,7 @@ class TrackingSettings:
     epsilon: float | None = None
     epsilon_factor: float = 1.5
     plateau_factor: float = 2.0
-    epsilon_min: float = 0.02
+    epsilon_min: float = 0.03
     penalty: float = 1.0
     penalty_limit: float = 1e4
     ramp: int = 2

@@ -71,12 +71,12 @@ def test_images_follow_the_schema_and_the_tongue_moves_a_few_mm(scene):
 
 def test_tracking_reaches_epsilon_with_sub_voxel_error(scene, tracked):
     # the activation chain's target: twice the images' phase-noise floor (never below
-    # 0.02 rad); measured floors 0.019-0.022 rad (SNR 20 CSPAMM), ε 0.036-0.039 rad, every
+    # 0.03 rad); measured floors 0.019-0.022 rad (SNR 20 CSPAMM), ε 0.036-0.039 rad, every
     # frame below its target itself (no plateau allowance used)
     assert tracked.target_reached.all(), tracked.epsilon.values
     eps, target = tracked.epsilon.values[1:], tracked.epsilon_target.values[1:]
     floor = tracked.epsilon_floor.values[1:]
-    np.testing.assert_allclose(target, np.maximum(2.0 * floor, 0.02))
+    np.testing.assert_allclose(target, np.maximum(2.0 * floor, 0.03))
     assert np.all(floor > 0.01) and np.all(floor < 0.03), floor
     assert np.all(eps <= target) and not tracked.plateau.values.any(), eps
     # the tracked grid is the acquired grid, up to round-off in its coordinates: use the
