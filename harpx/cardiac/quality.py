@@ -63,7 +63,9 @@ fixed point needs a few passes, and a wider band-pass (which CSPAMM allows, havi
 peak) leaves less to remove; the correction also needs the phase upsampled (the
 tracker samples it between voxels of a wall only a few voxels thick).
 :func:`radial_strain_caution` therefore names the settings of a result below
-:data:`THICKENING_RADIUS`, :data:`THICKENING_PASSES` or :data:`THICKENING_UPSAMPLE`, and
+:data:`THICKENING_RADIUS`, :data:`THICKENING_PASSES` or :data:`THICKENING_UPSAMPLE`,
+frames whose default tracking target fell to an ``epsilon_min`` below
+:data:`THICKENING_EPSILON_MIN` (a fit that follows the phase the correction leaves), and
 any conventional HARP result (which has no correction): their radial strain (wall
 thickening) is under-reported. The measured biases are in the user guide ("Wall thickening").
 """
