@@ -131,6 +131,17 @@ ELEMENT_VERTICES: dict[str, int] = {
     "hex20": 20,
     "hex27": 27,
 }
+#: ``cells.attrs["element"]`` → corner vertices per cell (they come first in its vertex list).
+ELEMENT_CORNERS: dict[str, int] = {
+    "tri3": 3,
+    "quad4": 4,
+    "tet4": 4,
+    "tet10": 4,
+    "wedge6": 6,
+    "hex8": 8,
+    "hex20": 8,
+    "hex27": 8,
+}
 
 #: Units harpx writes for each standard variable/coordinate ("1": dimensionless).
 UNITS: dict[str, str] = {

@@ -75,7 +75,9 @@ from harpx.cardiac.quality import (
     template_segment_volume,
     user_stacklevel,
 )
+from harpx.conventions import ELEMENT_CORNERS
 from harpx.errors import HarpxWarning
+from harpx.mechanics.cells import VTK_HEX_CORNERS, hex8_shape
 
 __all__ = [
     "AHA_NAMES",
@@ -97,15 +99,6 @@ AHA_NAMES = (
 COMPONENTS = ("radial", "circumferential", "longitudinal")
 #: least coverage (fraction of its template volume with data) for a segment to get a value
 MIN_COVERAGE = 0.1
-# trilinear corner signs (VTK order) for the cell-centre Jacobian of a hexahedron
-_SIGNS = (
-    2.0
-    * np.array(
-        [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]],
-        dtype=np.float64,
-    )
-    - 1.0
-)
 
 
 def aha_segments(points: ArrayLike, template: Any, *, anterior: float | None = None) -> IntArray:
@@ -424,19 +417,14 @@ def lv_measures(
     return out
 
 
-def _corners(element: str) -> int:
-    """Corner vertices of a cell of ``element`` (they come first in its vertex list)."""
-    return 4 if element.startswith("tet") else 8
-
-
 def _cell_weights(points: FloatArray, cells: IntArray, element: str) -> FloatArray:
     """Cell volumes from the corner vertices, mm³: exact for straight tetrahedra; for
     hexahedra the estimate |det J(centre)|·8."""
-    if _corners(element) == 4:
+    if ELEMENT_CORNERS.get(element, 8) == 4:
         x = points[cells[:, :4]]
         return np.abs(np.linalg.det(x[:, 1:] - x[:, :1])) / 6.0
     x = points[cells[:, :8]]
-    d = np.einsum("nai,aj->nij", x, _SIGNS) / 4.0
+    d = np.einsum("nai,aj->nij", x, VTK_HEX_CORNERS) / 4.0
     return np.abs(np.linalg.det(d))
 
 
@@ -445,15 +433,9 @@ def _hex8_gauss_points(
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Reference positions (8 ncell, 3), Green strain (time, 8 ncell, 3, 3), current
     positions (time, 8 ncell, 3) and volumes (8 ncell,) mm³ of the 2 × 2 × 2 Gauss points
-    of trilinear hexahedra (corner order of ``_SIGNS``), cell by cell, from the nodal
+    of trilinear hexahedra (in the order of their VTK corners), cell by cell, from the nodal
     ``displacement`` (time, node, 3) mm: the field the tracker's hex8 cells carry."""
-    xi = _SIGNS / np.sqrt(3.0)  # the Gauss points, in the corners' order, (q, k)
-    factors = 1.0 + xi[:, None, :] * _SIGNS[None, :, :]  # (q, a, k): 1 + ξ_ak ξ_qk
-    shape = factors.prod(axis=2) / 8.0  # N_a(ξ_q)
-    dshape = np.empty((8, 8, 3))  # ∂N_a/∂ξ_k at ξ_q
-    for k in range(3):  # the three reference axes
-        others = [m for m in range(3) if m != k]
-        dshape[:, :, k] = _SIGNS[None, :, k] * factors[:, :, others].prod(axis=2) / 8.0
+    shape, dshape = hex8_shape(VTK_HEX_CORNERS / np.sqrt(3.0))  # N_a(ξ_q), ∂N_a/∂ξ_k
     x = points[cells[:, :8]]  # (e, a, i)
     jac = np.einsum("eai,qak->eqik", x, dshape)  # ∂X_i/∂ξ_k
     inverse = np.linalg.inv(jac)
@@ -596,7 +578,7 @@ def cardiac_strain(
         cells = np.asarray(tracked["cells"].values, dtype=np.int64)
         disp = np.asarray(tracked["displacement"].transpose("time", "node", "axis").values)
         element = str(tracked["cells"].attrs.get("element", "hex8"))
-        corners = cells[:, : _corners(element)]
+        corners = cells[:, : ELEMENT_CORNERS.get(element, 8)]
         centres = pts[corners].mean(axis=1)
         E = np.asarray(tracked["green_strain"].transpose("time", "cell", "i", "j").values)
         observed, has_data = _observation(tracked)

@@ -212,25 +212,47 @@ def volume_blocks(
     return kind, cells, cell_data
 
 
-# The 8 corners of the reference hexahedron in VTK order, as (xi, eta, zeta) in {-1, 1}.
-_VTK_HEX_CORNERS = np.array(
+#: The 8 corners of the reference hexahedron in VTK order, as (xi, eta, zeta) in {-1, 1}.
+VTK_HEX_CORNERS = np.array(
     [[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
      [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=np.float64
 )  # fmt: skip
 
 
-def _corner_gradients() -> FloatArray:
-    """``dN_a/dxi_k`` of the trilinear hexahedron at its 8 corners, shape (corner, a, k)."""
-    xi = _VTK_HEX_CORNERS
-    f = 1.0 + xi[None, :, :] * xi[:, None, :]  # (corner, a, j): 1 + xi_aj xi_cj
-    dN = np.empty((8, 8, 3))
+def hex8_shape(xi: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Trilinear shape functions of the VTK-ordered hexahedron and their gradients.
+
+    Parameters
+    ----------
+    xi : array_like, shape (q, 3)
+        Reference points in [-1, 1]³ (dimensionless; the corners are
+        :data:`VTK_HEX_CORNERS`).
+
+    Returns
+    -------
+    N : ndarray, shape (q, 8)
+        ``N_a(xi_q) = prod_k (1 + xi_qk c_ak) / 8`` with ``c_a`` corner ``a``.
+    dN : ndarray, shape (q, 8, 3)
+        ``dN_a/dxi_k`` at the points.
+
+    Examples
+    --------
+    >>> from harpx.mechanics.cells import hex8_shape
+    >>> N, dN = hex8_shape([[0.0, 0.0, 0.0]])
+    >>> N.round(3).tolist()[0] == [0.125] * 8, float(dN.sum())
+    (True, 0.0)
+    """
+    x = np.asarray(xi, dtype=np.float64).reshape(-1, 3)
+    c = VTK_HEX_CORNERS
+    f = 1.0 + x[:, None, :] * c[None, :, :]  # (q, a, k): 1 + xi_qk c_ak
+    dN = np.empty((len(x), 8, 3))
     for k in range(3):  # loop over the 3 reference axes
         others = [j for j in range(3) if j != k]
-        dN[:, :, k] = xi[None, :, k] * f[:, :, others[0]] * f[:, :, others[1]] / 8.0
-    return dN
+        dN[:, :, k] = c[None, :, k] * f[:, :, others[0]] * f[:, :, others[1]] / 8.0
+    return f.prod(axis=2) / 8.0, dN
 
 
-_DN_CORNERS = _corner_gradients()
+_DN_CORNERS = hex8_shape(VTK_HEX_CORNERS)[1]
 
 
 def vtk_hex_corner_jacobians(points: FloatArray, cells: IntArray) -> tuple[FloatArray, FloatArray]:

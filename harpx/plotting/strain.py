@@ -27,6 +27,7 @@ import xarray as xr
 from matplotlib.collections import PolyCollection
 
 from harpx.cardiac.quality import source_labels, user_stacklevel
+from harpx.conventions import ELEMENT_CORNERS
 from harpx.errors import HarpxWarning, SchemaError
 from harpx.plotting._common import _axes, _map_doc, _nearest, _number, _require
 
@@ -49,7 +50,6 @@ _ALIASES = {
        for a in "xyz" for b in "xyz" for p in ("E", "E_", "")},
 }  # fmt: skip
 # corner vertices of each element kind, and the edges between them (VTK order)
-_CORNERS = {"hex8": 8, "hex20": 8, "hex27": 8, "wedge6": 6, "tet4": 4, "tet10": 4}
 _EDGES = {
     8: ((0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4),
         (0, 4), (1, 5), (2, 6), (3, 7)),
@@ -82,7 +82,7 @@ def _cut(points: np.ndarray, cells: np.ndarray, element: str, z: float) -> tuple
     """Cross-sections (x, y polygons) of the cells that the plane ``z`` cuts, and their
     indices. A cell counts when its lowest corner is at or below the plane and its highest
     above it, so a plane through a layer of nodes cuts each column of cells once."""
-    k = _CORNERS.get(element, 8 if cells.shape[1] >= 8 else cells.shape[1])
+    k = ELEMENT_CORNERS.get(element, 8 if cells.shape[1] >= 8 else cells.shape[1])
     corners = points[cells[:, :k]]  # (n, k, 3)
     scale = float(np.ptp(points, axis=0).max()) or 1.0
     s = corners[..., 2] - z
@@ -162,7 +162,7 @@ def strain_on_slice(
     points = np.asarray(ds["points"].values, dtype=np.float64)
     cells = np.asarray(ds["cells"].values, dtype=np.int64)
     element = str(ds["cells"].attrs.get("element", "hex8"))
-    k = _CORNERS.get(element, min(cells.shape[1], 8))
+    k = ELEMENT_CORNERS.get(element, min(cells.shape[1], 8))
     low, high = points[cells[:, :k], 2].min(), points[cells[:, :k], 2].max()
     notes: list[str] = []
     if z is None:
