@@ -51,6 +51,17 @@ the in-plane motion of material points at the basal and apical levels; which mat
 in an imaged plane depends on the through-plane (longitudinal) motion, so they count as
 observed only where both the circumferential and the longitudinal directions are.
 
+Radial strain is taken as observed only where an in-wall direction is seen as well: its
+fraction is :math:`\min(s(e_r), \max(s(e_c), s(e_l)))` (:func:`strain_seen_fraction`).
+Across a wall about one tag period thick the phase resolves the thickening itself poorly
+(next section); a nearly incompressible model then takes much of it from the in-wall
+stretch, so where no in-wall direction is seen the radial value rests on the model and the
+blur model rather than on the images. The apical cap imaged by long-axis slices alone,
+whose through-plane tag runs across the cap, is that case: its radial strain reads "partly
+inferred" (what it costs on the infarct scene is in the user guide, "Wall thickening").
+Short-axis tags alone (x, y) see the circumferential direction, so they leave the
+short-axis rings' radial strain observed, as 2-D tagging analyses report it.
+
 Radial strain and the band-pass blur
 ------------------------------------
 The harmonic phase is the angle of a band-passed image, an average over a disk of radius
@@ -98,6 +109,7 @@ __all__ = [
     "radial_strain_caution",
     "seen_fraction",
     "source_labels",
+    "strain_seen_fraction",
     "template_segment_volume",
 ]
 
@@ -296,6 +308,30 @@ def seen_fraction(basis: tuple[FloatArray, ...], observed: ArrayLike) -> FloatAr
     f = np.clip(np.asarray(observed, dtype=np.float64), 0.0, 1.0)
     frame = np.stack(basis, axis=1)  # (n, component, axis)
     return np.clip(np.einsum("nca,na->nc", frame**2, f), 0.0, 1.0)
+
+
+def strain_seen_fraction(basis: tuple[FloatArray, ...], observed: ArrayLike) -> FloatArray:
+    """Fraction of each strain component (radial, circumferential, longitudinal) observed.
+
+    The circumferential and longitudinal fractions are those of their directions
+    (:func:`seen_fraction`); the radial one is ``min(s_r, max(s_c, s_l))``: thickening counts
+    as observed only where an in-wall direction is seen too (module notes).
+
+    Parameters
+    ----------
+    basis : tuple of 3 ndarray, shape (n, 3)
+        Unit radial, circumferential and longitudinal directions (image components).
+    observed : array_like, shape (n, 3)
+        Seen fraction of the image axes x, y, z (``observed_fraction``), in [0, 1].
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        Observed fraction of (E_rr, E_cc, E_ll), in [0, 1].
+    """
+    seen = seen_fraction(basis, observed)
+    seen[:, 0] = np.minimum(seen[:, 0], seen[:, 1:].max(axis=1))
+    return seen
 
 
 def source_labels(fraction: ArrayLike, has_data: BoolArray | None = None) -> Any:

@@ -70,8 +70,8 @@ from harpx.cardiac.quality import (
     check_body,
     check_template,
     radial_strain_caution,
-    seen_fraction,
     source_labels,
+    strain_seen_fraction,
     template_segment_volume,
     user_stacklevel,
 )
@@ -279,8 +279,10 @@ def lv_measures(
         value of largest magnitude over the frames, with ``peak_time`` (ms);
         ``segment_volume`` (segment, mm³, of the points with data) and
         ``segment_template_volume`` (mm³); ``strain_observed_fraction`` (segment,
-        component): mean fraction of the component's direction the tags see (NaN: not
-        recorded); ``rotation`` (time, level) in degrees for the ``"base"`` and ``"apex"``
+        component): mean observed fraction of the component (its direction's, for the
+        radial one at most that of the better-seen in-wall direction:
+        :func:`~harpx.cardiac.quality.strain_seen_fraction`; NaN: not recorded);
+        ``rotation`` (time, level) in degrees for the ``"base"`` and ``"apex"``
         levels, ``twist`` (time, degrees) and ``torsion`` (time, degrees/mm), each with
         attributes ``source`` and ``observed_fraction``; coordinates ``segment`` (1..17),
         ``segment_name``, ``segment_coverage`` (0..1), ``strain_source`` (segment,
@@ -320,7 +322,8 @@ def lv_measures(
     valid = np.all(np.isfinite(local), axis=(0, 2)) & np.all(np.isfinite(x), axis=(0, 2))
     check_body(p[valid], w[valid], template)
     data = valid if has_data is None else valid & np.asarray(has_data, dtype=bool).reshape(-1)
-    seen = np.full((len(p), 3), np.nan) if observed is None else seen_fraction(basis, observed)
+    seen = (np.full((len(p), 3), np.nan) if observed is None
+            else strain_seen_fraction(basis, observed))  # fmt: skip
     onehot = (segment[:, None] == np.arange(1, 18)[None, :]) & data[:, None]  # (n, 17)
     wseg = onehot * w[:, None]
     volume = wseg.sum(axis=0)
@@ -534,8 +537,9 @@ def cardiac_strain(
     xarray.Dataset
         ``tracked`` with the variables of :func:`lv_measures` added, plus, for a
         finite-element result, ``strain_lv`` and ``engineering_strain_lv`` (time, cell,
-        component), ``strain_lv_observed`` (cell, component: fraction of each direction
-        the cell's tags see, when recorded) and ``aha_segment`` (cell); for a grid result
+        component), ``strain_lv_observed`` (cell, component: observed fraction of each
+        component in the cell, as ``strain_observed_fraction``, when recorded) and
+        ``aha_segment`` (cell); for a grid result
         ``aha_segment_grid`` (z, y, x, 0 outside the voxels used). Finite-element cells
         without tag data (``observed_directions`` 0) count as cells without data.
 
@@ -614,8 +618,8 @@ def cardiac_strain(
         )  # fmt: skip
         if observed is not None:
             out["strain_lv_observed"] = xr.DataArray(
-                seen_fraction(basis, observed), dims=("cell", "component"),
-                attrs={"units": "1", "long_name": "fraction of the direction the tags see"},
+                strain_seen_fraction(basis, observed), dims=("cell", "component"),
+                attrs={"units": "1", "long_name": "observed fraction of the strain component"},
             )  # fmt: skip
         out["aha_segment"] = xr.DataArray(
             aha_segments(centres, template, anterior=measures.attrs["anterior_deg"]),

@@ -7,7 +7,7 @@ import pytest
 
 from harpx.anatomy.ventricle import VentricleGeometry
 from harpx.anatomy.ventricle_fit import VentricleTemplate
-from harpx.cardiac.quality import VentricleShapeError, template_segment_volume
+from harpx.cardiac.quality import VentricleShapeError, seen_fraction, template_segment_volume
 from harpx.cardiac.strain import aha_segments, cardiac_strain, lv_measures
 from harpx.errors import HarpxWarning, SchemaError
 from harpx.mechanics.body import Body
@@ -302,3 +302,28 @@ def test_other_elements_take_one_point_per_cell_and_agree_with_trilinear_gauss_p
         peaks[name] = cardiac_strain(ds, TEMPLATE, anterior=0.0).peak_strain
     difference = np.abs(peaks[element] - peaks["hex8"]).sel(segment=range(1, 17))
     assert float(difference.max()) < bound
+
+
+def test_thickening_seen_across_the_wall_alone_is_not_observed():
+    # the through-plane tag alone (long-axis slices): at the apical cap (17) it runs across
+    # the wall, so the radial direction is seen, but neither in-wall direction is (e_c is
+    # horizontal, e_l nearly so at the cap); the thickening there rests on the model
+    body = body_of()
+    with pytest.warns(HarpxWarning, match=r"radial strain (partly )?inferred in segment\(s\) "):
+        out = cardiac_strain(fe_dataset(_shrink, body, seen=(0.0, 0.0, 1.0)), TEMPLATE,
+                             anterior=0.0)  # fmt: skip
+    lv = out.strain_lv_observed
+    cap = (out.aha_segment == 17).values
+    assert cap.any()
+    centres = body.dof_points[body.cells[:, :8]].mean(axis=1)
+    basis = TEMPLATE.local_basis(centres[cap])
+    direction = seen_fraction(basis, np.tile([0.0, 0.0, 1.0], (int(cap.sum()), 1)))
+    # the radial direction itself is mostly seen (e_r within 45° of z in every cap cell of
+    # this coarse mesh; 0.53-0.84 of it) ...
+    assert direction[:, 0].min() > 0.5
+    assert direction[:, 0].mean() > 0.6
+    # ... but its in-wall partners are not (s_r + s_l = 1 in the meridian plane), so the
+    # component counts as observed no further than they are: below one half, inferred
+    assert lv.values[cap, 0].max() <= 0.5
+    assert out.strain_source.sel(segment=17, component="radial") == "inferred"
+    assert float(out.strain_observed_fraction.sel(segment=17, component="radial")) < 0.5

@@ -35,8 +35,12 @@ def fe(scene):
     # blur-correction passes remove the band-pass and slice blur across the 10 mm wall
     phase = extract_phase(scene.tagged, upsample=2, radius=0.8)
     tracked = track(phase, scene.body(), dirichlet=scene.dirichlet(), blur_passes=3)
-    # the apical cap (17) has long-axis data only: its Ecc and Ell come from the model
-    with pytest.warns(HarpxWarning, match=r"partly inferred in segment\(s\) 17;"):
+    # the apical cap (17) has long-axis data only: its Ecc and Ell come from the model,
+    # and so does much of its thickening, which the through-plane tag sees across the cap
+    # (the guide, "Wall thickening": FE 0.114 there against 0.261 true)
+    with pytest.warns(
+        HarpxWarning, match=r"radial strain partly inferred in segment\(s\) 17;.*circumf"
+    ):
         return cardiac_strain(tracked, scene.template())
 
 
