@@ -113,13 +113,19 @@ def aha_segments(points: ArrayLike, template: Any, *, anterior: float | None = N
     anterior : float, optional
         Direction of the anterior wall (centre of segments 1, 7, 13), degrees about the
         long axis (right-handed about the apex-to-base axis) from the template's +x axis.
-        Default: the template's ``anterior`` (0 when it has none).
+        Default: the template's ``anterior``; without one, 0 and a warning.
 
     Returns
     -------
     ndarray of int, shape (n,)
         Segment numbers 1..17, counter-clockwise seen from the apex (points above the base
         plane count as basal).
+
+    Warns
+    -----
+    HarpxWarning
+        Neither ``anterior`` nor the template gives the anterior direction: the names are
+        then counted from the template's +x axis, not anatomical.
 
     Examples
     --------
@@ -128,13 +134,13 @@ def aha_segments(points: ArrayLike, template: Any, *, anterior: float | None = N
     >>> from harpx.cardiac.strain import aha_segments
     >>> t = VentricleTemplate(VentricleGeometry((25.0, 70.0), (35.0, 78.0), 10.0))
     >>> # anterior +x; the septum at -y, the lateral wall at +y; the apex
-    >>> aha_segments([[30.0, 1.0, 0.0], [-1.0, -30.0, -40.0], [0.0, 0.0, -74.0]], t).tolist()
+    >>> points = [[30.0, 1.0, 0.0], [-1.0, -30.0, -40.0], [0.0, 0.0, -74.0]]
+    >>> aha_segments(points, t, anterior=0.0).tolist()
     [1, 9, 17]
     """
-    if anterior is None:
-        anterior = getattr(template, "anterior", None) or 0.0
+    angle, _ = _anterior(anterior, template)
     q = template.to_local(points)
-    return segments_local(q, template.geometry, float(anterior))
+    return segments_local(q, template.geometry, angle)
 
 
 def _anterior(anterior: float | None, template: Any) -> tuple[float, str]:

@@ -80,7 +80,7 @@ def partial():
     """x/y tags only, and no tag data in segments 7 and 8 (anterior at +x)."""
     body = body_of(n=(32, 12, 2))
     centres = body.dof_points[body.cells[:, :8]].mean(axis=1)
-    rank = np.where(np.isin(aha_segments(centres, TEMPLATE), [7, 8]), 0, 2)
+    rank = np.where(np.isin(aha_segments(centres, TEMPLATE, anterior=0.0), [7, 8]), 0, 2)
 
     def motion(p):
         q = p - TEMPLATE.centre
