@@ -458,19 +458,22 @@ def main() -> None:
             "",
             f"Peak {sym} per segment (error = method − truth):",
             "",
-            "| segment | truth | FE | FE error | HARP | HARP error | truth displacement on "
-            "voxels |",
-            "|---|---|---|---|---|---|---|",
+            "| segment | truth | FE | FE error | FE source | HARP | HARP error | truth "
+            "displacement on voxels |",
+            "|---|---|---|---|---|---|---|---|",
         ]
         t = peaks(truth, c)
         f_, h_, v_ = (
             peaks(rows[n], c) for n in (fe_name, harp_name, "truth displacement on voxels")
         )
+        # observed by the tags or (partly) inferred by the model (harpx.cardiac.quality)
+        source = rows[fe_name].strain_source.sel(component=c).values
         for k in range(17):
             mark = " (infarct)" if k + 1 in infarct else ""
             lines.append(
                 f"| {k + 1} {truth.segment_name.values[k]}{mark} | {t[k]:.4f} | {f_[k]:.4f} | "
-                f"{f_[k] - t[k]:+.4f} | {h_[k]:.4f} | {h_[k] - t[k]:+.4f} | {v_[k]:.4f} |"
+                f"{f_[k] - t[k]:+.4f} | {source[k]} | {h_[k]:.4f} | {h_[k] - t[k]:+.4f} | "
+                f"{v_[k]:.4f} |"
             )
     q = segmented.quality
     epsilon = "the tracker's default ε (noise floor × 1.5, blur correction)" if (
