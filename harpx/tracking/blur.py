@@ -60,6 +60,17 @@ voxel. It needs each tag's slice thickness and slice centres, the ``slice_thickn
 resolve its slab (spacing along the slice axis above half the thickness), keeps the
 ``"in-plane"`` model (:func:`blur_models` says which each tag gets).
 
+The slice-profile prediction places the tissue within each slab by the tracked motion
+along the slice axis. Where no tag sees that direction (the apical cap of a ventricle that
+only long-axis slices image, whose in-plane motion across those slices no tag measures),
+that placement is the model's guess, and a wrong guess biases the correction the way the
+model already errs: there the correction falls back to the in-plane model. Each voxel's
+correction blends the two models' phases with the seen fraction of the slice axis
+(:func:`axis_seen`: from the tags whose masks hold the tissue's reference voxel),
+density-weighted over the tissue splatted into the voxel (1: the slice-profile model, 0:
+the in-plane one). Short-axis stacks alone (x and y tags) leave the through-plane
+direction unseen everywhere: their correction is the in-plane one.
+
 Assumptions: the tagged signal near the body comes from the body alone (``body`` density
 of the images where given, else uniform inside the mesh), the tag fading is uniform, the
 slice profile is a boxcar of the nominal thickness (a real excitation profile is smoother
@@ -90,6 +101,10 @@ from harpx.schema import GRID_DIMS, grid_step
 
 #: Splatted signal below this fraction of its largest modulus counts as outside the tissue.
 SIGNAL_FLOOR = 1e-3
+
+#: A slice axis seen by at least 1 - this fraction everywhere keeps the slice-profile model
+#: alone (module notes).
+_SEEN_TOLERANCE = 1e-6
 
 #: Tissue points splatted at once (their work arrays are a few MB).
 _SPLAT_PART = 1 << 16
@@ -207,8 +222,9 @@ def blur_models(phase: xr.Dataset, model: str = "slice-profile") -> list[str]:
         ``phase/1`` images.
     model : {"slice-profile", "in-plane"}, default "slice-profile"
         ``"slice-profile"`` models the slice profile of every tag whose slice geometry the
-        phase carries (and its grid resolves); the others, and every tag with
-        ``"in-plane"``, get the in-plane band-pass alone.
+        phase carries (and its grid resolves) and whose slice axis some tag sees (in the
+        voxels no tag sees it, its correction is the in-plane one: module notes); the
+        others, and every tag with ``"in-plane"``, get the in-plane band-pass alone.
 
     Returns
     -------
@@ -223,9 +239,13 @@ def blur_models(phase: xr.Dataset, model: str = "slice-profile") -> list[str]:
     if model not in BLUR_MODELS:
         raise ValueError(f"blur model {model!r}; expected one of {list(BLUR_MODELS)!r}")
     spacing = _grid_spacing(phase)
+    spanned = axis_seen(phase.drop_vars("mask", errors="ignore"), np.zeros(1, dtype=np.int64))[0]
     return [
         "slice-profile"
-        if model == "slice-profile" and _slab(phase, t, spacing) is not None
+        if model == "slice-profile"
+        and _slab(phase, t, spacing) is not None
+        and spanned[2 - GRID_DIMS.index(str(np.asarray(phase["slice_axis"].values)[t]))]
+        >= 1.0 - _SEEN_TOLERANCE
         else "in-plane"
         for t in range(phase.sizes["tag"])
     ]
@@ -386,6 +406,8 @@ class _CorrectionFrames:
             density = np.ones(voxels.size)
         tissue, interpolate = interpolation_matrix(body, points)  # centres in the reference
         self.reference, self.density = points[tissue], density[tissue]
+        # seen fraction of each image axis (x, y, z) at the tissue's voxels (module notes)
+        self.seen = axis_seen(phase, voxels[tissue])
         del points, voxels
         # the tissue's points in parts: one part's work arrays at a time
         self.parts = [
@@ -410,6 +432,14 @@ class _CorrectionFrames:
                 if slab is None
                 else slice_operator(coords[normal], *slab, float(self.wavevector[t, 2 - normal]))
             )
+        # tags whose slice-profile correction falls back to the in-plane one where their slice
+        # axis is unseen (module notes): (tag, image axis of the slice normal)
+        self.blended = [
+            (t, 2 - normal)
+            for t, (_, normal) in enumerate(self.disks)
+            if self.profiles[t] is not None
+            and self.seen[:, 2 - normal].min(initial=1.0) < 1.0 - _SEEN_TOLERANCE
+        ]
         # a tag's images hold only the tissue inside its acquisition (slab, field of view)
         self.outside = (
             [~a if not a.all() else None
@@ -434,10 +464,10 @@ class _CorrectionFrames:
             slice(int(a), int(max(a, b))) for a, b in zip(low, high, strict=True)
         )
 
-    def _moved(self, n: int, part: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _moved(self, n: int, part: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Positions (z, y, x) in frame ``n`` of the tissue's voxel centres of one part, mm,
         with their displacement (x, y, z) and density; points without a finite displacement
-        left out."""
+        left out (the last item: which of the part's points are kept)."""
         nnode = self.U.shape[1] // 3
         rows, interpolate = self.parts[part]
         un = np.asarray(interpolate @ self.U[n].reshape(nnode, 3))  # (voxel, 3) mm
@@ -445,7 +475,7 @@ class _CorrectionFrames:
         ok = np.isfinite(un).all(axis=1)
         if not ok.all():
             un, here, rho = un[ok], here[ok], rho[ok]
-        return (here + un)[:, ::-1], un, rho
+        return (here + un)[:, ::-1], un, rho, ok
 
     def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
         shape, ntag = self.shape, self.ntag
@@ -468,32 +498,103 @@ class _CorrectionFrames:
         out = np.empty((ntag, *inner), dtype=np.float32)
         corner = self.origin + self.spacing * np.array([b.start for b in box])
         work, has = np.empty(size, dtype=np.float32), np.empty(size, dtype=bool)
+        blended = dict(self.blended)  # tag -> image axis of its slice normal
+        extra = [2 * ntag + 1 + k for k in range(len(blended))]  # ρ w columns; ρ at 2 ntag
+        plain = np.empty(inner, dtype=np.float32) if blended else None
         for n in range(1, self.U.shape[0]):  # one splat of every tag and one filter per tag
             out[...] = 0.0
-            spread = np.zeros((int(np.prod(inner)), 2 * ntag), dtype=np.float32)
+            columns = 2 * ntag + (1 + len(blended) if blended else 0)
+            spread = np.zeros((int(np.prod(inner)), columns), dtype=np.float32)
             for part in range(len(self.parts)):
-                moved, un, rho = self._moved(n, part)
+                moved, un, rho, kept = self._moved(n, part)
                 angle = np.einsum("pi,ti->pt", un, self.wavevector)  # (point, tag) rad
                 del un
                 # ρ0 e^{-ik·u} as real and imaginary columns: one real sparse product spreads
                 # all (in single precision, as S is filtered: the correction keeps ~1e-6 rad)
-                signals = np.empty((angle.shape[0], 2 * ntag), dtype=np.float32)
+                signals = np.empty((angle.shape[0], columns), dtype=np.float32)
                 np.cos(angle, out=signals[:, :ntag])
-                np.sin(angle, out=signals[:, ntag:])
+                np.sin(angle, out=signals[:, ntag : 2 * ntag])
                 del angle
-                signals[:, ntag:] *= -1.0
+                signals[:, ntag : 2 * ntag] *= -1.0
+                if blended:  # the density and its share whose slice axis a tag sees
+                    seen = self.seen[self.parts[part][0]][kept]
+                    signals[:, 2 * ntag] = 1.0
+                    for column, axis in zip(extra, blended.values(), strict=True):
+                        signals[:, column] = seen[:, axis]
                 signals *= rho[:, None]
                 spread += splat_operator(moved, corner, self.spacing, inner, np.float32) @ signals
                 del moved, signals
             for t, (disk, normal) in enumerate(self.disks):  # ≤ 3 tags
-                S[...] = 0.0
-                S[box].real = spread[:, t].reshape(inner)
-                S[box].imag = spread[:, ntag + t].reshape(inner)
-                if self.outside[t] is not None:
-                    np.copyto(S, 0.0, where=self.outside[t])
-                _filtered_phase(S, disk, normal, out[t], plans, work, has, box, self.profiles[t])
+                for profile, target in ((self.profiles[t], out[t]), (None, plain)):
+                    target[...] = 0.0
+                    S[...] = 0.0
+                    S[box].real = spread[:, t].reshape(inner)
+                    S[box].imag = spread[:, ntag + t].reshape(inner)
+                    if self.outside[t] is not None:
+                        np.copyto(S, 0.0, where=self.outside[t])
+                    _filtered_phase(S, disk, normal, target, plans, work, has, box, profile)
+                    if t not in blended:
+                        break
+                if t in blended:
+                    assert plain is not None
+                    column = extra[list(blended).index(t)]
+                    _blend(out[t], plain, spread[:, column], spread[:, 2 * ntag])
             del spread
             yield n, out
+
+
+def axis_seen(phase: xr.Dataset, voxels: np.ndarray) -> FloatArray:
+    """Fraction of each image axis (x, y, z) that the tags acquired at some voxels see.
+
+    Parameters
+    ----------
+    phase : xarray.Dataset
+        ``phase/1`` images: ``tag_direction`` and, if present, the per-tag ``mask`` of the
+        acquisition (without one every tag covers the whole grid).
+    voxels : ndarray of int, shape (n,)
+        Row-major (z, y, x) indices of grid voxels.
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        ``|P e_a|²`` for the image axes ``e_a``, ``P`` the projector onto the span of the
+        directions of the tags whose mask holds the voxel, in [0, 1].
+
+    Examples
+    --------
+    >>> import xarray as xr
+    >>> ds = xr.Dataset(coords={"tag_direction": (("tag", "axis"), [[1.0, 0, 0], [0, 1.0, 0]])})
+    >>> axis_seen(ds, np.array([0])).tolist()  # x and y tags: z unseen
+    [[1.0, 1.0, 0.0]]
+    """
+    index = np.asarray(voxels, dtype=np.int64)
+    directions = np.asarray(
+        phase["tag_direction"].transpose("tag", "axis").values, dtype=np.float64
+    )  # (tag, x y z)
+    if "mask" in phase.variables:
+        mask = np.asarray(phase["mask"].transpose("tag", *GRID_DIMS).values, dtype=bool)
+        cover = mask.reshape(mask.shape[0], -1)[:, index]
+    else:
+        cover = np.ones((directions.shape[0], index.size), dtype=bool)
+    # the tags covering a voxel, as bits of one code: a projector per code met
+    codes = (cover.astype(np.int64) << np.arange(cover.shape[0])[:, None]).sum(axis=0)
+    out = np.zeros((index.size, 3))
+    for code in np.unique(codes):  # at most 2^tag codes, not voxels
+        rows = directions[[(int(code) >> t) & 1 == 1 for t in range(directions.shape[0])]]
+        projector = np.linalg.pinv(rows) @ rows if rows.size else np.zeros((3, 3))
+        out[codes == code] = np.clip(np.diag(projector), 0.0, 1.0)
+    return out
+
+
+def _blend(profiled: np.ndarray, plain: np.ndarray, weighted: np.ndarray,
+           density: np.ndarray) -> None:  # fmt: skip
+    """Blend two corrections (rad) in place into ``profiled``: its weight at a voxel is the
+    splatted density-weighted seen fraction ``weighted / density`` (module notes)."""
+    w = np.divide(weighted, density, out=np.ones_like(weighted), where=density > 0)
+    w = np.clip(w, 0.0, 1.0).reshape(profiled.shape)
+    sine = w * np.sin(profiled) + (1.0 - w) * np.sin(plain)
+    cosine = w * np.cos(profiled) + (1.0 - w) * np.cos(plain)
+    profiled[...] = np.where((profiled != 0) | (plain != 0), np.arctan2(sine, cosine), 0.0)
 
 
 def blur_correction(

@@ -106,8 +106,15 @@ def test_phase_carries_the_scenes_slice_geometry_or_none():
     # the scene's 4 contiguous 8 mm SA slices, matched to the x and y tags by their slab
     np.testing.assert_allclose(phase.slice_thickness.values, [8.0, 8.0])
     np.testing.assert_allclose(phase.slice_position.values, [[-12.0, -4.0, 4.0, 12.0]] * 2)
-    assert blur_models(phase) == ["slice-profile"] * 2
-    assert blur_models(phase, "in-plane") == ["in-plane"] * 2
+    # x and y tags alone do not see the slice axis z: where the tissue sits within each
+    # slab would be the model's guess, so the in-plane model serves (module notes)
+    assert blur_models(phase) == ["in-plane"] * 2
+    # with a tag that sees z the slab is modelled
+    seen_z = phase.assign_coords(
+        tag_direction=(("tag", "axis"), [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    )
+    assert blur_models(seen_z) == ["slice-profile"] * 2
+    assert blur_models(seen_z, "in-plane") == ["in-plane"] * 2
     # an archive without slice geometry keeps the in-plane model
     bare = phase.drop_vars(["slice_thickness", "slice_position"])
     validate(bare, "phase")
@@ -234,3 +241,28 @@ def test_lazily_corrected_phase_equals_the_deblurred_copy(moving_wall):
     outside = np.ones(correction.shape[2:], dtype=bool)
     outside[box] = False
     assert outside.sum() > 0 and np.all(correction[:, :, outside] == 0.0)
+
+
+def test_slice_profile_gives_way_to_the_in_plane_model_where_no_tag_sees_the_slice_axis(
+    moving_wall,
+):
+    # a tag along x and one along z, both in 8 mm short-axis slices (slice axis z), the z
+    # tag acquired only where y > 0: there the slab's contents follow motion a tag sees
+    # and the x tag's correction is the slice-profile one; where y < 0 nothing sees z and
+    # it is the in-plane one (module notes)
+    phase, body, U = moving_wall
+    phase = phase.assign_coords(tag_direction=(("tag", "axis"), [[1.0, 0, 0], [0, 0, 1.0]]))
+    mask = phase["mask"].copy()
+    mask[1] = mask[1] & (phase.y > 0)
+    half = phase.assign(mask=mask)
+    blended = blur_correction(half, body, U)[0]  # the x tag
+    profiled = blur_correction(phase, body, U)[0]  # z seen everywhere
+    plain = blur_correction(phase, body, U, model="in-plane")[0]
+    y = phase.y.values[None, None, :, None]
+    late = slice(2, None)  # frames where the wall has moved
+    seen, unseen = np.broadcast_to(y > 6.0, blended.shape), np.broadcast_to(y < -6.0, blended.shape)
+    tissue = profiled != 0
+    # the two models differ there by more than the test's tolerance, so it can fail
+    assert np.abs(profiled - plain)[late][(unseen & tissue)[late]].max() > 0.02
+    np.testing.assert_allclose(blended[seen & tissue], profiled[seen & tissue], atol=1e-5)
+    np.testing.assert_allclose(blended[unseen & tissue], plain[unseen & tissue], atol=1e-5)
