@@ -500,7 +500,21 @@ class _CorrectionFrames:
         work, has = np.empty(size, dtype=np.float32), np.empty(size, dtype=bool)
         blended = dict(self.blended)  # tag -> image axis of its slice normal
         extra = [2 * ntag + 1 + k for k in range(len(blended))]  # ρ w columns; ρ at 2 ntag
-        plain = np.empty(inner, dtype=np.float32) if blended else None
+        plain = np.empty(inner if blended else 0, dtype=np.float32)
+
+        def filtered(
+            spread: np.ndarray, t: int, profile: np.ndarray | None, target: np.ndarray
+        ) -> None:
+            """Tag ``t``'s correction in the box into ``target`` (one model)."""
+            target[...] = 0.0
+            S[...] = 0.0
+            S[box].real = spread[:, t].reshape(inner)
+            S[box].imag = spread[:, ntag + t].reshape(inner)
+            if self.outside[t] is not None:
+                np.copyto(S, 0.0, where=self.outside[t])
+            disk, normal = self.disks[t]
+            _filtered_phase(S, disk, normal, target, plans, work, has, box, profile)
+
         for n in range(1, self.U.shape[0]):  # one splat of every tag and one filter per tag
             out[...] = 0.0
             columns = 2 * ntag + (1 + len(blended) if blended else 0)
@@ -524,19 +538,10 @@ class _CorrectionFrames:
                 signals *= rho[:, None]
                 spread += splat_operator(moved, corner, self.spacing, inner, np.float32) @ signals
                 del moved, signals
-            for t, (disk, normal) in enumerate(self.disks):  # ≤ 3 tags
-                for profile, target in ((self.profiles[t], out[t]), (None, plain)):
-                    target[...] = 0.0
-                    S[...] = 0.0
-                    S[box].real = spread[:, t].reshape(inner)
-                    S[box].imag = spread[:, ntag + t].reshape(inner)
-                    if self.outside[t] is not None:
-                        np.copyto(S, 0.0, where=self.outside[t])
-                    _filtered_phase(S, disk, normal, target, plans, work, has, box, profile)
-                    if t not in blended:
-                        break
-                if t in blended:
-                    assert plain is not None
+            for t in range(ntag):  # ≤ 3 tags
+                filtered(spread, t, self.profiles[t], out[t])
+                if t in blended:  # and the in-plane model, where the slice axis is unseen
+                    filtered(spread, t, None, plain)
                     column = extra[list(blended).index(t)]
                     _blend(out[t], plain, spread[:, column], spread[:, 2 * ntag])
             del spread
