@@ -319,10 +319,8 @@ def strain_seen_fraction(basis: tuple[FloatArray, ...], observed: ArrayLike) -> 
 
     Parameters
     ----------
-    basis : tuple of 3 ndarray, shape (n, 3)
-        Unit radial, circumferential and longitudinal directions (image components).
-    observed : array_like, shape (n, 3)
-        Seen fraction of the image axes x, y, z (``observed_fraction``), in [0, 1].
+    basis, observed
+        As for :func:`seen_fraction`.
 
     Returns
     -------
