@@ -66,10 +66,10 @@ only long-axis slices image, whose in-plane motion across those slices no tag me
 that placement is the model's guess, and a wrong guess biases the correction the way the
 model already errs: there the correction falls back to the in-plane model. Each voxel's
 correction blends the two models' phases with the seen fraction of the slice axis
-(:func:`axis_seen`: from the tags whose masks hold the tissue's reference voxel),
-density-weighted over the tissue splatted into the voxel (1: the slice-profile model, 0:
-the in-plane one). Short-axis stacks alone (x and y tags) leave the through-plane
-direction unseen everywhere: their correction is the in-plane one.
+(:func:`~harpx.tracking.slab.axis_seen`: from the tags whose masks hold the tissue's
+reference voxel), density-weighted over the tissue splatted into the voxel (1: the
+slice-profile model, 0: the in-plane one). Short-axis stacks alone (x and y tags) leave
+the through-plane direction unseen everywhere: their correction is the in-plane one.
 
 Assumptions: the tagged signal near the body comes from the body alone (``body`` density
 of the images where given, else uniform inside the mesh), the tag fading is uniform, the
@@ -97,14 +97,18 @@ from harpx.imaging.fft import inplace_plans
 from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.imaging.sample import wrap
 from harpx.mechanics.locate import interpolation_matrix
-from harpx.schema import GRID_DIMS, grid_step
+from harpx.schema import GRID_DIMS
+from harpx.tracking.slab import (
+    SEEN_TOLERANCE,
+    axis_seen,
+    blend_corrections,
+    grid_spacing,
+    slab_geometry,
+    slice_operator,
+)
 
 #: Splatted signal below this fraction of its largest modulus counts as outside the tissue.
 SIGNAL_FLOOR = 1e-3
-
-#: A slice axis seen by at least 1 - this fraction everywhere keeps the slice-profile model
-#: alone (module notes).
-_SEEN_TOLERANCE = 1e-6
 
 #: Tissue points splatted at once (their work arrays are a few MB).
 _SPLAT_PART = 1 << 16
@@ -238,85 +242,17 @@ def blur_models(phase: xr.Dataset, model: str = "slice-profile") -> list[str]:
     """
     if model not in BLUR_MODELS:
         raise ValueError(f"blur model {model!r}; expected one of {list(BLUR_MODELS)!r}")
-    spacing = _grid_spacing(phase)
+    spacing = grid_spacing(phase)
     spanned = axis_seen(phase.drop_vars("mask", errors="ignore"), np.zeros(1, dtype=np.int64))[0]
     return [
         "slice-profile"
         if model == "slice-profile"
-        and _slab(phase, t, spacing) is not None
+        and slab_geometry(phase, t, spacing) is not None
         and spanned[2 - GRID_DIMS.index(str(np.asarray(phase["slice_axis"].values)[t]))]
-        >= 1.0 - _SEEN_TOLERANCE
+        >= 1.0 - SEEN_TOLERANCE
         else "in-plane"
         for t in range(phase.sizes["tag"])
     ]
-
-
-def _grid_spacing(phase: xr.Dataset) -> FloatArray:
-    """Voxel spacing (z, y, x) of the phase grid, mm (1 along a single-voxel axis)."""
-    return np.array([grid_step(phase, d) or 1.0 for d in GRID_DIMS])
-
-
-def _slab(phase: xr.Dataset, t: int, spacing: FloatArray) -> tuple[float, FloatArray] | None:
-    """Slice thickness (mm) and increasing slice centres (mm) of tag ``t``, or None when the
-    phase does not carry them or its grid does not resolve the slab (module notes)."""
-    if "slice_thickness" not in phase.variables or "slice_position" not in phase.variables:
-        return None
-    thickness = float(np.asarray(phase["slice_thickness"].values, dtype=np.float64)[t])
-    centres = np.asarray(phase["slice_position"].transpose("tag", ...).values, np.float64)[t]
-    centres = centres[np.isfinite(centres)]
-    normal = GRID_DIMS.index(str(np.asarray(phase["slice_axis"].values)[t]))
-    if not (np.isfinite(thickness) and thickness > 0 and centres.size):
-        return None
-    if spacing[normal] > 0.5 * thickness or np.any(np.diff(centres) <= 0):
-        return None
-    return thickness, centres
-
-
-def slice_operator(
-    planes: FloatArray, thickness: float, centres: FloatArray, wavenumber: float = 0.0
-) -> np.ndarray:
-    r"""The slice profile and interpolation between slices along a slice axis, :math:`T`.
-
-    Parameters
-    ----------
-    planes : ndarray, shape (n,)
-        Evenly spaced positions of the grid planes along the slice axis, mm.
-    thickness : float
-        Slice thickness (boxcar profile), mm.
-    centres : ndarray, shape (s,)
-        Increasing slice centres, mm.
-    wavenumber : float, default 0
-        The tag's wave-vector component along the slice axis, :math:`k_\zeta`, rad/mm.
-
-    Returns
-    -------
-    ndarray of complex, shape (n, n)
-        :math:`T = E^* L W E` (module notes): ``T @ S`` along the slice axis is the
-        demodulated signal the slices measure, interpolated back to the planes; rows of
-        planes outside every slab are 0.
-
-    Examples
-    --------
-    >>> T = slice_operator(np.arange(6.0), 3.0, np.array([1.0, 4.0]))
-    >>> T.real.round(3)[1].tolist()  # plane 1 is slice 0's centre: its slab's mean
-    [0.333, 0.333, 0.333, 0.0, 0.0, 0.0]
-    """
-    z = np.asarray(planes, dtype=np.float64)
-    c = np.asarray(centres, dtype=np.float64)
-    step = float(z[1] - z[0]) if z.size > 1 else float(thickness)
-    half = 0.5 * float(thickness)
-    # W (slice, plane): overlap of plane i's cell with slab s, over the thickness
-    overlap = np.minimum(z[None, :] + 0.5 * step, c[:, None] + half) - np.maximum(
-        z[None, :] - 0.5 * step, c[:, None] - half
-    )
-    W = np.clip(overlap, 0.0, None) / float(thickness)
-    # L (plane, slice): linear in the slice position, nearest beyond the outer centres
-    eye = np.eye(c.size)
-    L = np.stack([np.interp(z, c, eye[s]) for s in range(c.size)], axis=1)
-    eps = 1e-6 * step
-    L[(z < c[0] - half - eps) | (z > c[-1] + half + eps)] = 0.0
-    carrier = np.exp(1j * wavenumber * z)
-    return np.asarray(np.conj(carrier)[:, None] * (L @ W) * carrier[None, :])
 
 
 def _filtered_phase(
@@ -386,7 +322,7 @@ class _CorrectionFrames:
         shape = (nz, ny, nx)
         coords = [np.asarray(phase[d].values, dtype=np.float64) for d in GRID_DIMS]
         origin = np.array([c[0] for c in coords])
-        spacing = _grid_spacing(phase)
+        spacing = grid_spacing(phase)
         models = blur_models(phase, model)
         lo = body.dof_points.min(axis=0) - 1e-9  # (x, y, z)
         hi = body.dof_points.max(axis=0) + 1e-9
@@ -425,7 +361,7 @@ class _CorrectionFrames:
         self.disks = [_disk(phase, tag, shape, spacing) for tag in tags]
         self.profiles: list[np.ndarray | None] = []
         for t, (_, normal) in enumerate(self.disks):
-            slab = _slab(phase, t, spacing) if models[t] == "slice-profile" else None
+            slab = slab_geometry(phase, t, spacing) if models[t] == "slice-profile" else None
             # k_ζ in the grid's (z, y, x) order: wavevector is (x, y, z)
             self.profiles.append(
                 None
@@ -438,7 +374,7 @@ class _CorrectionFrames:
             (t, 2 - normal)
             for t, (_, normal) in enumerate(self.disks)
             if self.profiles[t] is not None
-            and self.seen[:, 2 - normal].min(initial=1.0) < 1.0 - _SEEN_TOLERANCE
+            and self.seen[:, 2 - normal].min(initial=1.0) < 1.0 - SEEN_TOLERANCE
         ]
         # a tag's images hold only the tissue inside its acquisition (slab, field of view)
         self.outside = (
@@ -543,63 +479,9 @@ class _CorrectionFrames:
                 if t in blended:  # and the in-plane model, where the slice axis is unseen
                     filtered(spread, t, None, plain)
                     column = extra[list(blended).index(t)]
-                    _blend(out[t], plain, spread[:, column], spread[:, 2 * ntag])
+                    blend_corrections(out[t], plain, spread[:, column], spread[:, 2 * ntag])
             del spread
             yield n, out
-
-
-def axis_seen(phase: xr.Dataset, voxels: np.ndarray) -> FloatArray:
-    """Fraction of each image axis (x, y, z) that the tags acquired at some voxels see.
-
-    Parameters
-    ----------
-    phase : xarray.Dataset
-        ``phase/1`` images: ``tag_direction`` and, if present, the per-tag ``mask`` of the
-        acquisition (without one every tag covers the whole grid).
-    voxels : ndarray of int, shape (n,)
-        Row-major (z, y, x) indices of grid voxels.
-
-    Returns
-    -------
-    ndarray, shape (n, 3)
-        ``|P e_a|²`` for the image axes ``e_a``, ``P`` the projector onto the span of the
-        directions of the tags whose mask holds the voxel, in [0, 1].
-
-    Examples
-    --------
-    >>> import xarray as xr
-    >>> ds = xr.Dataset(coords={"tag_direction": (("tag", "axis"), [[1.0, 0, 0], [0, 1.0, 0]])})
-    >>> axis_seen(ds, np.array([0])).tolist()  # x and y tags: z unseen
-    [[1.0, 1.0, 0.0]]
-    """
-    index = np.asarray(voxels, dtype=np.int64)
-    directions = np.asarray(
-        phase["tag_direction"].transpose("tag", "axis").values, dtype=np.float64
-    )  # (tag, x y z)
-    if "mask" in phase.variables:
-        mask = np.asarray(phase["mask"].transpose("tag", *GRID_DIMS).values, dtype=bool)
-        cover = mask.reshape(mask.shape[0], -1)[:, index]
-    else:
-        cover = np.ones((directions.shape[0], index.size), dtype=bool)
-    # the tags covering a voxel, as bits of one code: a projector per code met
-    codes = (cover.astype(np.int64) << np.arange(cover.shape[0])[:, None]).sum(axis=0)
-    out = np.zeros((index.size, 3))
-    for code in np.unique(codes):  # at most 2^tag codes, not voxels
-        rows = directions[[(int(code) >> t) & 1 == 1 for t in range(directions.shape[0])]]
-        projector = np.linalg.pinv(rows) @ rows if rows.size else np.zeros((3, 3))
-        out[codes == code] = np.clip(np.diag(projector), 0.0, 1.0)
-    return out
-
-
-def _blend(profiled: np.ndarray, plain: np.ndarray, weighted: np.ndarray,
-           density: np.ndarray) -> None:  # fmt: skip
-    """Blend two corrections (rad) in place into ``profiled``: its weight at a voxel is the
-    splatted density-weighted seen fraction ``weighted / density`` (module notes)."""
-    w = np.divide(weighted, density, out=np.ones_like(weighted), where=density > 0)
-    w = np.clip(w, 0.0, 1.0).reshape(profiled.shape)
-    sine = w * np.sin(profiled) + (1.0 - w) * np.sin(plain)
-    cosine = w * np.cos(profiled) + (1.0 - w) * np.cos(plain)
-    profiled[...] = np.where((profiled != 0) | (plain != 0), np.arctan2(sine, cosine), 0.0)
 
 
 def blur_correction(
