@@ -23,7 +23,8 @@ wider filter blurs the 10 mm wall less (``benchmarks/results/infarct_radius.md``
 ``--blur-passes`` sets the tracker's blur-correction passes (default: the tracker's, 1);
 ``--set NAME=VALUE ...`` any other numeric tracker setting (e.g. ``epsilon_factor=1.0``);
 ``--divisions NC NL NT`` a template tracking mesh other than the scene's; ``--snr`` the
-images' signal-to-noise ratio (``none``: noise free).
+images' signal-to-noise ratio (``none``: noise free); ``--seed N`` another realisation of
+the images' noise (same motion), written beside the recorded table as ``..._seedN.md``.
 
 Summary statistics are over segments 1-16 (the short-axis segments; HARP has no value in
 the apical cap 17, which only long-axis slices image); segment 17 is listed per segment.
@@ -299,6 +300,13 @@ def main() -> None:
         help="image signal-to-noise ratio of the scene ('none': noise free; default 20)",
     )
     parser.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="the scene's noise seed (default 0, the recorded tables'); another seed writes "
+        "<table>_seed<N>.md beside them",
+    )
+    parser.add_argument(
         "--radius-study",
         type=float,
         nargs="+",
@@ -330,7 +338,7 @@ def main() -> None:
 
     start = time.perf_counter()
     scene = lv(size=args.size, infarct=tuple(args.infarct), scar_activation=args.scar_activation,
-               snr=args.snr)  # fmt: skip
+               snr=args.snr, seed=args.seed)  # fmt: skip
     t_scene = time.perf_counter() - start
     tagged = scene.tagged
 
@@ -495,6 +503,8 @@ def main() -> None:
         out = RESULTS / (
             "cardiac_strain.md" if args.size == "paper" else f"cardiac_strain_{args.size}.md"
         )
+    if args.output is None and args.seed != 0:
+        out = out.with_name(f"{out.stem}_seed{args.seed}.md")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
