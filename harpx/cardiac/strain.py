@@ -548,6 +548,9 @@ def cardiac_strain(
         ``aha_segment`` (cell); for a grid result
         ``aha_segment_grid`` (z, y, x, 0 outside the voxels used). Finite-element cells
         without tag data (``observed_directions`` 0) count as cells without data.
+        Attribute ``frames_missing_target`` (ms): the frames whose tracking missed its
+        target or did not converge (``target_reached``, ``converged``); where there are
+        any, ``peak_at_missed_frame`` (segment, component) marks the peaks taken there.
 
     Raises
     ------
@@ -566,7 +569,8 @@ def cardiac_strain(
         settings that under-report radial strain (conventional HARP; a band-pass radius
         or blur-correction passes below what removes the blur across the wall:
         :func:`~harpx.cardiac.quality.radial_strain_caution`, kept in
-        ``attrs["radial_strain_caution"]``, empty when none).
+        ``attrs["radial_strain_caution"]``, empty when none), or frames whose tracking
+        missed its target.
     """
     if "time" not in tracked.coords:
         raise ValueError(
@@ -631,7 +635,7 @@ def cardiac_strain(
             aha_segments(centres, template, anterior=measures.attrs["anterior_deg"]),
             dims="cell", attrs={"units": "1", "long_name": "AHA segment"},
         )  # fmt: skip
-        return _flag_radial(out)
+        return _flag_missed_frames(_flag_radial(out))
     name = next((n for n in ("displacement_grid", "displacement_true") if n in tracked), None)
     if name is None:
         raise ValueError(
@@ -665,7 +669,37 @@ def cardiac_strain(
         seg.reshape(shape), dims=("z", "y", "x"),
         attrs={"units": "1", "long_name": "AHA segment of voxels used (0: none)"},
     )  # fmt: skip
-    return _flag_radial(out)
+    return _flag_missed_frames(_flag_radial(out))
+
+
+def _flag_missed_frames(out: xr.Dataset) -> xr.Dataset:
+    """Record (and warn) the frames whose tracking missed its target or did not converge
+    (the tracker's ``target_reached`` and ``converged``), and the segment peaks taken there."""
+    ok = np.ones(out.sizes["time"], dtype=bool)
+    for name in ("target_reached", "converged"):
+        if name in out and out[name].dims == ("time",):
+            ok &= np.asarray(out[name].values, dtype=bool)
+    times = np.asarray(out["time"].values, dtype=np.float64)[~ok]
+    out.attrs["frames_missing_target"] = times
+    if not times.size:
+        return out
+    peaks = np.isfinite(out["peak_strain"].values)
+    at = np.isin(out["peak_time"].values, times) & peaks
+    out["peak_at_missed_frame"] = xr.DataArray(
+        at, dims=out["peak_strain"].dims,
+        attrs={"long_name": "peak taken at a frame whose tracking missed its target"},
+    )  # fmt: skip
+    named = ", ".join(f"{t:g}" for t in times)
+    warnings.warn(
+        f"the tracking missed its target or did not converge at t = {named} ms "
+        f"('target_reached', 'converged'): {int(at.sum())} of {int(peaks.sum())} segment "
+        "peaks were taken there ('peak_at_missed_frame'), and every segment value at those "
+        "frames rests on a fit that did not follow the images; track again (more frames, "
+        "a larger penalty_limit= or epsilon=) before reading them",
+        HarpxWarning,
+        stacklevel=user_stacklevel(),
+    )
+    return out
 
 
 def _flag_radial(out: xr.Dataset) -> xr.Dataset:

@@ -230,3 +230,21 @@ def test_segment_coordinates_survive_on_the_result():
     assert out.component.values.tolist() == ["radial", "circumferential", "longitudinal"]
     # the source travels with a selected variable (for the plots)
     assert out.peak_strain.sel(component="radial").strain_source.dims == ("segment",)
+
+
+def test_peaks_taken_at_a_frame_that_missed_its_target_are_named():
+    # the tracker marks a frame whose fit missed its target ('target_reached' False):
+    # every segment's peak of this two-frame dilation is taken there, so each is marked and
+    # the warning says so; a result whose frames all reached theirs carries no mark
+    tracked = fe_dataset(_dilation)
+    ok = tracked.assign(target_reached=("time", [True, True]), converged=("time", [True, True]))
+    good = cardiac_strain(ok, TEMPLATE, anterior=0.0)
+    assert good.attrs["frames_missing_target"].size == 0
+    assert "peak_at_missed_frame" not in good
+    missed = tracked.assign(target_reached=("time", [True, False]),
+                            converged=("time", [True, True]))  # fmt: skip
+    with pytest.warns(HarpxWarning, match=r"at t = 100 ms .*: 51 of 51 segment peaks"):
+        out = cardiac_strain(missed, TEMPLATE, anterior=0.0)
+    assert out.attrs["frames_missing_target"].tolist() == [100.0]
+    assert bool(out.peak_at_missed_frame.all())
+    np.testing.assert_allclose(out.peak_strain, good.peak_strain)  # flagged, not changed
