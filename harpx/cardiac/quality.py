@@ -84,14 +84,16 @@ thickening) is under-reported. The measured biases are in the user guide ("Wall 
 from __future__ import annotations
 
 import sys
+import warnings
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+import xarray as xr
 from numpy.typing import ArrayLike
 
 from harpx._typing import BoolArray, FloatArray
-from harpx.errors import HarpxError, SchemaError
+from harpx.errors import HarpxError, HarpxWarning, SchemaError
 
 __all__ = [
     "HEART_SIZE_MM",
@@ -106,6 +108,7 @@ __all__ = [
     "VentricleShapeError",
     "check_body",
     "check_template",
+    "flag_result",
     "radial_strain_caution",
     "seen_fraction",
     "source_labels",
@@ -445,3 +448,73 @@ def _tight_target(attrs: Mapping[str, Any], targets: ArrayLike | None) -> list[s
         "(the images' noise floor asked for less: a fit that tight follows the phase the "
         f"correction leaves; track(..., epsilon_min={THICKENING_EPSILON_MIN:g}))"
     ]
+
+
+def flag_result(out: Any) -> Any:
+    """Record, and warn about, what a cardiac strain result cannot claim.
+
+    Parameters
+    ----------
+    out : xarray.Dataset
+        A :func:`~harpx.cardiac.strain.cardiac_strain` result: the tracked dataset with
+        ``peak_strain`` and ``peak_time`` (segment, component) added.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``out`` with ``attrs["radial_strain_caution"]`` (:func:`radial_strain_caution`,
+        empty when none) and ``attrs["frames_missing_target"]`` (ms: the frames whose
+        tracking missed its target or did not converge, from ``target_reached`` and
+        ``converged``); where there are such frames, ``peak_at_missed_frame`` (segment,
+        component) marks the peaks taken there.
+
+    Warns
+    -----
+    HarpxWarning
+        For a radial caution and for frames that missed their target.
+    """
+    return _flag_missed_frames(_flag_radial(out))
+
+
+def _flag_missed_frames(out: xr.Dataset) -> xr.Dataset:
+    """Record (and warn) the frames whose tracking missed its target or did not converge
+    (the tracker's ``target_reached`` and ``converged``), and the segment peaks taken there."""
+    ok = np.ones(out.sizes["time"], dtype=bool)
+    for name in ("target_reached", "converged"):
+        if name in out and out[name].dims == ("time",):
+            ok &= np.asarray(out[name].values, dtype=bool)
+    times = np.asarray(out["time"].values, dtype=np.float64)[~ok]
+    out.attrs["frames_missing_target"] = times
+    if not times.size:
+        return out
+    peaks = np.isfinite(out["peak_strain"].values)
+    at = np.isin(out["peak_time"].values, times) & peaks
+    out["peak_at_missed_frame"] = xr.DataArray(
+        at, dims=out["peak_strain"].dims,
+        attrs={"long_name": "peak taken at a frame whose tracking missed its target"},
+    )  # fmt: skip
+    named = ", ".join(f"{t:g}" for t in times)
+    warnings.warn(
+        f"the tracking missed its target or did not converge at t = {named} ms "
+        f"('target_reached', 'converged'): {int(at.sum())} of {int(peaks.sum())} segment "
+        "peaks were taken there ('peak_at_missed_frame'), and every segment value at those "
+        "frames rests on a fit that did not follow the images; track again (more frames, "
+        "a larger penalty_limit= or epsilon=) before reading them",
+        HarpxWarning,
+        stacklevel=user_stacklevel(),
+    )
+    return out
+
+
+def _flag_radial(out: xr.Dataset) -> xr.Dataset:
+    """Record (and warn) when the result's settings under-report radial strain."""
+    targets = out["epsilon_target"].values if "epsilon_target" in out else None
+    caution = radial_strain_caution(out.attrs, targets)
+    out.attrs["radial_strain_caution"] = caution
+    if caution:
+        warnings.warn(
+            f"{caution}; attrs['radial_strain_caution'] keeps this note",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
+    return out

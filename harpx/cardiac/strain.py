@@ -69,7 +69,7 @@ from harpx.cardiac.quality import (
     HEART_SIZE_MM,
     check_body,
     check_template,
-    radial_strain_caution,
+    flag_result,
     source_labels,
     strain_seen_fraction,
     template_segment_volume,
@@ -635,7 +635,7 @@ def cardiac_strain(
             aha_segments(centres, template, anterior=measures.attrs["anterior_deg"]),
             dims="cell", attrs={"units": "1", "long_name": "AHA segment"},
         )  # fmt: skip
-        return _flag_missed_frames(_flag_radial(out))
+        return flag_result(out)
     name = next((n for n in ("displacement_grid", "displacement_true") if n in tracked), None)
     if name is None:
         raise ValueError(
@@ -669,48 +669,4 @@ def cardiac_strain(
         seg.reshape(shape), dims=("z", "y", "x"),
         attrs={"units": "1", "long_name": "AHA segment of voxels used (0: none)"},
     )  # fmt: skip
-    return _flag_missed_frames(_flag_radial(out))
-
-
-def _flag_missed_frames(out: xr.Dataset) -> xr.Dataset:
-    """Record (and warn) the frames whose tracking missed its target or did not converge
-    (the tracker's ``target_reached`` and ``converged``), and the segment peaks taken there."""
-    ok = np.ones(out.sizes["time"], dtype=bool)
-    for name in ("target_reached", "converged"):
-        if name in out and out[name].dims == ("time",):
-            ok &= np.asarray(out[name].values, dtype=bool)
-    times = np.asarray(out["time"].values, dtype=np.float64)[~ok]
-    out.attrs["frames_missing_target"] = times
-    if not times.size:
-        return out
-    peaks = np.isfinite(out["peak_strain"].values)
-    at = np.isin(out["peak_time"].values, times) & peaks
-    out["peak_at_missed_frame"] = xr.DataArray(
-        at, dims=out["peak_strain"].dims,
-        attrs={"long_name": "peak taken at a frame whose tracking missed its target"},
-    )  # fmt: skip
-    named = ", ".join(f"{t:g}" for t in times)
-    warnings.warn(
-        f"the tracking missed its target or did not converge at t = {named} ms "
-        f"('target_reached', 'converged'): {int(at.sum())} of {int(peaks.sum())} segment "
-        "peaks were taken there ('peak_at_missed_frame'), and every segment value at those "
-        "frames rests on a fit that did not follow the images; track again (more frames, "
-        "a larger penalty_limit= or epsilon=) before reading them",
-        HarpxWarning,
-        stacklevel=user_stacklevel(),
-    )
-    return out
-
-
-def _flag_radial(out: xr.Dataset) -> xr.Dataset:
-    """Record (and warn) when the result's settings under-report radial strain."""
-    targets = out["epsilon_target"].values if "epsilon_target" in out else None
-    caution = radial_strain_caution(out.attrs, targets)
-    out.attrs["radial_strain_caution"] = caution
-    if caution:
-        warnings.warn(
-            f"{caution}; attrs['radial_strain_caution'] keeps this note",
-            HarpxWarning,
-            stacklevel=user_stacklevel(),
-        )
-    return out
+    return flag_result(out)
