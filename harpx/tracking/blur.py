@@ -435,7 +435,8 @@ class _CorrectionFrames:
         corner = self.origin + self.spacing * np.array([b.start for b in box])
         work, has = np.empty(size, dtype=np.float32), np.empty(size, dtype=bool)
         blended = dict(self.blended)  # tag -> image axis of its slice normal
-        extra = [2 * ntag + 1 + k for k in range(len(blended))]  # ρ w columns; ρ at 2 ntag
+        # spread's columns: cos, sin per tag, then ρ (column 2 ntag) and ρ w per blended tag
+        column = {t: 2 * ntag + 1 + k for k, t in enumerate(blended)}
         plain = np.empty(inner if blended else 0, dtype=np.float32)
 
         def filtered(
@@ -469,8 +470,8 @@ class _CorrectionFrames:
                 if blended:  # the density and its share whose slice axis a tag sees
                     seen = self.seen[self.parts[part][0]][kept]
                     signals[:, 2 * ntag] = 1.0
-                    for column, axis in zip(extra, blended.values(), strict=True):
-                        signals[:, column] = seen[:, axis]
+                    for t, axis in blended.items():
+                        signals[:, column[t]] = seen[:, axis]
                 signals *= rho[:, None]
                 spread += splat_operator(moved, corner, self.spacing, inner, np.float32) @ signals
                 del moved, signals
@@ -478,8 +479,7 @@ class _CorrectionFrames:
                 filtered(spread, t, self.profiles[t], out[t])
                 if t in blended:  # and the in-plane model, where the slice axis is unseen
                     filtered(spread, t, None, plain)
-                    column = extra[list(blended).index(t)]
-                    blend_corrections(out[t], plain, spread[:, column], spread[:, 2 * ntag])
+                    blend_corrections(out[t], plain, spread[:, column[t]], spread[:, 2 * ntag])
             del spread
             yield n, out
 
