@@ -242,7 +242,10 @@ class TrackingSettings:
         u(n−1) + α (u(n−1) − u(n−2)): α = 1 (the last velocity kept) unless a smaller
         factor of ``tuning.predictor_factors`` lowers the phase residual by more than
         ``tuning.predictor_margin`` (wrapped phase repeats every tag period, so near-ties
-        carry no information and the steady motion decides).
+        carry no information and the steady motion decides). A frame that ends above its
+        target from an extrapolated start (a miss, or a plateau) is tracked again from
+        u(n−1), and the fit with the lower ε is kept: where the motion turns, as at end
+        systole, the extrapolation can start part of the body in a neighbouring tag's basin.
     robust_scale : float or None, default 0.5
         Residual scale :math:`r_0` (rad) of the Cauchy loss on each constraint point's
         phase mismatch :math:`r` (:class:`harpx.tracking.constraint.PhaseConstraint`): a

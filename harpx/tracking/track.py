@@ -416,7 +416,6 @@ def _track_frames(
     """
     body, constraint, settings = problem.body, problem.constraint, problem.settings
     timings, terms = problem.timings, problem.terms
-    strategy = STRATEGIES[settings.method]
     ntime = phase.sizes["time"]
     out = _Pass(
         U=np.zeros((ntime, body.ndof)), eps=np.zeros(ntime), floor=np.zeros(ntime),
@@ -463,15 +462,9 @@ def _track_frames(
             target=float(out.target[n]), penalty=lam,
             plateau=settings.accepted_plateau(out.floor[n]), warm=earlier is not None,
         )  # fmt: skip
-        if relaxed is not None:
-            loose_problem = replace(problem, settings=relaxed)  # this frame's offset included
-            outcome: FrameOutcome = strategy(loose_problem, u0, goal)
-            spent = outcome.iterations
-            if not outcome.reached:  # kept by the later passes: at the full tolerance
-                outcome = strategy(problem, u0, goal)
-                outcome.iterations += spent
-        else:
-            outcome = strategy(problem, u0, goal)
+        outcome = _solve_frame(
+            problem, goal, u0, relaxed, fallback=U[n - 1] if u0 is not U[n - 1] else None
+        )
         if not np.isfinite(outcome.epsilon) or outcome.state is None:
             where = explain_missing_data(phase, constraint.current_points(u0), n)
             raise SchemaError(
@@ -490,6 +483,43 @@ def _track_frames(
         out.plateau[n] = outcome.plateau
         out.wall[n] = _time.perf_counter() - begin
     return out
+
+
+def _solve_frame(
+    problem: FrameProblem,
+    goal: FrameGoal,
+    u0: np.ndarray,
+    relaxed: TrackingSettings | None,
+    fallback: np.ndarray | None,
+) -> FrameOutcome:
+    """Track one frame from ``u0``; again from ``fallback`` if that does not meet the target.
+
+    ``relaxed``: the settings of a loose first pass (:func:`_track_frames`); a miss with them
+    is solved again from ``u0`` at the full tolerance. ``fallback`` (the previous frame's
+    fit, when ``u0`` extrapolated the motion): a frame that still ends above its target (a
+    miss, or a plateau) is tracked again from it, and the fit with the lower ε is kept
+    (one that meets the target first). Where the motion turns, as at end systole, the
+    extrapolated start can leave part of the body in a neighbouring tag's basin; the
+    penalty raise then levels off above the target with that part stopped across a wrap,
+    and a blur correction predicted from it pulls the body the rest of the way.
+    """
+    strategy = STRATEGIES[problem.settings.method]
+    if relaxed is not None:
+        loose_problem = replace(problem, settings=relaxed)  # this frame's offset included
+        outcome: FrameOutcome = strategy(loose_problem, u0, goal)
+        if not outcome.reached:  # kept by the later passes: at the full tolerance
+            spent = outcome.iterations
+            outcome = strategy(problem, u0, goal)
+            outcome.iterations += spent
+    else:
+        outcome = strategy(problem, u0, goal)
+    if fallback is None or (outcome.reached and not outcome.plateau):
+        return outcome
+    again = strategy(problem, fallback, goal)
+    met = again.reached and not again.plateau
+    best = again if met or again.epsilon < outcome.epsilon else outcome
+    best.iterations = outcome.iterations + again.iterations
+    return best
 
 
 def _blur_model_attrs(phase: xr.Dataset, passes: int) -> dict[str, str]:
