@@ -462,8 +462,9 @@ def _track_frames(
             target=float(out.target[n]), penalty=lam,
             plateau=settings.accepted_plateau(out.floor[n]), warm=earlier is not None,
         )  # fmt: skip
+        extrapolated = not np.array_equal(u0, U[n - 1]) and earlier is None
         outcome = _solve_frame(
-            problem, goal, u0, relaxed, fallback=U[n - 1] if u0 is not U[n - 1] else None
+            problem, goal, u0, relaxed, fallback=U[n - 1] if extrapolated else None
         )
         if not np.isfinite(outcome.epsilon) or outcome.state is None:
             where = explain_missing_data(phase, constraint.current_points(u0), n)
