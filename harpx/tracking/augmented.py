@@ -5,7 +5,8 @@ constraint point carries multipliers Λ (one per tag); after every equilibrium s
 updated, Λ ← Λ + λ W(φ − φ0), until their relative change falls below ``multiplier_tolerance``
 (λ_tol) or ε meets its target. If neither happens within ``max_updates``, λ is doubled (up to
 ``penalty_limit``) while that still lowers ε by the penalty method's stall margin.
-Multipliers carry over from frame to frame as a warm start.
+Multipliers carry over from frame to frame as a warm start; a blur-correction pass starts
+each frame from the multipliers that frame ended with in the pass before.
 """
 
 from __future__ import annotations

@@ -386,6 +386,8 @@ class _Pass:
     converged: np.ndarray
     plateau: np.ndarray
     wall: np.ndarray
+    #: augmented-Lagrangian multipliers per frame (time, nq, ntag), kPa/rad; None otherwise
+    multipliers: np.ndarray | None = None
 
 
 def _voxel(phase: xr.Dataset) -> float:
@@ -409,7 +411,8 @@ def _track_frames(
     converged as without ``loose``.
 
     A later pass (``earlier`` given) starts each frame from the earlier pass's result and
-    penalty for it, which the blur correction moves only a little. A frame the earlier pass
+    penalty for it (and, with the augmented-Lagrangian method, its multipliers), which the
+    blur correction moves only a little. A frame the earlier pass
     missed keeps that pass's result and stays a miss: its correction is predicted from the
     missed fit, and tracking the corrected images would only confirm that fit, meeting the
     target far from the true motion (``benchmarks/results/tracking_defaults.md``).
@@ -425,6 +428,8 @@ def _track_frames(
         converged=np.ones(ntime, dtype=bool), plateau=np.zeros(ntime, dtype=bool),
         wall=np.zeros(ntime),
     )  # fmt: skip
+    if settings.method == "augmented-lagrangian":  # each frame's multipliers, for later passes
+        out.multipliers = np.zeros((ntime, *constraint.multipliers.shape))
     U = out.U
     constraint.set_frame(0)
     st0 = constraint.state(U[0])
@@ -451,6 +456,9 @@ def _track_frames(
         u0 = U[n - 1]
         if earlier is not None:
             u0, lam = earlier.U[n], max(settings.penalty, float(earlier.penalty[n]))
+            if earlier.multipliers is not None:
+                # the frame's own, not those the earlier pass ended its last frame with
+                constraint.multipliers = earlier.multipliers[n].copy()
         elif settings.predictor == "linear" and n >= 2:
             u0 = _predict(body, constraint, U[n - 1], U[n - 2], settings.tuning, problem.executor)
         if settings.regularization == "increment":
@@ -482,6 +490,8 @@ def _track_frames(
         out.reached[n] = outcome.reached
         out.converged[n] = outcome.converged
         out.plateau[n] = outcome.plateau
+        if out.multipliers is not None:
+            out.multipliers[n] = constraint.multipliers
         out.wall[n] = _time.perf_counter() - begin
     return out
 
@@ -505,22 +515,31 @@ def _solve_frame(
     and a blur correction predicted from it pulls the body the rest of the way.
     """
     strategy = STRATEGIES[problem.settings.method]
+    constraint = problem.constraint
+    start = constraint.multipliers.copy()  # every attempt starts from the frame's multipliers
+
+    def attempt(on: FrameProblem, u: np.ndarray) -> tuple[FrameOutcome, np.ndarray]:
+        constraint.multipliers = start.copy()
+        outcome = strategy(on, u, goal)
+        return outcome, constraint.multipliers
+
     if relaxed is not None:
         loose_problem = replace(problem, settings=relaxed)  # this frame's offset included
-        outcome: FrameOutcome = strategy(loose_problem, u0, goal)
+        outcome, multipliers = attempt(loose_problem, u0)
         if not outcome.reached:  # kept by the later passes: at the full tolerance
             spent = outcome.iterations
-            outcome = strategy(problem, u0, goal)
+            outcome, multipliers = attempt(problem, u0)
             outcome.iterations += spent
     else:
-        outcome = strategy(problem, u0, goal)
-    if fallback is None or (outcome.reached and not outcome.plateau):
-        return outcome
-    again = strategy(problem, fallback, goal)
-    met = again.reached and not again.plateau
-    best = again if met or again.epsilon < outcome.epsilon else outcome
-    best.iterations = outcome.iterations + again.iterations
-    return best
+        outcome, multipliers = attempt(problem, u0)
+    if fallback is not None and not (outcome.reached and not outcome.plateau):
+        again, again_multipliers = attempt(problem, fallback)
+        spent = outcome.iterations + again.iterations
+        if (again.reached and not again.plateau) or again.epsilon < outcome.epsilon:
+            outcome, multipliers = again, again_multipliers
+        outcome.iterations = spent
+    constraint.multipliers = multipliers  # the kept fit's, which the next frame starts from
+    return outcome
 
 
 def _blur_model_attrs(phase: xr.Dataset, passes: int) -> dict[str, str]:
@@ -540,3 +559,5 @@ def _keep(out: _Pass, earlier: _Pass, n: int) -> None:
     for name in ("U", "eps", "floor", "target", "eps_cell", "penalty", "iterations", "stages",
                  "reached", "converged", "plateau"):  # fmt: skip
         getattr(out, name)[n] = getattr(earlier, name)[n]
+    if out.multipliers is not None and earlier.multipliers is not None:
+        out.multipliers[n] = earlier.multipliers[n]

@@ -23,10 +23,9 @@ EPSILON = 0.2  # rad, the paper's tracking residual
 
 
 @pytest.fixture(scope="module")
-def scene():
-    # the reduced scene so the module runs in well under a minute: 5 frames, 2 mm pixels,
-    # a 456-cell tracking model and a 1539-cell truth
-    return lv(size="small", seed=0)
+def scene(lv_small):
+    # the reduced scene (tests/conftest.py) so the module runs in well under a minute
+    return lv_small
 
 
 @pytest.fixture(scope="module")
