@@ -23,7 +23,7 @@ import xarray as xr
 
 from harpx._progress import progress_bar
 from harpx._typing import BoolArray
-from harpx.errors import HarpxWarning, SchemaError
+from harpx.errors import ElementInversionError, HarpxWarning, SchemaError
 from harpx.imaging.coverage import explain_missing_data, phase_direction_mismatch
 from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.mechanics.assembly import internal_forces
@@ -512,7 +512,10 @@ def _solve_frame(
     (one that meets the target first). Where the motion turns, as at end systole, the
     extrapolated start can leave part of the body in a neighbouring tag's basin; the
     penalty raise then levels off above the target with that part stopped across a wrap,
-    and a blur correction predicted from it pulls the body the rest of the way.
+    and a blur correction predicted from it pulls the body the rest of the way. A retry
+    that would invert an element (:class:`~harpx.errors.ElementInversionError`) leaves the
+    first attempt's fit in place; every attempt starts from the frame's starting
+    multipliers (augmented Lagrangian).
     """
     strategy = STRATEGIES[problem.settings.method]
     constraint = problem.constraint
@@ -523,20 +526,28 @@ def _solve_frame(
         outcome = strategy(on, u, goal)
         return outcome, constraint.multipliers
 
+    def retry(on: FrameProblem, u: np.ndarray) -> tuple[FrameOutcome, np.ndarray] | None:
+        try:
+            return attempt(on, u)
+        except ElementInversionError:  # the first attempt's fit stands
+            return None
+
     if relaxed is not None:
         loose_problem = replace(problem, settings=relaxed)  # this frame's offset included
         outcome, multipliers = attempt(loose_problem, u0)
-        if not outcome.reached:  # kept by the later passes: at the full tolerance
-            spent = outcome.iterations
-            outcome, multipliers = attempt(problem, u0)
-            outcome.iterations += spent
+        tight = None if outcome.reached else retry(problem, u0)  # kept by the later passes
+        if tight is not None:
+            tight[0].iterations += outcome.iterations
+            outcome, multipliers = tight
     else:
         outcome, multipliers = attempt(problem, u0)
+    again = None
     if fallback is not None and not (outcome.reached and not outcome.plateau):
-        again, again_multipliers = attempt(problem, fallback)
-        spent = outcome.iterations + again.iterations
-        if (again.reached and not again.plateau) or again.epsilon < outcome.epsilon:
-            outcome, multipliers = again, again_multipliers
+        again = retry(problem, fallback)
+    if again is not None:
+        spent = outcome.iterations + again[0].iterations
+        if (again[0].reached and not again[0].plateau) or again[0].epsilon < outcome.epsilon:
+            outcome, multipliers = again
         outcome.iterations = spent
     constraint.multipliers = multipliers  # the kept fit's, which the next frame starts from
     return outcome

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import harpx.tracking.track as track_module
+from harpx.errors import ElementInversionError, HarpxWarning
 from harpx.imaging.harp import extract_phase
 from harpx.scenes.phantom import phantom
 from harpx.tracking.results import tracking_error
@@ -125,3 +126,27 @@ def test_a_frame_that_ends_above_its_target_from_an_extrapolated_start_is_tracke
     kept = ends[2] if first_worse else ends[1]
     assert np.array_equal(out.dof_displacement.values[2], kept)
     assert bool(out.target_reached[2]) == (ending == "plateau" and not first_worse)
+
+
+def test_a_retry_that_would_invert_an_element_leaves_the_first_fit(scene, monkeypatch):
+    """The retry from the last fit is a second chance, not a risk: if it would invert an
+    element, the frame keeps the fit of its extrapolated start (still marked as ending
+    above its target) and tracking goes on."""
+    made, _, phase = scene
+    strategy = track_module.STRATEGIES["penalty"]
+    ends: list[np.ndarray] = []
+
+    def spy(problem, u, goal):
+        if problem.constraint.frame == 2 and len(ends) == 2:  # the retry of frame 2
+            raise ElementInversionError("inverted in the retry", cells=[0])
+        outcome = strategy(problem, u, goal)
+        ends.append(np.array(outcome.u))
+        if problem.constraint.frame == 2:
+            outcome.reached = outcome.plateau = False  # the extrapolated start "misses"
+        return outcome
+
+    monkeypatch.setitem(track_module.STRATEGIES, "penalty", spy)
+    with pytest.warns(HarpxWarning, match="missed the tracking target"):
+        out = track(phase, made.body(), blur_passes=0)
+    assert np.array_equal(out.dof_displacement.values[2], ends[1])
+    assert not bool(out.target_reached[2])
