@@ -3,6 +3,8 @@ depend on it beyond the correction pass's own tolerance."""
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import pytest
 
@@ -116,7 +118,13 @@ def test_a_frame_that_ends_above_its_target_from_an_extrapolated_start_is_tracke
         return outcome
 
     monkeypatch.setitem(track_module.STRATEGIES, "penalty", spy)
-    out = track(phase, made.body(), blur_passes=0)
+    reached = ending == "plateau" and not first_worse
+    with (
+        contextlib.nullcontext()
+        if reached
+        else pytest.warns(HarpxWarning, match="missed the tracking target")
+    ):
+        out = track(phase, made.body(), blur_passes=0)
     assert [frame for frame, _ in starts] == [1, 2, 2]
     first = out.dof_displacement.values[1]
     assert not np.array_equal(starts[1][1], first)  # extrapolated from frames 0 and 1
@@ -125,7 +133,7 @@ def test_a_frame_that_ends_above_its_target_from_an_extrapolated_start_is_tracke
     # (measured ε 0.28 rad against 0.054): unless the extrapolated fit is made worse, it stays
     kept = ends[2] if first_worse else ends[1]
     assert np.array_equal(out.dof_displacement.values[2], kept)
-    assert bool(out.target_reached[2]) == (ending == "plateau" and not first_worse)
+    assert bool(out.target_reached[2]) == reached
 
 
 def test_a_retry_that_would_invert_an_element_leaves_the_first_fit(scene, monkeypatch):

@@ -18,6 +18,9 @@ def scene(lv_small):
     return made, tagged, extract_phase(tagged)
 
 
+# the correction pass meets frame 2's target in a multiplier update whose solve stops at its
+# iteration limit: flagged in 'converged' and warned, which this test does not look at
+@pytest.mark.filterwarnings("ignore:the Gauss–Newton solve stopped:harpx.errors.HarpxWarning")
 def test_the_augmented_lagrangian_correction_pass_starts_each_frame_from_its_own_multipliers(
     scene,
 ):
