@@ -412,10 +412,10 @@ def _track_frames(
 
     A later pass (``earlier`` given) starts each frame from the earlier pass's result and
     penalty for it (and, with the augmented-Lagrangian method, its multipliers), which the
-    blur correction moves only a little. A frame the earlier pass
-    missed keeps that pass's result and stays a miss: its correction is predicted from the
-    missed fit, and tracking the corrected images would only confirm that fit, meeting the
-    target far from the true motion (``benchmarks/results/tracking_defaults.md``).
+    blur correction moves only a little. A frame the earlier pass missed keeps that pass's
+    result and stays a miss: its correction is predicted from the missed fit, and tracking
+    the corrected images would only confirm that fit, meeting the target far from the true
+    motion (``benchmarks/results/tracking_defaults.md``).
     """
     body, constraint, settings = problem.body, problem.constraint, problem.settings
     timings, terms = problem.timings, problem.terms
