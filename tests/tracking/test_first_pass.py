@@ -94,8 +94,8 @@ def test_a_frame_the_loose_first_pass_misses_is_tracked_again_at_tolerance(scene
     assert out.target_reached.all()
 
 
-@pytest.mark.parametrize("ending", ["miss", "plateau"])
-@pytest.mark.parametrize("first_worse", [False, True])
+# a miss whose retry does worse (the first fit kept), a plateau whose retry is kept
+@pytest.mark.parametrize(("ending", "first_worse"), [("miss", False), ("plateau", True)])
 def test_a_frame_that_ends_above_its_target_from_an_extrapolated_start_is_tracked_again_from_the_last_fit(  # noqa: E501
     scene, monkeypatch, ending, first_worse
 ):
