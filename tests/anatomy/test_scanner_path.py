@@ -27,7 +27,7 @@ from harpx.errors import HarpxWarning
 from harpx.imaging.harp import extract_phase
 from harpx.mechanics.body import Body
 from harpx.plotting import bullseye
-from harpx.scenes.lv import ANTERIOR, lv, myocardium
+from harpx.scenes.lv import ANTERIOR, myocardium
 from harpx.tracking.blur import blur_models
 from harpx.tracking.track import track
 
@@ -44,8 +44,9 @@ IN_VIEW = np.arange(1, 17)  # segments 1-16; the apical cap (17) lies below the 
 
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    scene = lv(size="small", infarct=INFARCT, scar_activation=0.5)
+def run(tmp_path_factory: pytest.TempPathFactory, lv_small_infarct) -> dict:
+    scene = lv_small_infarct  # tests/conftest.py: the infarct in segments INFARCT
+    assert tuple(scene.tagged.attrs["infarct_segments"]) == INFARCT
     folder = Path(tmp_path_factory.mktemp("scanner")) / "dicom"
     # the scanner's export: the short-axis series only, one per tag direction
     series = write_tagged(scene.tagged.sel(tag=["x", "y"]), folder)

@@ -18,9 +18,12 @@ SHORT_AXIS = slice(0, 16)  # segments 1-16: segment 17 has no short-axis data
 
 
 @pytest.fixture(scope="module")
-def scene():
-    # small: 5 frames, 2 mm pixels, a 456-cell tracking model, a 1539-cell truth (~15 s)
-    return lv(size="small", infarct=INFARCT, scar_activation=SCAR)
+def scene(lv_small_infarct):
+    # small: 5 frames, 2 mm pixels, a 456-cell tracking model, a 1539-cell truth
+    # (tests/conftest.py, shared with the scanner-path test)
+    attrs = lv_small_infarct.tagged.attrs
+    assert tuple(attrs["infarct_segments"]) == INFARCT and attrs["scar_activation"] == SCAR
+    return lv_small_infarct
 
 
 @pytest.fixture(scope="module")
