@@ -273,6 +273,11 @@ class TrackingSettings:
         Applied only to phase images that say they come from the disk band-pass
         (``bandpass="disk"``, as :func:`~harpx.imaging.harp.extract_phase` writes); the
         result records the passes made (``blur_passes_applied``, ``iterations_per_pass``).
+    wall_smoothing : float, optional
+        Predict each blur-correction pass from the tracked motion averaged along the wall
+        over this length, mm (:mod:`harpx.tracking.wall`; the motion itself stays as
+        tracked). Needs a body with ``"endo"`` and ``"epi"`` boundaries. None (default): the
+        prediction uses the tracked motion as it is.
     tolerance : float, default 0.01
         Gauss–Newton convergence, mm: the largest nodal increment is below it, or the
         increments contract so fast (``tuning.fast``, full steps) that those still to come
@@ -324,6 +329,7 @@ class TrackingSettings:
     robust_scale: float | None = 0.5
     regularization: Regularization = "total"
     blur_passes: int | None = None
+    wall_smoothing: float | None = None
     tolerance: float = 0.01
     max_iterations: int = 20
     intorder: int | None = None
@@ -342,6 +348,8 @@ class TrackingSettings:
         set_ = object.__setattr__
         set_(self, "epsilon", _positive("epsilon", self.epsilon, allow_none=True))
         set_(self, "robust_scale", _positive("robust_scale", self.robust_scale, allow_none=True))
+        set_(self, "wall_smoothing",
+             _positive("wall_smoothing", self.wall_smoothing, allow_none=True))  # fmt: skip
         for name in ("epsilon_factor", "plateau_factor", "epsilon_min", "penalty", "penalty_limit",
                      "multiplier_tolerance", "tolerance"):  # fmt: skip
             set_(self, name, _positive(name, getattr(self, name)))
@@ -455,6 +463,7 @@ class TrackingSettings:
                     "epsilon": "auto",
                     "robust_scale": "none",
                     "blur_passes": "auto",
+                    "wall_smoothing": "none",
                     "progress": "auto",
                     "tuning_step_accuracy": "none",
                 }.get(key, -1)

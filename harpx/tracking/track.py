@@ -39,6 +39,7 @@ from harpx.tracking.observability import describe_direction
 from harpx.tracking.penalty import track_frame_penalty
 from harpx.tracking.results import tracked_dataset
 from harpx.tracking.settings import SolverTuning, TrackingSettings
+from harpx.tracking.wall import smooth_along_wall, wall_smoother
 
 STRATEGIES = {"penalty": track_frame_penalty, "augmented-lagrangian": track_frame_augmented}
 #: Constraint points from which a worker thread samples the images while the solve
@@ -301,6 +302,9 @@ def track(
                                executor=pool if overlap else None)  # fmt: skip
         disk = PhaseParameters.from_dataset(phase).disk_bandpass  # the blur correction models it
         passes = settings.effective_blur_passes if disk else 0
+        smoother = None  # checked before the first pass: it needs the wall's boundaries
+        if passes and settings.wall_smoothing is not None:
+            smoother = wall_smoother(body, settings.wall_smoothing)
         first_tolerance = settings.tolerance
         if passes:  # a correction pass re-converges every frame: the first pass less tightly
             first_tolerance = max(
@@ -315,7 +319,8 @@ def track(
             clock = _time.perf_counter()
             constraint.release_frame()  # the last frame's sampler buffers, before the blur's
             # the corrected images, built frame by frame when the constraint reads them
-            corrected, correction_mean = lazily_deblurred(phase, body, result.U)
+            motion = result.U if smoother is None else smooth_along_wall(body, result.U, smoother)
+            corrected, correction_mean = lazily_deblurred(phase, body, motion)
             constraint.replace_images(corrected)  # frame 0 is uncorrected: its samples stay
             del corrected  # the constraint holds it
             timings.blur += _time.perf_counter() - clock
