@@ -13,8 +13,8 @@ depth), and the motion itself is left as tracked.
 
 The transmural depth of a point is :math:`d_e / (d_e + d_p)`, with :math:`d_e, d_p` its
 distances to the nearest node of the body's ``"endo"`` and ``"epi"`` boundaries (0 on the
-endocardium, 1 on the epicardium; exact for a cylindrical annulus up to the surface nodes'
-spacing). Two points count as the same depth with weight
+endocardium, 1 on the epicardium; on a ventricle template's mesh it follows the template's
+own transmural layers). Two points count as the same depth with weight
 :math:`\\exp(-(\\Delta e / 0.1)^2)`, so points one transmural cell apart on a mesh with a few
 cells across the wall hardly mix.
 """
@@ -28,6 +28,8 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 
 from harpx._typing import FloatArray
+
+__all__ = ["DEPTH_WIDTH", "REACH", "smooth_along_wall", "transmural_depth", "wall_smoother"]
 
 #: Width of the transmural-depth weight (fraction of the wall)
 DEPTH_WIDTH = 0.1
