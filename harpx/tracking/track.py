@@ -39,7 +39,12 @@ from harpx.tracking.observability import describe_direction
 from harpx.tracking.penalty import track_frame_penalty
 from harpx.tracking.results import tracked_dataset
 from harpx.tracking.settings import SolverTuning, TrackingSettings
-from harpx.tracking.wall import smooth_along_wall, wall_smoother
+from harpx.tracking.wall import (
+    MIN_CELLS_ACROSS,
+    cells_across_wall,
+    smooth_along_wall,
+    wall_smoother,
+)
 
 STRATEGIES = {"penalty": track_frame_penalty, "augmented-lagrangian": track_frame_augmented}
 #: Constraint points from which a worker thread samples the images while the solve
@@ -148,6 +153,20 @@ def _warn_unseen(constraint: PhaseConstraint) -> None:
         HarpxWarning,
         stacklevel=3,
     )
+
+
+def _warn_thin_wall(across: float) -> None:
+    """Warn when ``wall_smoothing`` is asked of a wall fewer than ``MIN_CELLS_ACROSS``
+    cells thick (:mod:`harpx.tracking.wall`)."""
+    if across < MIN_CELLS_ACROSS:
+        warnings.warn(
+            f"wall_smoothing: the wall is about {across:.1f} cells thick (fewer than "
+            f"{MIN_CELLS_ACROSS:g}): the depth keeps little of the thickening profile, so the "
+            "blur correction may under-report radial strain; a finer mesh across the wall, "
+            "or wall_smoothing=None (attrs['wall_cells_across'] keeps the count)",
+            HarpxWarning,
+            stacklevel=4,
+        )
 
 
 def _warn_frames(phase: xr.Dataset, reached: np.ndarray, converged: np.ndarray,
@@ -302,9 +321,10 @@ def track(
                                executor=pool if overlap else None)  # fmt: skip
         disk = PhaseParameters.from_dataset(phase).disk_bandpass  # the blur correction models it
         passes = settings.effective_blur_passes if disk else 0
-        smoother = None  # checked before the first pass: it needs the wall's boundaries
+        smoother, across = None, None  # checked before the first pass: it needs the wall
         if passes and settings.wall_smoothing is not None:
-            smoother = wall_smoother(body, settings.wall_smoothing)
+            smoother, across = wall_smoother(body, settings.wall_smoothing), cells_across_wall(body)
+            _warn_thin_wall(across)
         first_tolerance = settings.tolerance
         if passes:  # a correction pass re-converges every frame: the first pass less tightly
             first_tolerance = max(
@@ -347,6 +367,7 @@ def track(
         "rigid_modes_removed": int(seen.unseen_modes.shape[0]),
         "outside_fraction": float(outside),
         "blur_passes_applied": int(passes),
+        **({} if across is None else {"wall_cells_across": round(across, 2)}),
         "first_pass_tolerance": float(first_tolerance),
         **_blur_model_attrs(phase, passes),
         "iterations_per_pass": np.asarray(pass_iterations, dtype=np.int64),

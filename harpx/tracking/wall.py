@@ -16,7 +16,8 @@ distances to the nearest node of the body's ``"endo"`` and ``"epi"`` boundaries 
 endocardium, 1 on the epicardium; on a ventricle template's mesh it follows the template's
 own transmural layers). Two points count as the same depth with weight
 :math:`\\exp(-(\\Delta e / 0.1)^2)`, so points one transmural cell apart on a mesh with a few
-cells across the wall hardly mix.
+cells across the wall hardly mix. A wall less than ``MIN_CELLS_ACROSS`` cells thick
+(:func:`cells_across_wall`) has too little profile to keep: the tracker warns.
 """
 
 from __future__ import annotations
@@ -29,12 +30,22 @@ from scipy.spatial import cKDTree
 
 from harpx._typing import FloatArray
 
-__all__ = ["DEPTH_WIDTH", "REACH", "smooth_along_wall", "transmural_depth", "wall_smoother"]
+__all__ = [
+    "DEPTH_WIDTH",
+    "MIN_CELLS_ACROSS",
+    "REACH",
+    "cells_across_wall",
+    "smooth_along_wall",
+    "transmural_depth",
+    "wall_smoother",
+]
 
 #: Width of the transmural-depth weight (fraction of the wall)
 DEPTH_WIDTH = 0.1
 #: The Gaussian along the wall is cut at this many ``length``
 REACH = 2.5
+#: Fewer cells than this across the wall leave the depth little thickening profile to keep
+MIN_CELLS_ACROSS = 2.0
 
 
 def transmural_depth(body: Any) -> FloatArray:
@@ -56,19 +67,37 @@ def transmural_depth(body: Any) -> FloatArray:
     ValueError
         If the body has no ``"endo"`` or ``"epi"`` boundary, or one of them is empty.
     """
-    distances = []
-    for name in ("endo", "epi"):
-        if name not in body.boundaries or len(body.boundaries[name]) == 0:
-            raise ValueError(
-                f"wall smoothing needs the body's {name!r} boundary; this body has "
-                f"{sorted(body.boundaries)!r} (mesh it from a ventricle template, or name "
-                "its endocardial and epicardial facets)"
-            )
-        nodes = np.unique(body.mesh.facets[:, body.boundaries[name]])
-        distances.append(cKDTree(body.mesh.p[:, nodes].T).query(body.dof_points)[0])
+    distances = [
+        cKDTree(_surface_nodes(body, name)).query(body.dof_points)[0] for name in ("endo", "epi")
+    ]
     d_endo, d_epi = distances
     total = d_endo + d_epi
     return np.divide(d_endo, total, out=np.zeros_like(total), where=total > 0)
+
+
+def _surface_nodes(body: Any, name: str) -> FloatArray:
+    """Reference positions (n, 3) of the nodes of the named boundary, mm."""
+    if name not in body.boundaries or len(body.boundaries[name]) == 0:
+        raise ValueError(
+            f"wall smoothing needs the body's {name!r} boundary; this body has "
+            f"{sorted(body.boundaries)!r} (mesh it from a ventricle template, or name "
+            "its endocardial and epicardial facets)"
+        )
+    return body.mesh.p[:, np.unique(body.mesh.facets[:, body.boundaries[name]])].T
+
+
+def cells_across_wall(body: Any) -> float:
+    """About how many cells the wall is thick: 1 over the median transmural depth that a cell
+    spans (its corners' largest minus smallest :func:`transmural_depth`).
+
+    Raises
+    ------
+    ValueError
+        As :func:`transmural_depth`.
+    """
+    corners = transmural_depth(body)[np.asarray(body.mesh.t)]  # (corner, cell)
+    span = float(np.median(corners.max(axis=0) - corners.min(axis=0)))
+    return 1.0 / span if span > 0 else float("inf")
 
 
 def wall_smoother(body: Any, length: float) -> sparse.csr_matrix:

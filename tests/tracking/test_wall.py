@@ -78,3 +78,24 @@ def test_track_refuses_wall_smoothing_on_a_body_without_the_wall(lv_small):
     phase = extract_phase(lv_small.tagged.isel(time=[0, 1]), upsample=1)
     with pytest.raises(ValueError, match="needs the body's 'endo' boundary"):
         track(phase, bare, dirichlet=lv_small.dirichlet(), wall_smoothing=3.0)
+
+
+def test_a_wall_one_cell_thick_is_counted_warned_and_flagged(lv_small):
+    from harpx.errors import HarpxWarning
+    from harpx.imaging.harp import extract_phase
+    from harpx.tracking.track import track
+    from harpx.tracking.wall import cells_across_wall
+
+    # the template's layers: one cell per transmural division (measured within 0.17 % of n:
+    # the depth's nearest-node distances are not exactly the template's layers)
+    for n in (1, 2, 4):
+        assert cells_across_wall(body_of(n=(16, 6, n))) == pytest.approx(n, rel=2e-3)
+    # one cell across: on the small infarct scene's 6 mm segmentation mesh (one across) the
+    # radial error rose from 8.6-9.0 % to 10.1-11.0 % with wall_smoothing (the guide)
+    thin = Body(lv_small.template().mesh(n_circumferential=16, n_longitudinal=4,
+                                         n_transmural=1), lv_small.material)  # fmt: skip
+    phase = extract_phase(lv_small.tagged.isel(time=[0, 1]), upsample=1)
+    with pytest.warns(HarpxWarning, match=r"about 1\.0 cells thick"):
+        result = track(phase, thin, dirichlet=lv_small.template().base_conditions(),
+                       wall_smoothing=3.0, blur_passes=1)  # fmt: skip
+    assert result.attrs["wall_cells_across"] == 1.0
