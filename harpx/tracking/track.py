@@ -43,6 +43,7 @@ from harpx.tracking.wall import (
     MIN_CELLS_ACROSS,
     cells_across_wall,
     smooth_along_wall,
+    transmural_depth,
     wall_smoother,
 )
 
@@ -155,10 +156,18 @@ def _warn_unseen(constraint: PhaseConstraint) -> None:
     )
 
 
-def _warn_thin_wall(across: float) -> None:
-    """Warn when ``wall_smoothing`` is asked of a wall fewer than ``MIN_CELLS_ACROSS``
-    cells thick (:mod:`harpx.tracking.wall`)."""
-    if across < MIN_CELLS_ACROSS:
+def _warn_wall_smoothing(across: float | None) -> None:
+    """Warn when ``wall_smoothing`` has no pass to act on (``across`` None), or is asked of
+    a wall fewer than ``MIN_CELLS_ACROSS`` cells thick (:mod:`harpx.tracking.wall`)."""
+    if across is None:
+        warnings.warn(
+            "wall_smoothing has no effect: no blur-correction pass is made (blur_passes=0, "
+            "a user-given epsilon without blur_passes, or phase images not from the disk "
+            "band-pass)",
+            HarpxWarning,
+            stacklevel=4,
+        )
+    elif across < MIN_CELLS_ACROSS:
         warnings.warn(
             f"wall_smoothing: the wall is about {across:.1f} cells thick (fewer than "
             f"{MIN_CELLS_ACROSS:g}): the depth keeps little of the thickening profile, so the "
@@ -322,9 +331,12 @@ def track(
         disk = PhaseParameters.from_dataset(phase).disk_bandpass  # the blur correction models it
         passes = settings.effective_blur_passes if disk else 0
         smoother, across = None, None  # checked before the first pass: it needs the wall
-        if passes and settings.wall_smoothing is not None:
-            smoother, across = wall_smoother(body, settings.wall_smoothing), cells_across_wall(body)
-            _warn_thin_wall(across)
+        if settings.wall_smoothing is not None:
+            if passes:
+                depth = transmural_depth(body)
+                smoother = wall_smoother(body, settings.wall_smoothing, depth)
+                across = cells_across_wall(body, depth)
+            _warn_wall_smoothing(across)
         first_tolerance = settings.tolerance
         if passes:  # a correction pass re-converges every frame: the first pass less tightly
             first_tolerance = max(

@@ -86,21 +86,24 @@ def _surface_nodes(body: Any, name: str) -> FloatArray:
     return body.mesh.p[:, np.unique(body.mesh.facets[:, body.boundaries[name]])].T
 
 
-def cells_across_wall(body: Any) -> float:
+def cells_across_wall(body: Any, depth: FloatArray | None = None) -> float:
     """About how many cells the wall is thick: 1 over the median transmural depth that a cell
     spans (its corners' largest minus smallest :func:`transmural_depth`).
+
+    ``depth``: the body's :func:`transmural_depth`, if already computed.
 
     Raises
     ------
     ValueError
         As :func:`transmural_depth`.
     """
-    corners = transmural_depth(body)[np.asarray(body.mesh.t)]  # (corner, cell)
+    depth = transmural_depth(body) if depth is None else depth
+    corners = depth[np.asarray(body.mesh.t)]  # (corner, cell)
     span = float(np.median(corners.max(axis=0) - corners.min(axis=0)))
     return 1.0 / span if span > 0 else float("inf")
 
 
-def wall_smoother(body: Any, length: float) -> sparse.csr_matrix:
+def wall_smoother(body: Any, length: float, depth: FloatArray | None = None) -> sparse.csr_matrix:
     """Row-stochastic averaging along the wall: a Gaussian of ``length`` mm in the
     reference positions, times the transmural-depth weight (module notes).
 
@@ -110,6 +113,8 @@ def wall_smoother(body: Any, length: float) -> sparse.csr_matrix:
         As for :func:`transmural_depth`.
     length : float
         Standard deviation of the Gaussian along the wall, mm (> 0).
+    depth : ndarray, shape (n_dof_nodes,), optional
+        The body's :func:`transmural_depth`, if already computed.
 
     Returns
     -------
@@ -123,7 +128,7 @@ def wall_smoother(body: Any, length: float) -> sparse.csr_matrix:
     """
     if not (np.isfinite(length) and length > 0):
         raise ValueError(f"wall_smoothing={length!r} must be a positive length in mm")
-    depth = transmural_depth(body)
+    depth = transmural_depth(body) if depth is None else depth
     tree = cKDTree(body.dof_points)
     pairs = tree.sparse_distance_matrix(tree, REACH * length, output_type="coo_matrix")
     off = pairs.row != pairs.col  # each node's own weight is added once, below

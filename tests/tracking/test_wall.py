@@ -58,7 +58,7 @@ def test_the_average_keeps_the_transmural_profile_and_damps_detail_along_the_wal
     np.testing.assert_array_equal(kept[0], 0.0)
 
 
-def test_a_body_without_a_wall_is_refused_before_tracking():
+def test_the_smoother_refuses_a_body_without_a_wall_and_a_length_not_positive():
     body = Body(box((10.0, 10.0, 10.0), (2, 2, 2)), NeoHookean(c1=1.0, kappa=10.0))
     with pytest.raises(ValueError, match="'endo' boundary"):
         wall_smoother(body, 4.0)
@@ -99,3 +99,15 @@ def test_a_wall_one_cell_thick_is_counted_warned_and_flagged(lv_small):
         result = track(phase, thin, dirichlet=lv_small.template().base_conditions(),
                        wall_smoothing=3.0, blur_passes=1)  # fmt: skip
     assert result.attrs["wall_cells_across"] == 1.0
+
+
+def test_wall_smoothing_without_a_correction_pass_is_warned_about(lv_small):
+    from harpx.errors import HarpxWarning
+    from harpx.imaging.harp import extract_phase
+    from harpx.tracking.track import track
+
+    phase = extract_phase(lv_small.tagged.isel(time=[0, 1]), upsample=1)
+    with pytest.warns(HarpxWarning, match="wall_smoothing has no effect"):
+        result = track(phase, lv_small.body(), dirichlet=lv_small.dirichlet(),
+                       wall_smoothing=3.0, blur_passes=0)  # fmt: skip
+    assert "wall_cells_across" not in result.attrs
