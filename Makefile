@@ -22,8 +22,10 @@ $(DOCS_STAMP): $(STAMP)
 demo: $(STAMP)
 	$(BIN)/harpx demo --output harpx-demo
 
+# one worker per core, idle workers taking queued tests from busy ones (pytest-xdist); each
+# worker builds the shared scene fixtures it needs once. `pytest -n 0` runs in one process.
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n auto --dist worksteal
 
 # the tutorials are rendered, not run (the tests run them); the build takes ~10 s of CPU
 docs: $(DOCS_STAMP)
