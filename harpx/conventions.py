@@ -16,7 +16,10 @@ Three kinds of :class:`xarray.Dataset` flow through harpx. Each carries its kind
     ``phase`` (tag, time, z, y, x) wrapped to [-π, π) and ``magnitude`` (same dims) >= 0;
     optional ``harmonic_noise`` (tag): the noise standard deviation of each tag's complex
     harmonic image, in the units of ``magnitude`` (:mod:`harpx.imaging.noise`), from which
-    the tracker derives the noise floor of its residual.
+    the tracker derives the noise floor of its residual; optional
+    ``tag_frequency_measured`` (tag): the tag frequency in cycles/mm that the first frame's
+    phase shows in each tag's acquisition plane, NaN where not measured
+    (:mod:`harpx.imaging.tag_frequency`).
     Optional slice geometry (either kind of image dataset): ``slice_thickness`` (tag), the
     thickness of each tag's slices along its ``slice_axis`` in mm (boxcar profile; NaN:
     unknown), and ``slice_position`` (tag, slice), their centres along it in mm,
@@ -163,6 +166,7 @@ UNITS: dict[str, str] = {
     "phase": "rad",
     "magnitude": "1",
     "harmonic_noise": "1",
+    "tag_frequency_measured": "1/mm",
     "points": "mm",
     "cells": "1",
     "region": "1",
@@ -207,6 +211,7 @@ LONG_NAMES: dict[str, str] = {
     "phase": "harmonic phase",
     "magnitude": "harmonic image magnitude",
     "harmonic_noise": "noise standard deviation of the complex harmonic image",
+    "tag_frequency_measured": "tag spatial frequency seen in the phase at the first frame",
     "points": "reference position of node",
     "cells": "cell connectivity",
     "region": "region label of cell",
@@ -369,6 +374,7 @@ SCHEMAS: dict[str, dict[str, VarSpec]] = {
         "phase": VarSpec(IMAGE_DIMS, coord=False),
         "magnitude": VarSpec(IMAGE_DIMS, coord=False),
         "harmonic_noise": VarSpec(("tag",), required=False),
+        "tag_frequency_measured": VarSpec(("tag",), required=False),
         **_COMMON_IMAGE_COORDS,
     },
     SCHEMA_TRACKED: {

@@ -23,6 +23,7 @@ from harpx.imaging._kernels import refine_linear, refine_positions
 from harpx.imaging.bandpass import harmonic_phase
 from harpx.imaging.fft import default_threads
 from harpx.imaging.noise import harmonic_noise
+from harpx.imaging.tag_frequency import measure_tag_frequency, tag_frequency_mismatch
 from harpx.schema import AXES, GRID_DIMS, grid_step, standard_attrs, validate
 
 __all__ = ["extract_phase", "refinement_factors", "slice_geometry"]
@@ -90,6 +91,31 @@ def _warn_constant_frames(ds: xr.Dataset) -> None:
             HarpxWarning,
             stacklevel=3,
         )
+
+
+def _checked_tag_frequency(phase: xr.Dataset, lazy: bool, check: bool) -> xr.Variable:
+    """``tag_frequency_measured`` (tag) of a new phase; warns if it misses the stated one.
+
+    From the first frame only; NaN throughout without ``check``. For dask-backed phase it
+    stays lazy and nothing is checked here (:func:`harpx.tracking.track.track` checks it
+    when it reads the phase).
+    """
+    first = phase.isel(time=[0])
+    attrs = standard_attrs("tag_frequency_measured")
+    if not check:
+        return xr.Variable(("tag",), np.full(phase.sizes["tag"], np.nan), attrs)
+    if lazy:
+        import dask
+        import dask.array
+
+        later = dask.delayed(measure_tag_frequency)(first)
+        shape = (phase.sizes["tag"],)
+        return xr.Variable(("tag",), dask.array.from_delayed(later, shape, float), attrs)
+    measured = measure_tag_frequency(first)
+    message = tag_frequency_mismatch(first, measured)
+    if message:
+        warnings.warn(message, HarpxWarning, stacklevel=3)
+    return xr.Variable(("tag",), measured, attrs)
 
 
 def refinement_factors(ds: xr.Dataset, upsample: int) -> tuple[int, int, int]:
@@ -371,6 +397,9 @@ def extract_phase(
         evaluate a tracking, and refined it holds three float64 components per voxel and
         frame, more than ``phase`` and ``magnitude`` together); ``harmonic_noise`` (tag), the
         noise standard deviation of each harmonic image (:mod:`harpx.imaging.noise`);
+        ``tag_frequency_measured`` (tag), cycles/mm, the tag frequency the first frame's
+        phase shows in each tag's plane (:mod:`harpx.imaging.tag_frequency`; NaN where it
+        cannot be measured; lazy for dask-backed data);
         ``slice_thickness`` (tag) and ``slice_position`` (tag, slice) when
         :func:`slice_geometry` finds them. Attributes: ``harpx_schema="phase/1"``,
         ``sequence``, ``upsample``, ``radius``, ``bandpass="disk"``
@@ -389,7 +418,11 @@ def extract_phase(
     HarpxWarning
         If a frame of a tag's image is one value within the tag's mask (blank or constant:
         no tag pattern, so no phase); names the frames and the value. Only images held in
-        memory are checked.
+        memory are checked. Also if a tag's measured frequency (``tag_frequency_measured``)
+        differs from its stated ``tag_frequency`` by more than
+        :data:`~harpx.imaging.tag_frequency.FREQUENCY_TOLERANCE`: the band-pass did not
+        isolate the tag peak (a wrong tag period, or a SPAMM DC peak inside the radius).
+        Dask-backed data are checked by the tracker instead, which computes them.
 
     Notes
     -----
@@ -410,6 +443,20 @@ def extract_phase(
     >>> ph.phase.sizes["x"], ph.attrs["harpx_schema"]
     (32, 'phase/1')
     """
+    return _extract_phase(ds, upsample, radius, threads, dtype, check_tag_frequency=True)
+
+
+def _extract_phase(
+    ds: xr.Dataset,
+    upsample: int,
+    radius: float,
+    threads: int | None,
+    dtype: str,
+    check_tag_frequency: bool,
+) -> xr.Dataset:
+    """:func:`extract_phase`; without ``check_tag_frequency``, ``tag_frequency_measured`` is
+    left NaN and nothing is warned about (for images that are not tag patterns, such as the
+    noise samples of :func:`harpx.tracking.uncertainty.tracking_uncertainty`)."""
     validate(ds, "tagged")
     _check_options(upsample, radius)
     _warn_constant_frames(ds)
@@ -484,6 +531,10 @@ def extract_phase(
             var = _refine_linear(source.astype(np.float64), factors, nthreads)
             var.attrs = {**standard_attrs(name), **ds[name].attrs}
             data_vars[name] = var
+    seen = {n: data_vars[n] for n in ("phase", "magnitude", "mask") if n in data_vars}
+    data_vars["tag_frequency_measured"] = _checked_tag_frequency(
+        xr.Dataset(seen, coords=coords), lazy, check_tag_frequency
+    )
     attrs = {k: v for k, v in ds.attrs.items() if k != "harpx_schema"}
     attrs.update(
         harpx_schema="phase/1",

@@ -26,6 +26,7 @@ from harpx._typing import BoolArray
 from harpx.errors import ElementInversionError, HarpxWarning, SchemaError
 from harpx.imaging.coverage import explain_missing_data, phase_direction_mismatch
 from harpx.imaging.phase_parameters import PhaseParameters
+from harpx.imaging.tag_frequency import tags_off_frequency
 from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.schema import GRID_DIMS, grid_step, validate
@@ -287,7 +288,10 @@ def track(
     -----
     HarpxWarning
         When the tags leave a direction of the body's motion unseen (names it), when a
-        frame misses its target ε, or when a Gauss–Newton solve stops at its iteration limit.
+        frame misses its target ε, when a Gauss–Newton solve stops at its iteration limit,
+        or when the phase's ``tag_frequency_measured`` misses a tag's ``tag_frequency``
+        (:func:`~harpx.imaging.tag_frequency.tags_off_frequency`; recorded as
+        ``attrs["tags_off_frequency"]``).
 
     Notes
     -----
@@ -303,6 +307,15 @@ def track(
     swapped = phase_direction_mismatch(phase)
     if swapped:
         raise SchemaError(swapped)
+    off_frequency = tags_off_frequency(phase)
+    if off_frequency:
+        warnings.warn(
+            f"tracking from harmonic phase whose tag(s) {off_frequency} do not advance at "
+            "their tag_frequency (tag_frequency_measured): the band-pass missed the tag peak, "
+            "so the motion tracked from it is biased (attrs['tags_off_frequency'])",
+            HarpxWarning,
+            stacklevel=2,
+        )
     check_fits_image(body, phase)  # units and size, before anything large is allocated
     constraint = PhaseConstraint(
         body, phase, intorder=settings.intorder, robust_scale=settings.effective_robust_scale
@@ -378,6 +391,7 @@ def track(
         "unseen_directions": "; ".join(seen.unseen_directions) or "none",
         "rigid_modes_removed": int(seen.unseen_modes.shape[0]),
         "outside_fraction": float(outside),
+        "tags_off_frequency": " ".join(off_frequency) or "none",
         "blur_passes_applied": int(passes),
         **({} if across is None else {"wall_cells_across": round(across, 2)}),
         "first_pass_tolerance": float(first_tolerance),
