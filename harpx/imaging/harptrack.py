@@ -37,6 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 from harpx._blas import matmul_one_thread
 from harpx.errors import HarpxWarning, SchemaError
 from harpx.imaging.sample import PhaseSampler, wrap
+from harpx.imaging.tag_frequency import tag_frequency_flag
 from harpx.schema import AXES, GRID_DIMS, grid_step, newer_schema, standard_attrs, validate
 
 __all__ = ["track_harp"]
@@ -74,7 +75,8 @@ def track_harp(
         ``mask``; a point whose harmonic magnitude falls below the sampler's floor, i.e. that
         has left the tissue signal, keeps its last position), attributes ``points_lost``
         (points valid at frame 0 that are NaN in some later frame) and ``points_unseen``
-        (given points without valid phase at frame 0, NaN in every frame), per-frame
+        (given points without valid phase at frame 0, NaN in every frame) and
+        ``tags_off_frequency`` (:func:`~harpx.imaging.tag_frequency.tag_frequency_flag`), per-frame
         ``epsilon`` (mean absolute wrapped residual over the points with a valid phase, rad),
         ``iterations`` (sweeps run) and ``wall_time`` (s), and
         ``displacement_grid`` (time, axis, z, y, x) when ``points`` is None (NaN outside the
@@ -92,7 +94,10 @@ def track_harp(
     Warns
     -----
     HarpxWarning
-        If any point is lost (``points_lost > 0``) or unseen (``points_unseen > 0``).
+        If any point is lost (``points_lost > 0``) or unseen (``points_unseen > 0``), or
+        if the phase's ``tag_frequency_measured`` misses a tag's ``tag_frequency``
+        (:func:`~harpx.imaging.tag_frequency.tag_frequency_flag`; recorded as
+        ``attrs["tags_off_frequency"]``).
 
     Notes
     -----
@@ -125,6 +130,7 @@ def track_harp(
     """
     iterations = _iterations(iterations)
     ds = _as_phase(ds)
+    off_frequency = tag_frequency_flag(ds, "conventional HARP")
     grid = ds if points is None else points if isinstance(points, xr.Dataset) else None
     grid_points = grid is not None
     flat_index: NDArray[np.int64] | None = None
@@ -172,6 +178,7 @@ def track_harp(
     out = _assemble(ds, X, frames, int(iterations))
     lost = int(np.count_nonzero(valid0 & np.isnan(displacement[1:, :, 0]).any(axis=0)))
     out.attrs["points_lost"] = lost
+    out.attrs["tags_off_frequency"] = off_frequency
     unseen = int(np.count_nonzero(~valid0))  # only given points: grid points are selected
     out.attrs["points_unseen"] = unseen
     if unseen:

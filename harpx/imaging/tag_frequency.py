@@ -32,11 +32,14 @@ along such an axis is not measured (NaN).
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray
+from harpx.errors import HarpxWarning
 from harpx.imaging._kernels import wrap
 from harpx.schema import AXES, GRID_DIMS, grid_step
 
@@ -45,6 +48,7 @@ __all__ = [
     "MIN_PAIRS",
     "MIN_PERIODS",
     "measure_tag_frequency",
+    "tag_frequency_flag",
     "tag_frequency_mismatch",
     "tags_off_frequency",
 ]
@@ -196,3 +200,37 @@ def tag_frequency_mismatch(phase: xr.Dataset, measured: ArrayLike | None = None)
         "dataset's tag_frequency) and, for SPAMM images, that the band-pass radius keeps "
         "the DC peak out (radius 0.5), then extract the phase again"
     )
+
+
+def tag_frequency_flag(phase: xr.Dataset, tracker: str) -> str:
+    """Warn that ``tracker`` tracks from phase whose tags miss their frequency; the flag.
+
+    Parameters
+    ----------
+    phase : xarray.Dataset
+        The ``phase/1`` dataset about to be tracked (its ``tag_frequency_measured`` is read;
+        computed, if dask-backed).
+    tracker : str
+        Who tracks, for the message (e.g. ``"FE tracking"``).
+
+    Returns
+    -------
+    str
+        The value of the tracked result's ``attrs["tags_off_frequency"]``: the labels of
+        :func:`tags_off_frequency` separated by spaces, or ``"none"``.
+
+    Warns
+    -----
+    HarpxWarning
+        If some tag is off (names them).
+    """
+    off = tags_off_frequency(phase)
+    if off:
+        warnings.warn(
+            f"{tracker} from harmonic phase whose tag(s) {off} do not advance at their "
+            "tag_frequency (tag_frequency_measured): the band-pass missed the tag peak, so the "
+            "motion tracked from it is biased (attrs['tags_off_frequency'])",
+            HarpxWarning,
+            stacklevel=3,
+        )
+    return " ".join(off) or "none"

@@ -26,7 +26,7 @@ from harpx._typing import BoolArray
 from harpx.errors import ElementInversionError, HarpxWarning, SchemaError
 from harpx.imaging.coverage import explain_missing_data, phase_direction_mismatch
 from harpx.imaging.phase_parameters import PhaseParameters
-from harpx.imaging.tag_frequency import tags_off_frequency
+from harpx.imaging.tag_frequency import tag_frequency_flag
 from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.schema import GRID_DIMS, grid_step, validate
@@ -290,7 +290,7 @@ def track(
         When the tags leave a direction of the body's motion unseen (names it), when a
         frame misses its target ε, when a Gauss–Newton solve stops at its iteration limit,
         or when the phase's ``tag_frequency_measured`` misses a tag's ``tag_frequency``
-        (:func:`~harpx.imaging.tag_frequency.tags_off_frequency`; recorded as
+        (:func:`~harpx.imaging.tag_frequency.tag_frequency_flag`; recorded as
         ``attrs["tags_off_frequency"]``).
 
     Notes
@@ -307,15 +307,7 @@ def track(
     swapped = phase_direction_mismatch(phase)
     if swapped:
         raise SchemaError(swapped)
-    off_frequency = tags_off_frequency(phase)
-    if off_frequency:
-        warnings.warn(
-            f"tracking from harmonic phase whose tag(s) {off_frequency} do not advance at "
-            "their tag_frequency (tag_frequency_measured): the band-pass missed the tag peak, "
-            "so the motion tracked from it is biased (attrs['tags_off_frequency'])",
-            HarpxWarning,
-            stacklevel=2,
-        )
+    off_frequency = tag_frequency_flag(phase, "FE tracking")
     check_fits_image(body, phase)  # units and size, before anything large is allocated
     constraint = PhaseConstraint(
         body, phase, intorder=settings.intorder, robust_scale=settings.effective_robust_scale
@@ -391,7 +383,7 @@ def track(
         "unseen_directions": "; ".join(seen.unseen_directions) or "none",
         "rigid_modes_removed": int(seen.unseen_modes.shape[0]),
         "outside_fraction": float(outside),
-        "tags_off_frequency": " ".join(off_frequency) or "none",
+        "tags_off_frequency": off_frequency,
         "blur_passes_applied": int(passes),
         **({} if across is None else {"wall_cells_across": round(across, 2)}),
         "first_pass_tolerance": float(first_tolerance),

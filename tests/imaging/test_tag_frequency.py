@@ -17,6 +17,7 @@ import pytest
 
 from harpx.errors import HarpxWarning
 from harpx.imaging.harp import extract_phase
+from harpx.imaging.harptrack import track_harp
 from harpx.imaging.tag_frequency import (
     FREQUENCY_TOLERANCE,
     measure_tag_frequency,
@@ -93,6 +94,11 @@ def test_lazy_phase_is_checked_by_the_tracker(scene):
     with pytest.warns(HarpxWarning, match="did not isolate the tag peak"):
         eager = measure_tag_frequency(extract_phase(wrong))
     np.testing.assert_allclose(phase["tag_frequency_measured"].values, eager, rtol=1e-12)
-    with pytest.warns(HarpxWarning, match="do not advance at their tag_frequency"):
+    with pytest.warns(HarpxWarning, match="FE tracking from harmonic phase whose tag"):
         tracked = track(phase, scene.body())
     assert tracked.attrs["tags_off_frequency"] == "x y"
+    with pytest.warns(HarpxWarning) as caught:  # HARP also loses a few points at the edge
+        harp = track_harp(phase)
+    said = [str(w.message) for w in caught]
+    assert any(m.startswith("conventional HARP from harmonic phase whose tag") for m in said)
+    assert harp.attrs["tags_off_frequency"] == "x y"
