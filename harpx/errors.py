@@ -6,6 +6,7 @@ too, so users can catch either the family or the builtin (``ValueError``, ``Runt
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Iterable, Sequence
 
 
@@ -78,3 +79,18 @@ class CoincidentNodesWarning(HarpxWarning):
     Intended for cut bodies (:func:`harpx.physiology.cut.opening_angle`); anywhere else it
     usually means a mesh export did not merge the nodes of its blocks.
     """
+
+
+def user_stacklevel() -> int:
+    """``stacklevel`` for :func:`warnings.warn` that names the first caller outside harpx.
+
+    Call it where the warning is issued: ``warnings.warn(msg, HarpxWarning,
+    stacklevel=user_stacklevel())``. The warning then points at the user's line however
+    deep inside harpx it was raised (through the accessor, the CLI or helpers).
+    """
+    frame = sys._getframe(1)
+    level = 1
+    while frame.f_back is not None and frame.f_globals.get("__name__", "").startswith("harpx."):
+        frame = frame.f_back
+        level += 1
+    return level

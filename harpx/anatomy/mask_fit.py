@@ -72,7 +72,7 @@ from harpx.anatomy.ventricle_template import (
     _distance,
     fit_ventricle,
 )
-from harpx.errors import HarpxError, HarpxWarning
+from harpx.errors import HarpxError, HarpxWarning, user_stacklevel
 from harpx.io.labels import read_labels
 from harpx.schema import grid_step
 
@@ -144,7 +144,7 @@ def _labels(values: Any, what: str, myocardium: Any, rv: Any) -> tuple[FloatArra
 def _warn(flags: dict[str, str], name: str, message: str, *, warn: bool = True) -> None:
     flags[name] = message
     if warn:
-        warnings.warn(message, VentricleFitWarning, stacklevel=3)
+        warnings.warn(message, VentricleFitWarning, stacklevel=user_stacklevel())
 
 
 def _read_lax(

@@ -50,7 +50,7 @@ from numpy.typing import ArrayLike
 
 from harpx._moved import moved_getattr
 from harpx._typing import FloatArray, IntArray
-from harpx.errors import HarpxError, HarpxWarning
+from harpx.errors import HarpxError, HarpxWarning, user_stacklevel
 from harpx.io.labels import read_labels
 from harpx.mechanics.mesh import MeshSpec, hex_mesh, labelled_spec
 from harpx.mechanics.quality import MeshQuality, scaled_jacobian
@@ -585,7 +585,7 @@ def mesh_from_labels(
                     "on nothing: check the predicate (e.g. the template's base plane against "
                     "the extent of the mask)",
                     HarpxWarning,
-                    stacklevel=2,
+                    stacklevel=user_stacklevel(),
                 )
     cell_fibers = None
     if fibers is not None:

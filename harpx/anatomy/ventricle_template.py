@@ -50,7 +50,7 @@ from scipy.optimize import least_squares
 
 from harpx._typing import FloatArray, IntArray
 from harpx.anatomy.ventricle import VentricleGeometry
-from harpx.errors import HarpxWarning
+from harpx.errors import HarpxWarning, user_stacklevel
 from harpx.mechanics.mesh import MeshSpec, hex_mesh, labelled_spec
 
 __all__ = ["VentricleFit", "VentricleTemplate", "fit_ventricle"]
@@ -227,7 +227,7 @@ class VentricleTemplate:
                 "with the ventricle; resample the images along the long axis or write your "
                 "own conditions",
                 HarpxWarning,
-                stacklevel=2,
+                stacklevel=user_stacklevel(),
             )
         g = self.geometry
         a, c = (float(v) for v in g.semi_axes(0.5))

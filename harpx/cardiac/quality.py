@@ -83,7 +83,6 @@ thickening) is under-reported. The measured biases are in the user guide ("Wall 
 
 from __future__ import annotations
 
-import sys
 import warnings
 from collections.abc import Mapping
 from typing import Any
@@ -93,7 +92,7 @@ import xarray as xr
 from numpy.typing import ArrayLike
 
 from harpx._typing import BoolArray, FloatArray
-from harpx.errors import HarpxError, HarpxWarning, SchemaError
+from harpx.errors import HarpxError, HarpxWarning, SchemaError, user_stacklevel
 
 __all__ = [
     "HEART_SIZE_MM",
@@ -139,16 +138,6 @@ THICKENING_EPSILON_MIN = 0.03
 
 class VentricleShapeError(HarpxError, ValueError):
     """The body is not the wall of the left-ventricle template it is analysed with."""
-
-
-def user_stacklevel() -> int:
-    """``stacklevel`` for :func:`warnings.warn` that names the first caller outside harpx."""
-    frame = sys._getframe(1)
-    level = 1
-    while frame.f_back is not None and frame.f_globals.get("__name__", "").startswith("harpx."):
-        frame = frame.f_back
-        level += 1
-    return level
 
 
 def _extent(template: Any) -> float:

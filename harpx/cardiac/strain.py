@@ -73,10 +73,9 @@ from harpx.cardiac.quality import (
     source_labels,
     strain_seen_fraction,
     template_segment_volume,
-    user_stacklevel,
 )
 from harpx.conventions import ELEMENT_CORNERS
-from harpx.errors import HarpxWarning
+from harpx.errors import HarpxWarning, user_stacklevel
 from harpx.mechanics.cells import VTK_HEX_CORNERS, hex8_shape
 
 __all__ = [

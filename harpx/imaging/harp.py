@@ -18,7 +18,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from harpx.errors import HarpxWarning, SchemaError
+from harpx.errors import HarpxWarning, SchemaError, user_stacklevel
 from harpx.imaging._kernels import refine_linear, refine_positions
 from harpx.imaging.bandpass import harmonic_phase
 from harpx.imaging.fft import default_threads
@@ -89,7 +89,7 @@ def _warn_constant_frames(ds: xr.Dataset) -> None:
             "its phase carries no motion (harmonic magnitude 0) and tracking cannot use it; "
             f"fix those frames or drop them (ds.drop_isel(time={sorted(dropped)[:10]}))",
             HarpxWarning,
-            stacklevel=3,
+            stacklevel=user_stacklevel(),
         )
 
 
@@ -114,7 +114,7 @@ def _checked_tag_frequency(phase: xr.Dataset, lazy: bool, check: bool) -> xr.Var
     measured = measure_tag_frequency(first)
     message = tag_frequency_mismatch(first, measured)
     if message:
-        warnings.warn(message, HarpxWarning, stacklevel=3)
+        warnings.warn(message, HarpxWarning, stacklevel=user_stacklevel())
     return xr.Variable(("tag",), measured, attrs)
 
 

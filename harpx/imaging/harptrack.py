@@ -35,7 +35,7 @@ import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
 from harpx._blas import matmul_one_thread
-from harpx.errors import HarpxWarning, SchemaError
+from harpx.errors import HarpxWarning, SchemaError, user_stacklevel
 from harpx.imaging.sample import PhaseSampler, wrap
 from harpx.imaging.tag_frequency import tag_frequency_flag
 from harpx.schema import AXES, GRID_DIMS, grid_step, newer_schema, standard_attrs, validate
@@ -189,7 +189,7 @@ def track_harp(
             "not tracked and their displacement is NaN in every frame "
             "(out.attrs['points_unseen']); pass points inside the imaged tissue",
             HarpxWarning,
-            stacklevel=2,
+            stacklevel=user_stacklevel(),
         )
     if lost:
         warnings.warn(
@@ -199,7 +199,7 @@ def track_harp(
             "there (out.attrs['points_lost']); acquire a larger field of view or track "
             "points farther from its edges",
             HarpxWarning,
-            stacklevel=2,
+            stacklevel=user_stacklevel(),
         )
     if grid_points:
         assert grid is not None and flat_index is not None

@@ -39,7 +39,7 @@ import xarray as xr
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray
-from harpx.errors import HarpxWarning
+from harpx.errors import HarpxWarning, user_stacklevel
 from harpx.imaging._kernels import wrap
 from harpx.schema import AXES, GRID_DIMS, grid_step
 
@@ -231,6 +231,6 @@ def tag_frequency_flag(phase: xr.Dataset, tracker: str) -> str:
             "tag_frequency (tag_frequency_measured): the band-pass missed the tag peak, so the "
             "motion tracked from it is biased (attrs['tags_off_frequency'])",
             HarpxWarning,
-            stacklevel=3,
+            stacklevel=user_stacklevel(),
         )
     return " ".join(off) or "none"

@@ -44,7 +44,7 @@ import numpy as np
 import xarray as xr
 
 from harpx._typing import FloatArray, PathLike
-from harpx.errors import HarpxError, HarpxWarning
+from harpx.errors import HarpxError, HarpxWarning, user_stacklevel
 from harpx.imaging.stacks import common_grid, resample_stack, tagged_dataset
 from harpx.io.dicom_headers import _discover, _float, _Image, voxel_positions
 from harpx.io.dicom_stacks import (
@@ -389,7 +389,7 @@ def read_tagged(
             f"the resampled image needs {nbytes / 2**30:.1f} GiB ({z.size}x{y.size}x{x.size} "
             f"voxels at {step:g} mm); pass a coarser spacing= to reduce it",
             HarpxWarning,
-            stacklevel=2,
+            stacklevel=user_stacklevel(),
         )
     volumes = dict(zip(by_series, _load_pixels(stacks), strict=True))
     resampled = {

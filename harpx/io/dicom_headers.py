@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from harpx._typing import FloatArray, PathLike
-from harpx.errors import HarpxError, HarpxWarning
+from harpx.errors import HarpxError, HarpxWarning, user_stacklevel
 
 __all__ = ["voxel_positions"]
 
@@ -379,7 +379,9 @@ def _discover(paths_or_folder: PathLike | Sequence[PathLike]) -> list[_Image]:
         )
         if not images:
             raise HarpxError(message)
-        warnings.warn(message + "; those images are skipped", HarpxWarning, stacklevel=3)
+        warnings.warn(
+            message + "; those images are skipped", HarpxWarning, stacklevel=user_stacklevel()
+        )
     if not images:
         where = ", ".join(repr(str(e)) for e in entries)
         raise HarpxError(

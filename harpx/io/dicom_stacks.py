@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from harpx._typing import FloatArray
-from harpx.errors import HarpxError, HarpxWarning
+from harpx.errors import HarpxError, HarpxWarning, user_stacklevel
 from harpx.imaging.stacks import SliceStack
 from harpx.io.dicom_headers import _Image, _pydicom
 
@@ -232,7 +232,7 @@ def _check_gaps(offsets: FloatArray, firsts: list[_Image], label: str) -> None:
             "slice gap): slices seem to be missing; the images are interpolated across the "
             "gap (its mask marks it as having data)",
             HarpxWarning,
-            stacklevel=4,
+            stacklevel=user_stacklevel(),
         )
 
 

@@ -43,7 +43,7 @@ import numpy as np
 import xarray as xr
 
 from harpx._typing import FloatArray, IntArray, PathLike
-from harpx.errors import HarpxWarning, SchemaError
+from harpx.errors import HarpxWarning, SchemaError, user_stacklevel
 from harpx.imaging.harp import slice_geometry
 from harpx.io.netcdf import remove_stale_temporaries, temporary_prefix
 from harpx.schema import validate
@@ -327,7 +327,7 @@ def _slice_images(
             "written slices are their least-squares fit, so the series does not reproduce "
             "the grid images",
             HarpxWarning,
-            stacklevel=4,
+            stacklevel=user_stacklevel(),
         )
     shape = (centres.size, values.shape[0], *values.shape[2:])
     return np.moveaxis(slices.reshape(shape), 0, 1)

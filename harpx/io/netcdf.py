@@ -53,7 +53,7 @@ from typing import Any, Literal
 import xarray as xr
 
 from harpx._typing import PathLike
-from harpx.errors import ArchiveError, HarpxWarning
+from harpx.errors import ArchiveError, HarpxWarning, user_stacklevel
 from harpx.io.files import (
     _available_memory,
     _check_path,
@@ -291,7 +291,7 @@ def open_dataset(
             f"archive {str(path)!r}: {newer}. Until then its variables may be misread, and "
             "validate() and the trackers refuse it",
             HarpxWarning,
-            stacklevel=2,
+            stacklevel=user_stacklevel(),
         )
     return ds
 

@@ -21,7 +21,7 @@ import skfem
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
-from harpx.errors import CoincidentNodesWarning
+from harpx.errors import CoincidentNodesWarning, user_stacklevel
 from harpx.mechanics import kinematics
 from harpx.mechanics.cells import (
     _HEX20_MESHES,
@@ -167,7 +167,7 @@ def check_vertices(mesh: Any) -> FloatArray:
             "cells on either side are not connected and move independently; if that is "
             "not a deliberate cut, merge them (mesh = mesh.remove_duplicate_nodes())",
             CoincidentNodesWarning,
-            stacklevel=3,
+            stacklevel=user_stacklevel(),
         )
     _check_cells(mesh)
     check_unused_nodes(vertices.shape[1], np.asarray(mesh.t).T)

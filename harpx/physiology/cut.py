@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
-from harpx.errors import CoincidentNodesWarning, HarpxWarning
+from harpx.errors import CoincidentNodesWarning, HarpxWarning, user_stacklevel
 from harpx.mechanics.body import Body
 from harpx.mechanics.mesh import hex_mesh
 from harpx.physiology.growth import release, set_growth
@@ -306,7 +306,7 @@ def opening_angle(
             f"apart along z (the ring is {height:.1f} mm high), so the in-plane opening "
             f"angle {opening:.1f}° does not describe it; the faces' gap is {gap:.1f} mm",
             HarpxWarning,
-            stacklevel=2,
+            stacklevel=user_stacklevel(),
         )
     info = {"slab": tuple(slab), "cells": int(keep.size), "faces_apart_z": apart,
             "support": (int(A), int(B), int(C))}  # fmt: skip

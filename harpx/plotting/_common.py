@@ -10,8 +10,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import xarray as xr
 
-from harpx.cardiac.quality import user_stacklevel
-from harpx.errors import HarpxWarning, SchemaError
+from harpx.errors import HarpxWarning, SchemaError, user_stacklevel
 from harpx.schema import KINDS
 
 # unit of each coordinate a slice is chosen along

@@ -26,9 +26,9 @@ import numpy as np
 import xarray as xr
 from matplotlib.collections import PolyCollection
 
-from harpx.cardiac.quality import source_labels, user_stacklevel
+from harpx.cardiac.quality import source_labels
 from harpx.conventions import ELEMENT_CORNERS
-from harpx.errors import HarpxWarning, SchemaError
+from harpx.errors import HarpxWarning, SchemaError, user_stacklevel
 from harpx.plotting._common import _axes, _map_doc, _nearest, _number, _require
 
 __all__ = ["CARDIAC_COMPONENTS", "CARTESIAN_COMPONENTS", "strain_map", "strain_on_slice"]

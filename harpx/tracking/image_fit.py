@@ -17,7 +17,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike
 
-from harpx.errors import HarpxWarning, SchemaError
+from harpx.errors import HarpxWarning, SchemaError, user_stacklevel
 from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.mechanics.body import Body
 from harpx.mechanics.cells import _VTK_TET_EDGES
@@ -265,6 +265,6 @@ def check_coverage(
             "imaged part next to it (cells there have observed_directions 0). Crop the mesh "
             "to the imaged region, or image (or resample onto) a larger field of view",
             HarpxWarning,
-            stacklevel=3,
+            stacklevel=user_stacklevel(),
         )
     return outside

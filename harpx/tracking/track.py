@@ -23,7 +23,7 @@ import xarray as xr
 
 from harpx._progress import progress_bar
 from harpx._typing import BoolArray
-from harpx.errors import ElementInversionError, HarpxWarning, SchemaError
+from harpx.errors import ElementInversionError, HarpxWarning, SchemaError, user_stacklevel
 from harpx.imaging.coverage import explain_missing_data, phase_direction_mismatch
 from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.imaging.tag_frequency import tag_frequency_flag
@@ -153,7 +153,7 @@ def _warn_unseen(constraint: PhaseConstraint) -> None:
         "cell's tags see. To measure it, add tags along it (e.g. long-axis slices with a "
         "through-plane tag); to set it, hold the body there with a Dirichlet condition.",
         HarpxWarning,
-        stacklevel=3,
+        stacklevel=user_stacklevel(),
     )
 
 
@@ -166,7 +166,7 @@ def _warn_wall_smoothing(across: float | None) -> None:
             "a user-given epsilon without blur_passes, or phase images not from the disk "
             "band-pass)",
             HarpxWarning,
-            stacklevel=4,
+            stacklevel=user_stacklevel(),
         )
     elif across < MIN_CELLS_ACROSS:
         warnings.warn(
@@ -175,7 +175,7 @@ def _warn_wall_smoothing(across: float | None) -> None:
             "blur correction may under-report radial strain; a finer mesh across the wall, "
             "or wall_smoothing=None (attrs['wall_cells_across'] keeps the count)",
             HarpxWarning,
-            stacklevel=4,
+            stacklevel=user_stacklevel(),
         )
 
 
@@ -196,7 +196,7 @@ def _warn_frames(phase: xr.Dataset, reached: np.ndarray, converged: np.ndarray,
             "tag jumped); 'target_reached' marks them. Pass a larger epsilon=, or a larger "
             "penalty_limit= if the penalty reached its limit.",
             HarpxWarning,
-            stacklevel=3,
+            stacklevel=user_stacklevel(),
         )
     stopped = [n for n in range(1, len(converged)) if not converged[n]]
     if stopped:
@@ -205,7 +205,7 @@ def _warn_frames(phase: xr.Dataset, reached: np.ndarray, converged: np.ndarray,
             f"{stopped[:10]}{' …' if len(stopped) > 10 else ''} ('converged' marks them); "
             "raise max_iterations= or tolerance=, or track with more frames",
             HarpxWarning,
-            stacklevel=3,
+            stacklevel=user_stacklevel(),
         )
 
 

@@ -40,7 +40,7 @@ import numpy as np
 import xarray as xr
 
 from harpx._typing import FloatArray
-from harpx.errors import HarpxError, HarpxWarning
+from harpx.errors import HarpxError, HarpxWarning, user_stacklevel
 from harpx.imaging.harp import extract_phase
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.schema import validate
@@ -172,7 +172,7 @@ def tracking_uncertainty(
 
     def flag(message: str) -> None:
         flags.append(message)
-        warnings.warn(message, HarpxWarning, stacklevel=3)
+        warnings.warn(message, HarpxWarning, stacklevel=user_stacklevel())
 
     problem = rebuild(tracked, body, images, dirichlet, terms)
     noise = image_noise(images, tagged)
