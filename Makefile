@@ -22,10 +22,10 @@ $(DOCS_STAMP): $(STAMP)
 demo: $(STAMP)
 	$(BIN)/harpx demo --output harpx-demo
 
-# one worker per core, idle workers taking queued tests from busy ones (pytest-xdist); each
-# worker builds the shared scene fixtures it needs once. `pytest -n 0` runs in one process.
+# one worker per core, at most 4 (each builds the shared scene fixtures it needs), idle
+# workers taking queued tests from busy ones (pytest-xdist). `pytest -n 0`: one process.
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n auto --dist worksteal
+	$(BIN)/python -m pytest -q -n auto --maxprocesses 4 --dist worksteal
 
 # the tutorials are rendered, not run (the tests run them); the build takes ~10 s of CPU
 docs: $(DOCS_STAMP)
