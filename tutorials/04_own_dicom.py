@@ -175,14 +175,14 @@ dirichlet = template.base_conditions()
 # ## 5. Track and read the strain
 # CSPAMM has no DC peak, so a band-pass radius of 0.7 times the tag frequency is safe. The
 # tag period typed above is checked against the images: `tag_frequency_measured` is the
-# frequency each tag's phase advances at in the first frame, and `phase()` warns when it
-# misses the stated one by more than 3 % (a wrong period biases the phase while tracking
-# still meets its target).
+# frequency of each tag's peak in the first frame, and `phase()` warns when it misses the
+# stated one by more than 2 % (a wrong period biases the phase while tracking still meets
+# its target).
 
 # %%
 phase = tagged.harp.phase(upsample=1, radius=0.7)
 seen_period = (1 / phase.tag_frequency_measured).round(2)
-print("tag period seen in the phase (mm):", seen_period.to_series().to_dict())
+print("tag period seen in the images (mm):", seen_period.to_series().to_dict())
 start = time.perf_counter()
 tracked = phase.harp.track(body, epsilon=0.2, dirichlet=dirichlet)
 print(f"tracked {body.ncell} cells in {time.perf_counter() - start:.0f} s")

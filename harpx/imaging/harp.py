@@ -93,26 +93,30 @@ def _warn_constant_frames(ds: xr.Dataset) -> None:
         )
 
 
-def _checked_tag_frequency(phase: xr.Dataset, lazy: bool, check: bool) -> xr.Variable:
-    """``tag_frequency_measured`` (tag) of a new phase; warns if it misses the stated one.
+def _checked_tag_frequency(
+    ds: xr.Dataset, phase: xr.Dataset, lazy: bool, check: bool
+) -> xr.Variable:
+    """``tag_frequency_measured`` (tag) from the first frame of the images ``ds``; warns if
+    it misses the stated frequency (checked on the new ``phase``, whose tag coords are
+    ``ds``'s).
 
-    From the first frame only; NaN throughout without ``check``. For dask-backed phase it
-    stays lazy and nothing is checked here (:func:`harpx.tracking.track.track` checks it
-    when it reads the phase).
+    NaN throughout without ``check``. For dask-backed images it stays lazy and nothing is
+    checked here (the trackers check it when they read the phase).
     """
-    first = phase.isel(time=[0])
+    others = [n for n in ds.data_vars if n not in ("image", "mask")]  # e.g. the truth
+    first = ds.drop_vars(others).isel(time=[0])
     attrs = standard_attrs("tag_frequency_measured")
     if not check:
-        return xr.Variable(("tag",), np.full(phase.sizes["tag"], np.nan), attrs)
+        return xr.Variable(("tag",), np.full(ds.sizes["tag"], np.nan), attrs)
     if lazy:
         import dask
         import dask.array
 
         later = dask.delayed(measure_tag_frequency)(first)
-        shape = (phase.sizes["tag"],)
+        shape = (ds.sizes["tag"],)
         return xr.Variable(("tag",), dask.array.from_delayed(later, shape, float), attrs)
     measured = measure_tag_frequency(first)
-    message = tag_frequency_mismatch(first, measured)
+    message = tag_frequency_mismatch(phase, measured)
     if message:
         warnings.warn(message, HarpxWarning, stacklevel=user_stacklevel())
     return xr.Variable(("tag",), measured, attrs)
@@ -398,8 +402,9 @@ def extract_phase(
         frame, more than ``phase`` and ``magnitude`` together); ``harmonic_noise`` (tag), the
         noise standard deviation of each harmonic image (:mod:`harpx.imaging.noise`);
         ``tag_frequency_measured`` (tag), cycles/mm, the tag frequency the first frame's
-        phase shows in each tag's plane (:mod:`harpx.imaging.tag_frequency`; NaN where it
-        cannot be measured; lazy for dask-backed data);
+        images show in each tag's plane (their spectral peak,
+        :mod:`harpx.imaging.tag_frequency`; NaN where it cannot be measured; lazy for
+        dask-backed data);
         ``slice_thickness`` (tag) and ``slice_position`` (tag, slice) when
         :func:`slice_geometry` finds them. Attributes: ``harpx_schema="phase/1"``,
         ``sequence``, ``upsample``, ``radius``, ``bandpass="disk"``
@@ -420,9 +425,9 @@ def extract_phase(
         no tag pattern, so no phase); names the frames and the value. Only images held in
         memory are checked. Also if a tag's measured frequency (``tag_frequency_measured``)
         differs from its stated ``tag_frequency`` by more than
-        :data:`~harpx.imaging.tag_frequency.FREQUENCY_TOLERANCE`: the band-pass did not
-        isolate the tag peak (a wrong tag period, or a SPAMM DC peak inside the radius).
-        Dask-backed data are checked by the tracker instead, which computes them.
+        :data:`~harpx.imaging.tag_frequency.FREQUENCY_TOLERANCE`: the band-pass is centred
+        off the images' tag peak (a wrong tag period). Dask-backed data are checked by the
+        trackers instead, which compute them.
 
     Notes
     -----
@@ -531,9 +536,8 @@ def _extract_phase(
             var = _refine_linear(source.astype(np.float64), factors, nthreads)
             var.attrs = {**standard_attrs(name), **ds[name].attrs}
             data_vars[name] = var
-    seen = {n: data_vars[n] for n in ("phase", "magnitude", "mask") if n in data_vars}
     data_vars["tag_frequency_measured"] = _checked_tag_frequency(
-        xr.Dataset(seen, coords=coords), lazy, check_tag_frequency
+        ds, xr.Dataset(coords=coords), lazy, check_tag_frequency
     )
     attrs = {k: v for k, v in ds.attrs.items() if k != "harpx_schema"}
     attrs.update(

@@ -7,27 +7,22 @@ it) moves the disk off the tag peak, so the phase is filtered differently from w
 tracker's blur correction models. Tracking still meets its residual, so the result looks
 plausible; benchmarks/tag_period_error.py measures what it costs.
 
-The phase of an undeformed tag pattern advances by :math:`2\pi f\,d\cdot\Delta X` (paper
-eq. 1), whatever filter extracted it. :func:`measure_tag_frequency` reads that rate off one
-frame: per in-plane axis of the tag (the axes other than its ``slice_axis``), the median of
-the wrapped phase step between neighbouring voxels where the harmonic magnitude is in its
-upper quarter (the tissue), over the axis's step; the frequency is the norm of those
-components over :math:`2\pi`. The wrapped step is the true step while :math:`2\pi f s < \pi`,
-which holds on any grid that resolves the tags (the images' own sampling limit); the median
-ignores the noise and the few steps across a tag jump or the tissue's edge.
+:func:`measure_tag_frequency` finds the tag peak in the images themselves, independently
+of any filter: per tag, the first frame's slices in the tag's acquisition plane (those
+inside its ``mask``), each less its mean and under a separable Hann window, are Fourier
+transformed on a grid padded to :data:`PAD` times the field of view; the power spectra are
+summed over the slices, and the largest peak within :data:`SEARCH` × :math:`f` of the stated
+in-plane vector is located to a fraction of a bin by a parabola through the log-power of
+its neighbours along each axis. The window keeps a field of view that holds a non-integer
+number of tag periods (tissue up to its edges) from smearing the peak; the phase itself is
+bent there, so its steps would not do. The frequency is the peak's distance from the
+origin: the tag frequency in the tag's plane (paper eq. 1, the undeformed pattern
+:math:`\cos(2\pi f\,d\cdot X)` of the first frame).
 
-The same check catches a band-pass that does not isolate the tag peak for another reason:
-a ``radius`` that takes in the DC peak of SPAMM images, whose phase then follows the
-tissue's edges rather than the tags.
-
-Band-passed noise advances at the filter's centre, the stated frequency: the measurement
-follows the images' tags where they stand above the noise, and images of noise alone read
-as the stated frequency (this check does not tell them apart; ``extract_phase`` reports
-blank frames itself).
-
-Along an axis whose field of view holds fewer than :data:`MIN_PERIODS` tag periods, the
-band-pass's periodic extension and the tissue's edges bend the phase, so a tag that varies
-along such an axis is not measured (NaN).
+Along an axis whose field of view holds fewer than :data:`MIN_PERIODS` tag periods the peak
+sits within a few bins of the origin, so a tag that varies along such an axis is not
+measured (NaN); nor is one whose largest value in the search disk lies on its rim (no peak
+there: no tag pattern near the stated frequency).
 """
 
 from __future__ import annotations
@@ -40,13 +35,14 @@ from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray
 from harpx.errors import HarpxWarning, user_stacklevel
-from harpx.imaging._kernels import wrap
+from harpx.imaging.fft import fft2
 from harpx.schema import AXES, GRID_DIMS, grid_step
 
 __all__ = [
     "FREQUENCY_TOLERANCE",
-    "MIN_PAIRS",
     "MIN_PERIODS",
+    "PAD",
+    "SEARCH",
     "measure_tag_frequency",
     "tag_frequency_flag",
     "tag_frequency_mismatch",
@@ -55,14 +51,15 @@ __all__ = [
 
 #: Relative difference between the measured and the stated tag frequency above which
 #: :func:`tag_frequency_mismatch` reports it
-FREQUENCY_TOLERANCE = 0.03
+FREQUENCY_TOLERANCE = 0.02
 #: Tag periods the field of view must hold along an axis that carries the tag's wave
 #: (direction component >= 0.1) for the frequency to be measured
 MIN_PERIODS = 4.0
-#: Pairs of neighbouring tissue voxels needed along each in-plane axis
-MIN_PAIRS = 50
-#: Percentile of the harmonic magnitude above which a voxel counts as tissue
-TISSUE_PERCENTILE = 75.0
+#: Zero padding of each slice before its Fourier transform (finer spectral sampling)
+PAD = 2
+#: Radius of the disk around the stated frequency vector searched for the tag peak, as a
+#: fraction of the stated frequency (it excludes the origin and a grid's other tag)
+SEARCH = 0.6
 
 
 def _in_plane_frequency(phase: xr.Dataset, tag: int) -> float:
@@ -73,72 +70,92 @@ def _in_plane_frequency(phase: xr.Dataset, tag: int) -> float:
     return frequency * float(np.linalg.norm(np.delete(direction, slice_axis)))
 
 
-def _measure_one(phase: xr.Dataset, tag: int, time_index: int) -> float:
-    """Measured in-plane tag frequency of one tag and frame (cycles/mm), NaN if unmeasurable."""
-    frame = phase.isel(tag=tag, time=time_index)
-    values = np.asarray(frame["phase"].transpose(*GRID_DIMS).values, dtype=np.float64)
-    magnitude = np.asarray(frame["magnitude"].transpose(*GRID_DIMS).values, dtype=np.float64)
-    tissue = np.isfinite(values) & np.isfinite(magnitude) & (magnitude > 0)
-    if "mask" in phase.variables:
-        tissue &= np.asarray(phase["mask"].isel(tag=tag).transpose(*GRID_DIMS).values, bool)
-    if not tissue.any():
+def _plane(tagged: xr.Dataset, tag: int, time_index: int) -> tuple[np.ndarray, list[str]]:
+    """The first frame's slices of one tag inside its mask, (slice, a, b), and axes a, b."""
+    slice_axis = str(np.asarray(tagged["slice_axis"].values).ravel()[tag])
+    plane = [d for d in GRID_DIMS if d != slice_axis]
+    image = tagged["image"].isel(tag=tag, time=time_index).transpose(slice_axis, *plane)
+    values = np.asarray(image.values, dtype=np.float64)
+    if "mask" in tagged.variables:
+        mask = tagged["mask"].isel(tag=tag).transpose(slice_axis, *plane).values
+        values = values[np.asarray(mask, bool).any(axis=(1, 2))]
+    return values[np.isfinite(values).all(axis=(1, 2))], plane
+
+
+def _parabola(log_power: np.ndarray) -> float:
+    """Sub-bin offset of the middle of three log-power values from their parabola's vertex."""
+    left, mid, right = log_power
+    curvature = left - 2.0 * mid + right
+    return 0.0 if curvature >= 0 else float(0.5 * (left - right) / curvature)
+
+
+def _measure_one(tagged: xr.Dataset, tag: int, time_index: int) -> float:
+    """Tag frequency of one tag in its plane from the images' spectral peak (cycles/mm)."""
+    values, plane = _plane(tagged, tag, time_index)
+    direction = np.asarray(tagged["tag_direction"].isel(tag=tag).values, dtype=np.float64)
+    frequency = float(np.asarray(tagged["tag_frequency"].values).ravel()[tag])
+    steps = [grid_step(tagged, d) for d in plane]
+    stated = np.array([frequency * direction[AXES.index(d)] for d in plane])
+    for n, step, component in zip(values.shape[1:], steps, stated, strict=True):
+        if abs(component) >= 0.1 * frequency and (
+            step is None or n * abs(step) * abs(component) < MIN_PERIODS
+        ):
+            return np.nan  # the wave runs along an axis too short to resolve its peak
+    if values.shape[0] == 0:
         return np.nan
-    tissue &= magnitude >= np.percentile(magnitude[tissue], TISSUE_PERCENTILE)
-    direction = np.asarray(phase["tag_direction"].isel(tag=tag).values, dtype=np.float64)
-    frequency = float(np.asarray(phase["tag_frequency"].values).ravel()[tag])
-    slice_axis = str(np.asarray(phase["slice_axis"].values).ravel()[tag])
-    wave = np.zeros(3)
-    for g, dim in enumerate(GRID_DIMS):
-        if dim == slice_axis:
-            continue
-        step = grid_step(phase, dim)
-        component = abs(direction[AXES.index(dim)])
-        if step is None:
-            if component >= 0.1:
-                return np.nan  # the wave runs along an axis with one plane
-            continue
-        if component >= 0.1 and values.shape[g] * step * frequency * component < MIN_PERIODS:
-            return np.nan
-        n = values.shape[g]
-        both = np.take(tissue, range(n - 1), axis=g) & np.take(tissue, range(1, n), axis=g)
-        if np.count_nonzero(both) < MIN_PAIRS:
-            return np.nan
-        wave[AXES.index(dim)] = float(np.median(wrap(np.diff(values, axis=g))[both])) / step
-    return float(np.linalg.norm(wave)) / (2.0 * np.pi)
+    values = values - values.mean(axis=(1, 2), keepdims=True)
+    values *= np.hanning(values.shape[1])[:, None] * np.hanning(values.shape[2])[None, :]
+    shape = [PAD * n for n in values.shape[1:]]
+    padded = np.zeros((values.shape[0], *shape))
+    padded[:, : values.shape[1], : values.shape[2]] = values
+    power = (np.abs(fft2(padded)) ** 2).sum(axis=0)
+    spacing = [abs(step) if step else 1.0 for step in steps]
+    axes = [np.fft.fftfreq(m, d) for m, d in zip(shape, spacing, strict=True)]
+    ka, kb = np.meshgrid(*axes, indexing="ij")
+    inside = np.hypot(ka - stated[0], kb - stated[1]) <= SEARCH * np.hypot(*stated)
+    a, b = np.unravel_index(np.argmax(np.where(inside, power, -np.inf)), power.shape)
+    rows = [(a - 1) % shape[0], a, (a + 1) % shape[0]]
+    cols = [(b - 1) % shape[1], b, (b + 1) % shape[1]]
+    if not (inside[rows, b].all() and inside[a, cols].all()):
+        return np.nan  # the largest value in the disk sits on its rim: no peak inside
+    log_power = np.log(np.maximum(power, np.finfo(float).tiny))
+    found = [
+        axes[0][a] + _parabola(log_power[rows, b]) / (shape[0] * spacing[0]),
+        axes[1][b] + _parabola(log_power[a, cols]) / (shape[1] * spacing[1]),
+    ]
+    return float(np.hypot(*found))
 
 
-def measure_tag_frequency(phase: xr.Dataset, time_index: int = 0) -> FloatArray:
-    """Tag frequency of each tag as its harmonic phase shows it in one frame.
+def measure_tag_frequency(tagged: xr.Dataset, time_index: int = 0) -> FloatArray:
+    """Tag frequency of each tag as its images show it in one frame.
 
     Parameters
     ----------
-    phase : xarray.Dataset
-        ``phase/1`` dataset held in memory (a dask-backed one is computed frame by frame).
+    tagged : xarray.Dataset
+        ``tagged/1`` dataset (``image``, ``mask`` if any, and the tag coordinates).
     time_index : int, default 0
         The frame to read; the first (the tagging's reference) shows the undeformed pattern.
 
     Returns
     -------
     numpy.ndarray, shape (tag,)
-        In cycles/mm, in each tag's acquisition plane (the component along its
-        ``slice_axis`` is not seen by in-plane phase steps; compare with the stated
-        frequency projected on the plane, as :func:`tag_frequency_mismatch` does). NaN
-        where it cannot be measured: no tissue signal, fewer than :data:`MIN_PAIRS` pairs
-        of tissue voxels along an in-plane axis, or fewer than :data:`MIN_PERIODS` tag
-        periods in the field of view along an axis the wave runs along.
+        In cycles/mm, in each tag's acquisition plane (compare with the stated frequency
+        projected on the plane, as :func:`tags_off_frequency` does). NaN where it cannot be
+        measured: no slice inside the mask, fewer than :data:`MIN_PERIODS` tag periods in
+        the field of view along an axis the wave runs along, or no peak inside the searched
+        disk.
 
     Examples
     --------
     >>> from harpx.imaging.synth import synthesize_tagged
-    >>> from harpx.imaging.harp import extract_phase
     >>> tagged = synthesize_tagged(
     ...     lambda X, t: 0 * X, shape=(2, 32, 32), spacing=(2.0, 1.5, 1.5), times=[0.0],
     ...     tags=("x",), tag_period=6.0, snr=None, oversample=1)
-    >>> bool(abs(measure_tag_frequency(extract_phase(tagged))[0] * 6.0 - 1) < 0.01)
+    >>> bool(abs(measure_tag_frequency(tagged)[0] * 6.0 - 1) < 0.01)
     True
     """
     return np.array(
-        [_measure_one(phase, t, time_index) for t in range(phase.sizes["tag"])], dtype=float
+        [_measure_one(tagged, t, time_index) for t in range(tagged.sizes["tag"])], dtype=float
     )
 
 
@@ -181,24 +198,23 @@ def tags_off_frequency(phase: xr.Dataset, measured: ArrayLike | None = None) -> 
 def tag_frequency_mismatch(phase: xr.Dataset, measured: ArrayLike | None = None) -> str:
     """The warning for the tags of :func:`tags_off_frequency` (same arguments), or "".
 
-    It quotes, per tag, the frequency and period the phase shows and the stated ones, and
-    says what to check: the tag period given for scanner files, and for SPAMM images a
-    band-pass radius that keeps the DC peak out.
+    It quotes, per tag, the frequency and period the images show and the stated ones, and
+    says what to check: the tag period given for scanner files.
     """
     off = _off_frequency(phase, measured)
     if not off:
         return ""
     found = [
-        f"tag {tag!r} advances its phase at {seen:.4g} cycles/mm (a {1 / seen:.3g} mm tag "
-        f"period) but its tag_frequency says {stated:.4g} cycles/mm ({1 / stated:.3g} mm)"
+        f"tag {tag!r} shows its tags at {seen:.4g} cycles/mm (a {1 / seen:.3g} mm period) in "
+        f"the first frame, but its tag_frequency says {stated:.4g} cycles/mm "
+        f"({1 / stated:.3g} mm)"
         for tag, seen, stated in off
     ]
     return (
-        f"{'; '.join(found)}, at the first frame. The band-pass did not isolate the tag "
-        "peak: it was centred on the stated frequency, and the blur correction of tracking "
-        "models that filter too. Check the tag period (read_tagged(..., tag_period=...), the "
-        "dataset's tag_frequency) and, for SPAMM images, that the band-pass radius keeps "
-        "the DC peak out (radius 0.5), then extract the phase again"
+        f"{'; '.join(found)}. The band-pass is centred on the stated frequency, off the "
+        "images' tag peak, and the blur correction of tracking models that filter too. Check "
+        "the tag period (read_tagged(..., tag_period=...), the dataset's tag_frequency) and "
+        "extract the phase again"
     )
 
 
@@ -227,9 +243,9 @@ def tag_frequency_flag(phase: xr.Dataset, tracker: str) -> str:
     off = tags_off_frequency(phase)
     if off:
         warnings.warn(
-            f"{tracker} from harmonic phase whose tag(s) {off} do not advance at their "
-            "tag_frequency (tag_frequency_measured): the band-pass missed the tag peak, so the "
-            "motion tracked from it is biased (attrs['tags_off_frequency'])",
+            f"{tracker} from harmonic phase whose tag(s) {off} have images whose tags miss "
+            "their tag_frequency (tag_frequency_measured): the band-pass was centred off the tag "
+            "peak, so the motion tracked from it is biased (attrs['tags_off_frequency'])",
             HarpxWarning,
             stacklevel=user_stacklevel(),
         )
