@@ -71,7 +71,7 @@ def _in_plane_frequency(phase: xr.Dataset, tag: int) -> float:
 
 
 def _plane(tagged: xr.Dataset, tag: int, time_index: int) -> tuple[np.ndarray, list[str]]:
-    """The first frame's slices of one tag inside its mask, (slice, a, b), and axes a, b."""
+    """One frame's slices of one tag inside its mask, (slice, a, b), and the axes a, b."""
     slice_axis = str(np.asarray(tagged["slice_axis"].values).ravel()[tag])
     plane = [d for d in GRID_DIMS if d != slice_axis]
     image = tagged["image"].isel(tag=tag, time=time_index).transpose(slice_axis, *plane)
