@@ -93,12 +93,9 @@ def _warn_constant_frames(ds: xr.Dataset) -> None:
         )
 
 
-def _checked_tag_frequency(
-    ds: xr.Dataset, phase: xr.Dataset, lazy: bool, check: bool
-) -> xr.Variable:
+def _checked_tag_frequency(ds: xr.Dataset, lazy: bool, check: bool) -> xr.Variable:
     """``tag_frequency_measured`` (tag) from the first frame of the images ``ds``; warns if
-    it misses the stated frequency (checked on the new ``phase``, whose tag coords are
-    ``ds``'s).
+    it misses the stated frequency.
 
     NaN throughout without ``check``. For dask-backed images it stays lazy and nothing is
     checked here (the trackers check it when they read the phase).
@@ -116,7 +113,7 @@ def _checked_tag_frequency(
         shape = (ds.sizes["tag"],)
         return xr.Variable(("tag",), dask.array.from_delayed(later, shape, float), attrs)
     measured = measure_tag_frequency(first)
-    message = tag_frequency_mismatch(phase, measured)
+    message = tag_frequency_mismatch(ds, measured)
     if message:
         warnings.warn(message, HarpxWarning, stacklevel=user_stacklevel())
     return xr.Variable(("tag",), measured, attrs)
@@ -536,9 +533,7 @@ def _extract_phase(
             var = _refine_linear(source.astype(np.float64), factors, nthreads)
             var.attrs = {**standard_attrs(name), **ds[name].attrs}
             data_vars[name] = var
-    data_vars["tag_frequency_measured"] = _checked_tag_frequency(
-        ds, xr.Dataset(coords=coords), lazy, check_tag_frequency
-    )
+    data_vars["tag_frequency_measured"] = _checked_tag_frequency(ds, lazy, check_tag_frequency)
     attrs = {k: v for k, v in ds.attrs.items() if k != "harpx_schema"}
     attrs.update(
         harpx_schema="phase/1",

@@ -181,7 +181,8 @@ def tags_off_frequency(phase: xr.Dataset, measured: ArrayLike | None = None) -> 
     Parameters
     ----------
     phase : xarray.Dataset
-        ``phase/1`` dataset with the stated ``tag_frequency`` (tag), cycles/mm.
+        ``phase/1`` (or ``tagged/1``) dataset with the stated ``tag_frequency`` (tag),
+        cycles/mm, and the tag coordinates.
     measured : array_like, shape (tag,), optional
         :func:`measure_tag_frequency` of it; default its ``tag_frequency_measured`` (none
         there: no tag is reported). NaN entries are skipped.
