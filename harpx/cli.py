@@ -148,9 +148,24 @@ def _phase(args: argparse.Namespace) -> int:
 
     _refuse_overwriting_input(args.output, [args.input])
     ds = open_dataset(args.input)
-    to_netcdf(extract_phase(ds, upsample=args.upsample, radius=args.radius), args.output)
+    phase = extract_phase(ds, upsample=args.upsample, radius=args.radius)
+    to_netcdf(phase, args.output)
     print(f"wrote {args.output}")
+    print(_tag_periods(phase))
     return 0
+
+
+def _tag_periods(phase: Any) -> str:
+    """One line: per tag, the tag period the images show against the stated one (mm)."""
+    import numpy as np
+
+    seen = np.asarray(phase["tag_frequency_measured"].values, dtype=float)
+    stated = np.asarray(phase["tag_frequency"].values, dtype=float)
+    parts = [
+        f"{tag} {1 / s:.2f} / {1 / f:.2f}" if np.isfinite(s) and s > 0 else f"{tag} - / {1 / f:.2f}"
+        for tag, s, f in zip(np.asarray(phase["tag"].values), seen, stated, strict=True)
+    ]
+    return "tag period seen in the images / stated (mm; - not measured): " + ", ".join(parts)
 
 
 def _track(args: argparse.Namespace) -> int:

@@ -301,3 +301,20 @@ def test_docs_name_every_subcommand_and_the_demo_default():
         assert f"`harpx {name}" in docs, f"docs/cli.md does not describe `harpx {name}`"
     size = sub.choices["demo"].get_default("size")
     assert f"default `{size}`" in docs  # the size the demo runs without --size
+
+
+def test_phase_says_the_tag_period_the_images_show(tmp_path, capsys):
+    from harpx.imaging.synth import synthesize_tagged
+    from harpx.io.netcdf import to_netcdf
+
+    tagged = synthesize_tagged(
+        lambda X, t: 0 * X, shape=(2, 48, 48), spacing=(3.0, 1.5, 1.5), times=[0.0],
+        tags=("x", "z"), tag_period=6.0, snr=None, oversample=1,
+    )  # fmt: skip
+    source = to_netcdf(tagged, tmp_path / "tagged.nc")
+    assert main(["phase", str(source), str(tmp_path / "phase.nc")]) == 0
+    # x: 12 periods across 72 mm, measured; z: 6 mm of slab, 1 period, not measured
+    line = capsys.readouterr().out.splitlines()[-1]
+    assert line == (
+        "tag period seen in the images / stated (mm; - not measured): x 6.00 / 6.00, z - / 6.00"
+    )
