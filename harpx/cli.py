@@ -151,14 +151,19 @@ def _phase(args: argparse.Namespace) -> int:
     phase = extract_phase(ds, upsample=args.upsample, radius=args.radius)
     to_netcdf(phase, args.output)
     print(f"wrote {args.output}")
-    print(_tag_periods(phase))
+    periods = _tag_periods(phase)
+    if periods:
+        print(periods)
     return 0
 
 
 def _tag_periods(phase: Any) -> str:
-    """One line: per tag, the tag period the images show against the stated one (mm)."""
+    """One line: per tag, the tag period the images show against the stated one (mm); ""
+    for a phase without ``tag_frequency_measured``."""
     import numpy as np
 
+    if "tag_frequency_measured" not in phase.variables:
+        return ""
     seen = np.asarray(phase["tag_frequency_measured"].values, dtype=float)
     stated = np.asarray(phase["tag_frequency"].values, dtype=float)
     parts = [
