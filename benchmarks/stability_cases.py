@@ -149,6 +149,19 @@ def run_harp(tagged: Any, phase: Any) -> tuple[Row, Any]:
     return row, (out, err)
 
 
+def fe_and_harp(
+    scene: Any, phase: Any, group: str, case: str, parameter: str, value: Any, **extra: Any
+) -> list[Row]:
+    """One row for FE tracking and one for conventional HARP of the same scene and phase."""
+    return [
+        _row(group, case, parameter, value, **summary, **extra)
+        for summary, _ in (
+            run_fe(scene.tagged, phase, scene.body()),
+            run_harp(scene.tagged, phase),
+        )
+    ]
+
+
 def image_phase_error(phase: Any, motion: Any, points: np.ndarray) -> np.ndarray:
     """Image quality: mean |W(φ(x, t) − 2π f d·X(x, t))| per frame at body points x, rad.
 
@@ -429,22 +442,10 @@ def noise_cases() -> Iterable[Case]:
             phase = extract_phase(scene.tagged)
             g = GEOMETRIES["small"]
             quality = image_phase_error(phase, scene.motion, _body_points(g.radius, g.height))
-            rows = []
-            for summary, _ in (
-                run_fe(scene.tagged, phase, scene.body()),
-                run_harp(scene.tagged, phase),
-            ):
-                rows.append(
-                    _row(
-                        group,
-                        "phantom",
-                        parameter,
-                        value,
-                        **summary,
-                        phase_error=float(np.nanmean(quality[1:])),
-                    )
-                )
-            return rows
+            return fe_and_harp(
+                scene, phase, group, "phantom", parameter, value,
+                phase_error=float(np.nanmean(quality[1:])),
+            )  # fmt: skip
 
         yield group, f"{parameter}={value:g}", run
 
@@ -509,21 +510,10 @@ def inversion_cases() -> Iterable[Case]:
             motion = Stretch(times=tuple(times), stretches=tuple(np.linspace(1.0, stretch, 4)))
             scene = cylinder_scene(motion, times=times, kappa=1.0)  # compressible model
             phase = extract_phase(scene.tagged)
-            rows = []
-            for summary, _ in (
-                run_fe(scene.tagged, phase, scene.body()),
-                run_harp(scene.tagged, phase),
-            ):
-                rows.append(
-                    _row(
-                        "inversion",
-                        "images of uniaxial compression (J = stretch)",
-                        "final stretch",
-                        stretch,
-                        **summary,
-                    )
-                )
-            return rows
+            return fe_and_harp(
+                scene, phase, "inversion", "images of uniaxial compression (J = stretch)",
+                "final stretch", stretch,
+            )  # fmt: skip
 
         yield "inversion", f"compression {stretch:g}", run_stretch
 
