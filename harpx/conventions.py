@@ -17,8 +17,8 @@ Three kinds of :class:`xarray.Dataset` flow through harpx. Each carries its kind
     optional ``harmonic_noise`` (tag): the noise standard deviation of each tag's complex
     harmonic image, in the units of ``magnitude`` (:mod:`harpx.imaging.noise`), from which
     the tracker derives the noise floor of its residual; optional
-    ``tag_frequency_measured`` (tag): the tag frequency in cycles/mm that the first frame's
-    phase shows in each tag's acquisition plane, NaN where not measured
+    ``tag_frequency_measured`` (tag): the tag frequency in cycles/mm of the tag peak in the
+    first frame's images, in each tag's acquisition plane, NaN where not measured
     (:mod:`harpx.imaging.tag_frequency`).
     Optional slice geometry (either kind of image dataset): ``slice_thickness`` (tag), the
     thickness of each tag's slices along its ``slice_axis`` in mm (boxcar profile; NaN:
@@ -211,7 +211,7 @@ LONG_NAMES: dict[str, str] = {
     "phase": "harmonic phase",
     "magnitude": "harmonic image magnitude",
     "harmonic_noise": "noise standard deviation of the complex harmonic image",
-    "tag_frequency_measured": "tag spatial frequency seen in the phase at the first frame",
+    "tag_frequency_measured": "tag spatial frequency of the first frame's tag peak",
     "points": "reference position of node",
     "cells": "cell connectivity",
     "region": "region label of cell",
