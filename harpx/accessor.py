@@ -1,67 +1,117 @@
 """The ``ds.harp`` accessor: a thin layer that forwards to plain functions.
 
-Every method is one call; the full documentation lives on the function it forwards to.
+Every method is one call, ``function(ds, ...)``, built by :class:`Forward` from a table of
+names: nothing of the function's signature or defaults is copied here. On a dataset, the
+method carries the function's own signature (without the dataset) and its whole docstring,
+so ``ds.harp.track?`` in a notebook shows the full contract and tab completion offers the
+function's keywords.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any, Literal
+import functools
+import importlib
+import inspect
+from collections.abc import Callable
+from typing import Any
 
 import xarray as xr
 
-if TYPE_CHECKING:
-    from pathlib import Path
-
-    from numpy.typing import ArrayLike
-
-    from harpx._typing import PathLike
-
-from harpx.tracking.settings import TrackingSettings
+__all__ = ["Forward", "HarpAccessor", "PlotMethods"]
 
 
-def _plot(function: str, summary: str) -> Callable[..., Any]:
-    """A :class:`PlotMethods` method: ``harpx.plotting.<function>(ds, **kwargs)``.
+class Forward:
+    """A method that calls ``<module>.<function>(ds, *args, **kwargs)`` on its dataset.
 
-    The plotting package is imported at the first call (matplotlib stays unloaded until a
-    picture is asked for); ``summary`` is the method's docstring before its pointer to the
-    function.
+    The module is imported at the first use of the method, so that ``import harpx`` stays
+    light (matplotlib, scikit-fem and pyfftw load when a method needs them).
+
+    Parameters
+    ----------
+    target : str
+        ``"package.module.function"``; the function takes the dataset as its first
+        positional argument.
+
+    Notes
+    -----
+    Read from a dataset's accessor (``ds.harp.phase``), the method is bound to the dataset
+    and carries the function's name, docstring and signature without its first parameter.
+    Read from the class (``HarpAccessor.phase``, as the API reference does), it is an
+    unbound method ``(self, ...)`` whose docstring is the function's summary line and a
+    pointer to it.
     """
 
-    def method(self: PlotMethods, **kwargs: Any) -> Any:
-        import harpx.plotting
+    def __init__(self, target: str) -> None:
+        self.target = target
+        self.name = target.rpartition(".")[2]
 
-        return getattr(harpx.plotting, function)(self._ds, **kwargs)
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
 
-    method.__doc__ = f"{summary} See Also: harpx.plotting.{function}."
-    return method
+    def function(self) -> Callable[..., Any]:
+        """The function forwarded to (importing its module)."""
+        module, _, function = self.target.rpartition(".")
+        found: Callable[..., Any] = getattr(importlib.import_module(module), function)
+        return found
+
+    def __get__(self, instance: Any, owner: type | None = None) -> Callable[..., Any]:
+        target = self.function()
+        signature = inspect.signature(target)
+        rest = list(signature.parameters.values())[1:]
+        if instance is None:
+            return self._unbound(target, signature, rest)
+        ds = instance._ds
+
+        @functools.wraps(target)
+        def method(*args: Any, **kwargs: Any) -> Any:
+            return target(ds, *args, **kwargs)
+
+        method.__signature__ = signature.replace(parameters=rest)  # type: ignore[attr-defined]
+        return method
+
+    def _unbound(
+        self, target: Callable[..., Any], signature: inspect.Signature, rest: list[Any]
+    ) -> Callable[..., Any]:
+        def method(self: Any, *args: Any, **kwargs: Any) -> Any:
+            return target(self._ds, *args, **kwargs)
+
+        summary = (inspect.getdoc(target) or "").split("\n\n")[0]
+        method.__name__ = method.__qualname__ = self.name
+        method.__doc__ = f"{summary}\n\nSee Also\n--------\n{self.target}\n"
+        first = inspect.Parameter("self", inspect.Parameter.POSITIONAL_ONLY)
+        method.__signature__ = signature.replace(  # type: ignore[attr-defined]
+            parameters=[first, *rest]
+        )
+        return method
 
 
 class PlotMethods:
     """``ds.harp.plot``: matplotlib pictures of harpx datasets (see :mod:`harpx.plotting`).
 
     Each method forwards the dataset and its keywords to the plotting function named in its
-    docstring (built by :func:`_plot`).
+    docstring. The plotting package is imported at the first call, so matplotlib stays
+    unloaded until a picture is asked for.
     """
 
     def __init__(self, ds: xr.Dataset) -> None:
         self._ds = ds
 
-    tag_image = _plot("tag_image", "One slice of a tagged image.")
-    phase = _plot("phase_map", "One slice of a harmonic phase.")
-    displacement = _plot("displacement_map", "Tracked displacement on a slice.")
-    strain = _plot(
-        "strain_map",
-        "Strain on a slice (radial, circumferential, longitudinal or Cartesian, %).",
-    )
-    fiber_stretch = _plot("fiber_stretch_by_region", "Fibre stretch per region.")
-    bullseye = _plot("bullseye", "AHA 17-segment bull's-eye of a segment value.")
-    segment_curves = _plot("segment_curves", "AHA segment strain over time by ring.")
+    tag_image = Forward("harpx.plotting.tag_image")
+    phase = Forward("harpx.plotting.phase_map")
+    displacement = Forward("harpx.plotting.displacement_map")
+    strain = Forward("harpx.plotting.strain_map")
+    fiber_stretch = Forward("harpx.plotting.fiber_stretch_by_region")
+    bullseye = Forward("harpx.plotting.bullseye")
+    segment_curves = Forward("harpx.plotting.segment_curves")
 
 
 @xr.register_dataset_accessor("harp")
 class HarpAccessor:
-    """harpx methods on an :class:`xarray.Dataset` (``ds.harp``)."""
+    """harpx methods on an :class:`xarray.Dataset` (``ds.harp``).
+
+    Each method forwards the dataset to the function named in its docstring; on a dataset,
+    ``help(ds.harp.track)`` shows that function's whole documentation.
+    """
 
     def __init__(self, ds: xr.Dataset) -> None:
         self._ds = ds
@@ -69,158 +119,16 @@ class HarpAccessor:
     @property
     def plot(self) -> PlotMethods:
         """Pictures: ``ds.harp.plot.tag_image()``, ``.phase()``, ``.displacement()``,
-        ``.strain()``, ``.fiber_stretch()`` (see :mod:`harpx.plotting`)."""
+        ``.strain()``, ``.fiber_stretch()``, ``.bullseye()``, ``.segment_curves()`` (see
+        :mod:`harpx.plotting`)."""
         return PlotMethods(self._ds)
 
-    def validate(self, kind: str | None = None) -> None:
-        """Check the dataset against the harpx conventions.
-
-        See Also
-        --------
-        harpx.schema.validate
-        """
-        from harpx.schema import validate
-
-        return validate(self._ds, kind=kind)
-
-    def phase(
-        self,
-        *,
-        upsample: int = 2,
-        radius: float = 0.5,
-        threads: int | None = None,
-        dtype: Literal["float32", "float64"] = "float32",
-    ) -> xr.Dataset:
-        """Harmonic phase of a ``tagged/1`` dataset.
-
-        See Also
-        --------
-        harpx.imaging.harp.extract_phase
-        """
-        from harpx.imaging.harp import extract_phase
-
-        return extract_phase(
-            self._ds, upsample=upsample, radius=radius, threads=threads, dtype=dtype
-        )
-
-    def to_netcdf(self, path: PathLike) -> Path:
-        """Write the dataset atomically to a NetCDF archive.
-
-        See Also
-        --------
-        harpx.io.netcdf.to_netcdf
-        """
-        from harpx.io.netcdf import to_netcdf
-
-        return to_netcdf(self._ds, path)
-
-    def track(
-        self,
-        body: Any,
-        *,
-        settings: TrackingSettings | None = None,
-        dirichlet: Sequence[Any] = (),
-        terms: Sequence[Any] = (),
-        **overrides: Any,
-    ) -> xr.Dataset:
-        """Track a finite-element body through the phase images.
-
-        ``settings`` and the keyword ``overrides`` (any field of
-        :class:`~harpx.tracking.settings.TrackingSettings`) are forwarded unchanged.
-
-        See Also
-        --------
-        harpx.tracking.track.track
-        """
-        from harpx.tracking.track import track
-
-        return track(
-            self._ds, body, settings=settings, dirichlet=dirichlet, terms=terms, **overrides
-        )
-
-    def track_harp(
-        self, *, points: ArrayLike | xr.Dataset | None = None, iterations: int = 10
-    ) -> xr.Dataset:
-        """Conventional HARP tracking (fixed-point phase matching per material point).
-
-        See Also
-        --------
-        harpx.imaging.harptrack.track_harp
-        """
-        from harpx.imaging.harptrack import track_harp
-
-        return track_harp(self._ds, points=points, iterations=iterations)
-
-    def error(self, truth: xr.Dataset, *, where: xr.DataArray | None = None) -> xr.Dataset:
-        """Displacement error of a tracked dataset against ground truth.
-
-        See Also
-        --------
-        harpx.tracking.results.tracking_error
-        """
-        from harpx.tracking.results import tracking_error
-
-        return tracking_error(self._ds, truth, where=where)
-
-    def cardiac_strain(
-        self,
-        template: Any,
-        *,
-        anterior: float | None = None,
-        body: xr.DataArray | None = None,
-        min_coverage: float = 0.1,
-        heart_size: tuple[float, float] = (20.0, 150.0),
-    ) -> xr.Dataset:
-        """LV-frame strain, AHA segments, twist and torsion.
-
-        See Also
-        --------
-        harpx.cardiac.strain.cardiac_strain
-        """
-        from harpx.cardiac.strain import cardiac_strain
-
-        return cardiac_strain(
-            self._ds,
-            template,
-            anterior=anterior,
-            body=body,
-            min_coverage=min_coverage,
-            heart_size=heart_size,
-        )
-
-    def to_meshio(self, path: PathLike, *, series: Literal["vtu", "xdmf"] = "xdmf") -> list[Path]:
-        """Write a tracked result as a ParaView time series (XDMF, or VTU files and a PVD).
-
-        See Also
-        --------
-        harpx.io.mesh.to_meshio
-        """
-        from harpx.io.mesh import to_meshio
-
-        return to_meshio(self._ds, path, series=series)
-
-    def uncertainty(
-        self,
-        body: Any,
-        images: xr.Dataset,
-        *,
-        tagged: xr.Dataset | None = None,
-        dirichlet: Sequence[Any] = (),
-        terms: Sequence[Any] = (),
-        samples: int = 64,
-        seed: int | None = None,
-        keep_samples: bool = False,
-    ) -> xr.Dataset:
-        """Standard deviation of a tracked displacement due to the image noise.
-
-        See Also
-        --------
-        harpx.tracking.uncertainty.tracking_uncertainty
-        harpx.cardiac.uncertainty.segment_uncertainty : the AHA segment measures from it.
-        """
-        from harpx.tracking.uncertainty import tracking_uncertainty
-
-        return tracking_uncertainty(
-            self._ds, body, images, tagged=tagged, dirichlet=dirichlet, terms=terms,
-            samples=samples, seed=seed, keep_samples=keep_samples,
-        )  # fmt: skip
+    validate = Forward("harpx.schema.validate")
+    phase = Forward("harpx.imaging.harp.extract_phase")
+    to_netcdf = Forward("harpx.io.netcdf.to_netcdf")
+    track = Forward("harpx.tracking.track.track")
+    track_harp = Forward("harpx.imaging.harptrack.track_harp")
+    error = Forward("harpx.tracking.results.tracking_error")
+    cardiac_strain = Forward("harpx.cardiac.strain.cardiac_strain")
+    to_meshio = Forward("harpx.io.mesh.to_meshio")
+    uncertainty = Forward("harpx.tracking.uncertainty.tracking_uncertainty")
