@@ -7,7 +7,8 @@
 * :mod:`~harpx.anatomy.ventricle_fit`: that template fitted to a segmentation (the names of
   :mod:`~harpx.anatomy.ventricle_template`, the placed template and its fit to contour
   points; :mod:`~harpx.anatomy.contours`, contour points of a mask; and
-  :mod:`~harpx.anatomy.mask_fit`, the fit to a mask with its refusals and flags).
+  :mod:`~harpx.anatomy.mask_fit`, the fit to a mask with its refusals and flags, which
+  reads the mask as a stack of short-axis slices with :mod:`~harpx.anatomy.mask_slices`).
 * :mod:`~harpx.anatomy.tongue_mesh`: the tongue with its muscles and fibre fields.
 
 Units: mm.

@@ -3,8 +3,11 @@ r"""The ventricle fitted to a myocardium mask or segmentation, refusing what it 
 Fit to a mask
 -------------
 :func:`fit_ventricle_to_mask` takes the stacks scans provide and refuses what it cannot
-trust (:class:`VentricleFitError`, a ``ValueError``) or flags it (``fit.flags`` and a
-:class:`VentricleFitWarning`), stating the numbers:
+trust (:class:`~harpx.anatomy.mask_slices.VentricleFitError`, a ``ValueError``) or flags it
+(``fit.flags`` and a :class:`~harpx.anatomy.mask_slices.VentricleFitWarning`), stating the
+numbers. The first step, the mask read as a stack of short-axis slices, is
+:mod:`harpx.anatomy.mask_slices`; this module takes the long axis, the base and apex, the
+anterior wall and the segments from there:
 
 * **One piece with a cavity.** The myocardium (``myocardium=`` picks its label in a
   segmentation) must be one face-connected piece (specks under 1 % of it are dropped and
@@ -47,23 +50,23 @@ References
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Sequence
 from typing import Any, Literal
 
 import numpy as np
-import scipy.ndimage as ndi
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
 from harpx.anatomy.aha import segments_local
-from harpx.anatomy.contours import (
-    _contours,
-    _covers_axis,
-    _lax_points,
-    _lax_sense,
-    _padded_along,
-    _plane_structure,
+from harpx.anatomy.contours import _contours, _lax_points, _lax_sense, _padded_along
+from harpx.anatomy.mask_slices import (
+    VentricleFitError,
+    VentricleFitWarning,  # noqa: F401 (still importable from here)
+    _read_lax,
+    _read_mask,
+    _Slices,
+    _Stack,
+    _warn,
 )
 from harpx.anatomy.ventricle import VentricleGeometry
 from harpx.anatomy.ventricle_template import (
@@ -72,24 +75,8 @@ from harpx.anatomy.ventricle_template import (
     _distance,
     fit_ventricle,
 )
-from harpx.errors import HarpxError, HarpxWarning, user_stacklevel
-from harpx.io.labels import read_labels
-from harpx.schema import grid_step
 
-__all__ = ["VentricleFitError", "VentricleFitWarning", "fit_ventricle_to_mask"]
-
-
-class VentricleFitError(HarpxError, ValueError):
-    """A mask or contours the ventricle cannot be fitted to as asked.
-
-    The message states what is wrong with the numbers (e.g. two separate blobs and their
-    sizes, no cavity in any short-axis slice, an axis hint far off the slice normal) and
-    what to pass instead.
-    """
-
-
-class VentricleFitWarning(HarpxWarning):
-    """A fit that can be used but should be checked; the text is also in ``fit.flags``."""
+__all__ = ["fit_ventricle_to_mask"]
 
 
 def _aha(template: VentricleTemplate, points: ArrayLike) -> IntArray:
@@ -101,75 +88,6 @@ def _aha(template: VentricleTemplate, points: ArrayLike) -> IntArray:
     counter-clockwise seen from the apex (clockwise about the template's z axis).
     """
     return segments_local(template.to_local(points), template.geometry, template.anterior or 0.0)
-
-
-def _labels(values: Any, what: str, myocardium: Any, rv: Any) -> tuple[FloatArray, Any]:
-    """Myocardium fraction and RV mask (or None) of a label volume."""
-    if not np.all(np.isfinite(values)):
-        raise VentricleFitError(f"{what} contains NaN or inf; fill it (e.g. mask.fillna(0))")
-    integral = values.dtype == bool or bool(np.all(np.isclose(values, np.rint(values))))
-    myo = None if myocardium is None else [int(v) for v in np.atleast_1d(myocardium)]
-    rvl = None if rv is None else [int(v) for v in np.atleast_1d(rv)]
-    if not integral:
-        if values.min() < 0 or values.max() > 1:
-            raise VentricleFitError(
-                f"{what} is neither integer labels nor a fraction in [0, 1] (range "
-                f"{values.min():.3g} .. {values.max():.3g}); pass a myocardium mask or labels"
-            )
-        if myo is not None or rvl is not None:
-            raise VentricleFitError(
-                f"{what} is a tissue fraction, not integer labels: myocardium= and rv= select "
-                "labels of an integer segmentation"
-            )
-        return values.astype(np.float64), None
-    ints = np.rint(values).astype(np.int64)
-    present = [int(v) for v in np.unique(ints) if v != 0]
-    if myo is None:
-        myo = [v for v in present if v not in (rvl or [])]
-        if len(myo) > 1:
-            raise VentricleFitError(
-                f"{what} holds labels {present[:10]!r}; say which is the left-ventricular "
-                "myocardium with myocardium=<label> (and the right ventricle with rv=)"
-            )
-    missing = [v for v in (*myo, *(rvl or [])) if v not in present]
-    if missing:
-        raise VentricleFitError(
-            f"labels {missing!r} are not in {what} (present: {present[:10]!r}); check "
-            "myocardium= and rv="
-        )
-    rv_mask = None if rvl is None else np.isin(ints, rvl)
-    return np.isin(ints, myo).astype(np.float64), rv_mask
-
-
-def _warn(flags: dict[str, str], name: str, message: str, *, warn: bool = True) -> None:
-    flags[name] = message
-    if warn:
-        warnings.warn(message, VentricleFitWarning, stacklevel=user_stacklevel())
-
-
-def _read_lax(
-    sources: Sequence[Any], variable: str | None, myocardium: Any
-) -> list[tuple[FloatArray, list[FloatArray], FloatArray]]:
-    """Long-axis masks: padded fraction, padded (z, y, x) coordinates, tissue points (x, y, z)."""
-    out = []
-    for k, source in enumerate(sources):  # a few long-axis slices
-        da = read_labels(source, variable=variable)
-        f, _ = _labels(np.asarray(da.values), f"long_axis_slices[{k}]", myocardium, None)
-        f = np.pad(f, [(1, 1)] * 3, mode="constant", constant_values=0.0)
-        coords = []
-        for d in ("z", "y", "x"):
-            c = np.asarray(da[d].values, dtype=np.float64)
-            step = grid_step(da, d) or 1.0
-            coords.append(np.concatenate([[c[0] - step], c, [c[-1] + step]]))
-        tissue = np.argwhere(f >= 0.5)
-        if len(tissue) < 10:
-            raise VentricleFitError(
-                f"long_axis_slices[{k}] holds {len(tissue)} myocardium voxels; pass the "
-                "long-axis slice's myocardium mask"
-            )
-        xyz = np.stack([coords[2 - a][tissue[:, 2 - a]] for a in range(3)], axis=1)
-        out.append((f, coords, xyz))
-    return out
 
 
 def _insertions(
@@ -206,6 +124,258 @@ def _insertions(
     if not ant:
         return float("nan"), float("nan"), float("nan"), np.empty(0)
     return circular_mean(ant), circular_mean(inf), circular_mean(middle), np.asarray(width)
+
+
+def _check_options(slice_axis: str, base_side: Any, rv: Any, anterior: Any) -> None:
+    if slice_axis not in ("x", "y", "z"):
+        raise VentricleFitError(f"slice_axis={slice_axis!r} must be 'x', 'y' or 'z'")
+    if base_side not in (None, "high", "low"):
+        raise VentricleFitError(f"base_side={base_side!r} must be 'high', 'low' or None")
+    if rv is not None and anterior is not None:
+        raise VentricleFitError("pass either rv= (a right-ventricle label) or anterior=, not both")
+
+
+def _axis_hint(axis: Any) -> FloatArray | None:
+    """The unit axis hint of ``axis=`` (None for a mode name)."""
+    if isinstance(axis, str):
+        if axis not in ("auto", "slice", "fit"):
+            raise VentricleFitError(f"axis={axis!r} must be 'auto', 'slice', 'fit' or a vector")
+        return None
+    hint = np.asarray(axis, dtype=np.float64).reshape(3)
+    if not (np.all(np.isfinite(hint)) and np.linalg.norm(hint) > 0):
+        raise VentricleFitError(f"axis={axis!r} must be a finite non-zero vector")
+    unit: FloatArray = hint / np.linalg.norm(hint)
+    return unit
+
+
+def _sense(
+    stack: _Stack,
+    slices: _Slices,
+    hint: FloatArray | None,
+    axis: Any,
+    base_side: str | None,
+    lax: list[Any],
+) -> float:
+    """The sense of the long axis along the slice normal: +1 when the base lies towards
+    increasing slice coordinate. From the user, the axis hint, long-axis slices or the
+    apical cap; refused when they disagree or none tells."""
+    e_n = stack.e_n
+    sense_user = None if base_side is None else (1.0 if base_side == "high" else -1.0)
+    sense_hint = None if hint is None or hint @ e_n == 0 else float(np.sign(hint @ e_n))
+    cap_low, cap_high = slices.cap_low, slices.cap_high
+    sense_cap = 1.0 if cap_low and not cap_high else -1.0 if cap_high and not cap_low else None
+    if sense_user is not None and sense_hint is not None and sense_user != sense_hint:
+        raise VentricleFitError(
+            f"base_side={base_side!r} contradicts axis={axis!r} (apex to base); give one of them"
+        )
+    sense = sense_user if sense_user is not None else sense_hint
+    if lax and sense is None and sense_cap is None:
+        grid_c = np.meshgrid(*stack.coords, indexing="ij")
+        ring_centre = np.array([float(grid_c[2 - a][slices.cavity].mean()) for a in range(3)])
+        band = max(stack.step_n, 3.0 * stack.in_plane)
+        sense = _lax_sense(lax, ring_centre, e_n, band=band)
+    slice_axis = stack.slice_axis
+    if sense is not None and sense_cap is not None and sense != sense_cap:
+        cap_k = slices.tissue_k.min() if cap_low else slices.tissue_k.max()
+        raise VentricleFitError(
+            f"the base is said to lie towards {'high' if sense > 0 else 'low'} {slice_axis}, "
+            f"but the apical cap of the mask (tissue without cavity, {slice_axis} = "
+            f"{stack.position[cap_k]:.4g} mm) lies at that end; check base_side / axis"
+        )
+    if sense is None:
+        sense = sense_cap
+    if sense is None:
+        raise VentricleFitError(
+            "cannot tell the base from the apex: the mask shows no apical cap (every end "
+            f"slice along {slice_axis} is a ring{' or both ends are capped' if cap_low else ''}"
+            "); pass base_side='high' or 'low' (the base lies towards increasing or "
+            f"decreasing {slice_axis}) or long_axis_slices="
+        )
+    return sense
+
+
+def _axis_start(
+    stack: _Stack,
+    slices: _Slices,
+    hint: FloatArray | None,
+    axis: Any,
+    sense: float,
+    apex_in_view: bool,
+    lax: list[Any],
+    apex_level: float | None,
+) -> tuple[bool, FloatArray]:
+    """Whether the long axis is held, and its start (apex to base); refuses an axis hint
+    far off the slices, ``apex_level`` for a 3-D fit and an apex too few rings can place."""
+    thick = stack.step_n > 1.5 * stack.in_plane
+    if axis == "slice":
+        hold = True
+    elif axis == "fit":
+        hold = False
+    else:
+        hold = not ((apex_in_view and not thick) or bool(lax))
+    e_n = stack.e_n
+    u0 = sense * e_n
+    if hint is not None:
+        off = float(np.degrees(np.arccos(min(abs(float(hint @ e_n)), 1.0))))
+        limit = 15.0 if hold else 45.0
+        if off > limit:
+            what = "a short-axis stack (axis held at its normal)" if hold else "the slices"
+            raise VentricleFitError(
+                f"axis={np.round(hint, 3).tolist()} is {off:.1f} degrees off the normal of "
+                f"{what} ({stack.slice_axis}, limit {limit:g}); short-axis slices are planned "
+                "across the long axis: check axis and slice_axis, or resample the images"
+            )
+        u0 = hint * np.sign(hint @ e_n) * sense
+    if apex_level is not None and not hold:
+        raise VentricleFitError(
+            "apex_level is for a short-axis stack that does not reach the apex (axis held at "
+            "the slice normal); this mask is fitted in 3-D (apex in view or long-axis "
+            "slices): drop apex_level or pass axis='slice'"
+        )
+    rings = slices.ring_k.size
+    if hold and not apex_in_view and apex_level is None and not lax and rings < 3:
+        raise VentricleFitError(
+            f"the apex is not in view and {rings} ring slices cannot place it (the "
+            "ellipsoid's centre, two long and two short radii need at least 3 levels); pass "
+            "apex_level= or long_axis_slices="
+        )
+    return hold, u0
+
+
+def _base_plane(
+    template: VentricleTemplate, candidates: FloatArray, source: str, stack: _Stack
+) -> tuple[float, FloatArray]:
+    """The base plane's level along the template axis (mm from its centre) and the base
+    points it rests on: the top face of the wall among ``candidates``."""
+    if len(candidates) < 3:
+        raise VentricleFitError(f"{source} gives {len(candidates)} base points; pass base_level=")
+    local = template.to_local(candidates)
+    qz = local[:, 2]
+    # the top face of the wall: its voxel staircase spans a step along the slice axis,
+    # plus the rise of an oblique base plane across the ventricle
+    slope = np.tan(np.arccos(min(abs(float(template.axis @ stack.e_n)), 1.0)))
+    window = stack.step_n + 2.0 * stack.in_plane + template.geometry.outer[0] * slope
+    t_b = template.geometry.transmural(local)
+    base_used = candidates[(qz > qz.max() - window) & (t_b > -0.1) & (t_b < 1.1)]
+    if len(base_used) < 3:
+        raise VentricleFitError(
+            f"{source} gives {len(base_used)} base points in the wall; pass base_level="
+        )
+    return float(np.median(template.to_local(base_used)[:, 2])), base_used
+
+
+def _check_extrapolated_apex(
+    template: VentricleTemplate,
+    truncation: float,
+    uncertainty: float,
+    endo: FloatArray,
+    epi: FloatArray,
+    stack: _Stack,
+    flags: dict[str, str],
+) -> None:
+    """Refuse an apex out of view whose extrapolation is uncertain beyond a slice step and
+    a tenth of the cavity; flag it otherwise."""
+    g, c, u, normal = template.geometry, template.centre, template.axis, stack.normal
+    length = max(truncation + g.inner[1], 0.0)
+    lowest = float(np.min(template.to_local(np.concatenate([endo, epi]))[:, 2]))
+    allowed = max(stack.step_n, 0.1 * length)
+    apex_at = c[2 - normal] - g.inner[1] * u[2 - normal]
+    where = f"{stack.slice_axis} = {apex_at:.1f} ± {uncertainty:.1f} mm"
+    beyond = f"{lowest + g.inner[1]:.1f} mm beyond the lowest contour"
+    if uncertainty > allowed:
+        raise VentricleFitError(
+            f"the apex is not in view and the slices do not locate it: the ellipsoid puts "
+            f"it at {where} (more than {allowed:.1f} mm), {beyond}; pass apex_level= or "
+            "long_axis_slices="
+        )
+    _warn(
+        flags, "apex_extrapolated",
+        f"the apex is not in view: the fitted ellipsoid places the endocardial apex at "
+        f"{where}, {beyond}; the AHA thirds depend on it (pass apex_level= if you know it)",
+    )  # fmt: skip
+
+
+def _anterior(
+    template: VentricleTemplate,
+    anterior: Any,
+    touch: IntArray | None,
+    rv: Any,
+    stack: _Stack,
+    flags: dict[str, str],
+) -> tuple[float | None, tuple[float, float] | None]:
+    """The anterior angle (degrees, as ``template.anterior``) and the RV insertions, from
+    ``anterior=`` or the septum the RV touches; None when neither is given (flagged)."""
+    if anterior is not None:
+        a = np.asarray(anterior, dtype=np.float64)
+        return (float(template.angle(a.reshape(1, 3))[0]) if a.size == 3 else float(a)), None
+    if touch is None:
+        _warn(
+            flags, "anterior_unknown",
+            "no rv= or anterior=: the anterior wall (AHA segment 1) is unknown; segments are "
+            "numbered from the template's +x axis",
+            warn=False,
+        )  # fmt: skip
+        return None, None
+    ant, inf, septum, width = _insertions(template, stack.points(touch), touch[:, stack.normal])
+    if not np.isfinite(ant):
+        raise VentricleFitError(
+            f"the right-ventricle label {rv!r} touches the myocardium in too few voxels "
+            f"({len(touch)}) to find the insertions; check rv="
+        )
+    w = float(np.median(width))
+    if not 40.0 <= w <= 240.0:
+        _warn(
+            flags, "rv_contact",
+            f"the right ventricle touches the LV myocardium over {w:.0f} degrees per "
+            "slice (median; a septum spans about 120): check rv= (the RV wall or blood "
+            "pool, not the LV blood pool)",
+        )  # fmt: skip
+    # the anterior wall is 90 degrees from the middle of the septum, on the side of the
+    # anterior insertion (positive about the apex-to-base axis)
+    return float(np.mod(septum + 90.0, 360.0)), (ant, inf)
+
+
+def _segments_in_view(
+    template: VentricleTemplate, stack: _Stack, inside: Any, flags: dict[str, str]
+) -> tuple[IntArray, tuple[int, ...]]:
+    """Voxel count of each AHA segment (1..17) and the segments beyond the imaged tissue;
+    flags empty segments in view and a base plane beyond the tissue."""
+    g = template.geometry
+    grid = np.stack(np.meshgrid(*stack.coords, indexing="ij"), axis=-1)[inside][:, ::-1]
+    counts: IntArray = np.bincount(_aha(template, grid), minlength=18)[1:]
+    qz = template.to_local(grid)[:, 2]
+    lo_view, hi_view = float(qz.min()), float(qz.max())  # tissue voxel centres
+    bottom, top = -g.inner[1], g.truncation
+    third = (top - bottom) / 3.0
+    edges = {17: (-g.outer[1], bottom), 13: (bottom, bottom + third)}
+    edges |= {7: (bottom + third, bottom + 2 * third), 1: (bottom + 2 * third, top)}
+    ring_of = [17 if k == 17 else 13 if k >= 13 else 7 if k >= 7 else 1 for k in range(1, 18)]
+    ranges = {k: edges[ring_of[k - 1]] for k in range(1, 18)}
+    out_of_view = tuple(k for k, (a, b) in ranges.items() if b <= lo_view or a >= hi_view)
+    empty = [k for k in range(1, 18) if counts[k - 1] == 0 and k not in out_of_view]
+    if out_of_view:
+        _warn(
+            flags, "out_of_view",
+            f"AHA segments {list(out_of_view)} lie outside the imaged tissue (voxel centres "
+            f"at {lo_view:.1f} .. {hi_view:.1f} mm along the axis from the template centre) "
+            "and are empty",
+            warn=False,
+        )  # fmt: skip
+    if empty:
+        _warn(
+            flags, "empty_segments",
+            f"AHA segments {empty} hold no tissue voxel although their level is in view: "
+            "their strain will be missing (NaN); check the segmentation and the base level",
+        )  # fmt: skip
+    top_face = hi_view + 0.5 * stack.step_n * abs(float(template.axis @ stack.e_n))
+    if top > top_face + 3.0:
+        _warn(
+            flags, "base_out_of_view",
+            f"the base plane lies {top - top_face:.1f} mm beyond the imaged tissue: a "
+            "mesh of this mask has no facets on it (an empty 'base' boundary); hold the top "
+            "face of the mesh instead",
+        )  # fmt: skip
+    return counts, out_of_view
 
 
 def fit_ventricle_to_mask(
@@ -301,183 +471,25 @@ def fit_ventricle_to_mask(
         For each warned entry of ``flags`` (residual, axis, apex extrapolated, base out of
         view, empty segments in view, open slices, implausible septal arc).
     """
-    da = read_labels(mask, variable=variable)
-    values = np.asarray(da.values)
-    if slice_axis not in ("x", "y", "z"):
-        raise VentricleFitError(f"slice_axis={slice_axis!r} must be 'x', 'y' or 'z'")
-    if base_side not in (None, "high", "low"):
-        raise VentricleFitError(f"base_side={base_side!r} must be 'high', 'low' or None")
-    if rv is not None and anterior is not None:
-        raise VentricleFitError("pass either rv= (a right-ventricle label) or anterior=, not both")
-    f, rv_mask = _labels(values, "the mask", myocardium, rv)
-    normal = ("z", "y", "x").index(slice_axis)
-    other = tuple(d for d in range(3) if d != normal)
-    e_n = np.zeros(3)
-    e_n[2 - normal] = 1.0
-    coords = [np.asarray(da[d].values, dtype=np.float64) for d in ("z", "y", "x")]
-    steps = [float(np.abs(np.diff(c)).min()) if c.size > 1 else np.inf for c in coords]
-    in_plane = min(steps[d] for d in other)
-    step_n = steps[normal] if np.isfinite(steps[normal]) else in_plane
+    _check_options(slice_axis, base_side, rv, anterior)
+    hint = _axis_hint(axis)
     flags: dict[str, str] = {}
-
-    # the myocardium: one piece
-    inside = f >= 0.5
-    if not inside.any():
-        raise VentricleFitError(
-            f"the mask holds no myocardium (no voxel >= 0.5 among {values.size}); pass the "
-            "segmentation of the left-ventricular wall"
-        )
-    pieces, count = ndi.label(inside)
-    if count > 1:
-        sizes = np.bincount(pieces.ravel())[1:]
-        order = np.argsort(sizes)[::-1]
-        if sizes[order[1]] >= 0.01 * sizes[order[0]]:
-            centres = ndi.center_of_mass(inside, pieces, order[:3] + 1)
-            where = [
-                tuple(round(float(np.interp(c[k], np.arange(len(coords[k])), coords[k])), 1)
-                      for k in (2, 1, 0))
-                for c in centres
-            ]  # fmt: skip
-            raise VentricleFitError(
-                f"the myocardium is in {count} separate pieces of {sizes[order[:5]].tolist()} "
-                f"voxels (centres x, y, z mm: {where}); a ventricle is one piece: pass the "
-                "left-ventricular wall only (e.g. mask.where(labels == ...)) or fix the gaps"
-            )
-        keep = pieces == 1 + order[0]
-        f = np.where(ndi.binary_dilation(keep), f, 0.0)
-        inside = f >= 0.5
-        _warn(
-            flags, "dropped_specks",
-            f"{count - 1} specks of {int(sizes.sum() - sizes[order[0]])} voxels in all "
-            f"(< 1 % of the {int(sizes[order[0]])}-voxel myocardium) were left out",
-            warn=False,
-        )  # fmt: skip
-
-    # short-axis slices: rings (tissue around a cavity), the apical cap, open slices
-    cavity = ndi.binary_fill_holes(inside, structure=_plane_structure(normal)) & ~inside
-    tissue_n = inside.sum(axis=other)
-    cavity_n = cavity.sum(axis=other)
-    ring = cavity_n >= np.maximum(3, 0.02 * (tissue_n + cavity_n))
-    tissue_k = np.nonzero(tissue_n)[0]
-    ring_k = np.nonzero(ring)[0]
-    if ring_k.size == 0:
-        raise VentricleFitError(
-            f"no short-axis slice (normal {slice_axis}) of the mask encloses a cavity: its "
-            f"{tissue_k.size} slices with tissue are filled discs, as of a solid cylinder or "
-            "of myocardium and blood pool together; pass the myocardium alone (or "
-            "myocardium=<label>), or the right slice_axis"
-        )
-    open_k = tissue_k[(tissue_k > ring_k.min()) & (tissue_k < ring_k.max()) & ~ring[tissue_k]]
-    # an apical cap: tissue beyond the last ring that covers the ring's axis (a disc); the
-    # open arcs of an oblique base do not
-    cap_low = tissue_k.min() < ring_k.min() and _covers_axis(
-        inside, cavity, normal, ring_k.min(), -1
-    )
-    cap_high = tissue_k.max() > ring_k.max() and _covers_axis(
-        inside, cavity, normal, ring_k.max(), 1
-    )
-    cap_k = tissue_k[(cap_low & (tissue_k < ring_k.min())) | (cap_high & (tissue_k > ring_k.max()))]
-    slice_pos = coords[normal]
-    if open_k.size:
-        _warn(
-            flags, "open_slices",
-            f"{open_k.size} short-axis slices inside the stack have tissue but no closed "
-            f"cavity ({slice_axis} = {np.round(slice_pos[open_k], 2).tolist()} mm) and were "
-            "left out; close the ring in the segmentation to use them",
-        )  # fmt: skip
-
-    # the septum: myocardium of the ring slices within two voxels of the right ventricle
-    touch = None
-    if rv_mask is not None:
-        near = ndi.binary_dilation(rv_mask, structure=_plane_structure(normal), iterations=2)
-        in_rings = np.isin(np.arange(f.shape[normal]), ring_k)
-        touch = np.argwhere(near & inside & np.expand_dims(in_rings, other))
-        if len(touch) == 0:
-            raise VentricleFitError(
-                f"the right-ventricle label {rv!r} does not touch the left-ventricular "
-                "myocardium in any ring slice (within 2 voxels); check rv= and myocardium="
-            )
-
-    # the sense of the long axis (apex to base)
-    hint = None
-    if isinstance(axis, str):
-        if axis not in ("auto", "slice", "fit"):
-            raise VentricleFitError(f"axis={axis!r} must be 'auto', 'slice', 'fit' or a vector")
-    else:
-        hint = np.asarray(axis, dtype=np.float64).reshape(3)
-        if not (np.all(np.isfinite(hint)) and np.linalg.norm(hint) > 0):
-            raise VentricleFitError(f"axis={axis!r} must be a finite non-zero vector")
-        hint = hint / np.linalg.norm(hint)
-    sense_user = None if base_side is None else (1.0 if base_side == "high" else -1.0)
-    sense_hint = None if hint is None or hint @ e_n == 0 else float(np.sign(hint @ e_n))
-    sense_cap = 1.0 if cap_low and not cap_high else -1.0 if cap_high and not cap_low else None
-    if sense_user is not None and sense_hint is not None and sense_user != sense_hint:
-        raise VentricleFitError(
-            f"base_side={base_side!r} contradicts axis={axis!r} (apex to base); give one of them"
-        )
-    sense = sense_user if sense_user is not None else sense_hint
+    da, f, stack, slices, touch = _read_mask(mask, variable, slice_axis, myocardium, rv, flags)
     lax = _read_lax(list(long_axis_slices), variable, myocardium)
-    if lax and sense is None and sense_cap is None:
-        grid_c = np.meshgrid(*coords, indexing="ij")
-        ring_centre = np.array([float(grid_c[2 - a][cavity].mean()) for a in range(3)])
-        sense = _lax_sense(lax, ring_centre, e_n, band=max(step_n, 3.0 * in_plane))
-    if sense is not None and sense_cap is not None and sense != sense_cap:
-        cap_at = slice_pos[tissue_k.min()] if cap_low else slice_pos[tissue_k.max()]
-        raise VentricleFitError(
-            f"the base is said to lie towards {'high' if sense > 0 else 'low'} {slice_axis}, "
-            f"but the apical cap of the mask (tissue without cavity, {slice_axis} = "
-            f"{cap_at:.4g} mm) lies at that end; check base_side / axis"
-        )
-    if sense is None:
-        sense = sense_cap
-    if sense is None:
-        raise VentricleFitError(
-            "cannot tell the base from the apex: the mask shows no apical cap (every end "
-            f"slice along {slice_axis} is a ring{' or both ends are capped' if cap_low else ''}"
-            "); pass base_side='high' or 'low' (the base lies towards increasing or "
-            f"decreasing {slice_axis}) or long_axis_slices="
-        )
-    apex_in_view = bool(cap_low if sense > 0 else cap_high)
-    thick = step_n > 1.5 * in_plane
-    if axis == "slice":
-        hold = True
-    elif axis == "fit":
-        hold = False
-    else:
-        hold = not ((apex_in_view and not thick) or bool(lax))
-    u0 = sense * e_n
-    if hint is not None:
-        off = float(np.degrees(np.arccos(min(abs(float(hint @ e_n)), 1.0))))
-        limit = 15.0 if hold else 45.0
-        if off > limit:
-            what = "a short-axis stack (axis held at its normal)" if hold else "the slices"
-            raise VentricleFitError(
-                f"axis={np.round(hint, 3).tolist()} is {off:.1f} degrees off the normal of "
-                f"{what} ({slice_axis}, limit {limit:g}); short-axis slices are planned "
-                "across the long axis: check axis and slice_axis, or resample the images"
-            )
-        u0 = hint * np.sign(hint @ e_n) * sense
-    if apex_level is not None and not hold:
-        raise VentricleFitError(
-            "apex_level is for a short-axis stack that does not reach the apex (axis held at "
-            "the slice normal); this mask is fitted in 3-D (apex in view or long-axis "
-            "slices): drop apex_level or pass axis='slice'"
-        )
-    if hold and not apex_in_view and apex_level is None and not lax and ring_k.size < 3:
-        raise VentricleFitError(
-            f"the apex is not in view and {ring_k.size} ring slices cannot place it (the "
-            "ellipsoid's centre, two long and two short radii need at least 3 levels); pass "
-            "apex_level= or long_axis_slices="
-        )
+    sense = _sense(stack, slices, hint, axis, base_side, lax)
+    apex_in_view = bool(slices.cap_low if sense > 0 else slices.cap_high)
+    hold, u0 = _axis_start(stack, slices, hint, axis, sense, apex_in_view, lax, apex_level)
 
     # contour points (voxels fill their extent along the slice axis)
     fp, cp = _padded_along(f, da, slice_axis)
-    cavity_p = np.pad(cavity, [(1, 1) if d == normal else (0, 0) for d in range(3)])
+    normal = stack.normal
+    cavity_p = np.pad(slices.cavity, [(1, 1) if d == normal else (0, 0) for d in range(3)])
     # rings and the apical cap (all epicardium); not the open arcs beyond the base or the
     # open slices, whose inner side would pass for epicardium
-    use = np.pad(np.isin(np.arange(f.shape[normal]), np.concatenate([ring_k, cap_k])), 1)
+    used = np.concatenate([slices.ring_k, slices.cap_k])
+    use = np.pad(np.isin(np.arange(f.shape[normal]), used), 1)
     endo, epi, base_pts = _contours(fp, cp, normal, cavity_p, u0, use)
-    apex_point = None if apex_level is None else e_n * float(apex_level)
+    apex_point = None if apex_level is None else stack.e_n * float(apex_level)
     try:
         first = fit_ventricle(endo, epi, axis=u0, hold_axis=hold, apex=apex_point)
     except ValueError as exc:
@@ -488,65 +500,28 @@ def fit_ventricle_to_mask(
         endo, epi = np.concatenate([endo, lax_endo]), np.concatenate([epi, lax_epi])
         first = fit_ventricle(endo, epi, axis=first.template.axis)
         apex_in_view = True
-    t = first.template
-    u = t.axis
-    c = t.centre
-    g = t.geometry
 
-    # the base plane along the fitted axis
+    t, g = first.template, first.template.geometry
     if base_level is not None:
-        truncation = (float(base_level) - c[2 - normal]) / u[2 - normal]
-        base_used = np.empty((0, 3))
-        source = f"base_level={base_level:g} mm"
+        truncation = float((float(base_level) - t.centre[2 - normal]) / t.axis[2 - normal])
+        base_used, source = np.empty((0, 3)), f"base_level={base_level:g} mm"
     else:
         if len(lax_base) >= 3:
             candidates, source = lax_base, "the long-axis slices"
         elif apex_in_view:
             candidates, source = base_pts, "the top of the mask"
         else:
-            top_k = tissue_k.max() if sense > 0 else tissue_k.min()
+            top_k = slices.tissue_k.max() if sense > 0 else slices.tissue_k.min()
             raise VentricleFitError(
                 f"the base level is unknown: the mask does not show the apex, so the top of "
-                f"the stack ({slice_axis} = {slice_pos[top_k]:.4g} mm) need not be the base; "
-                "pass base_level= (the slice-axis coordinate of the base plane, mm) or "
+                f"the stack ({slice_axis} = {stack.position[top_k]:.4g} mm) need not be the "
+                "base; pass base_level= (the slice-axis coordinate of the base plane, mm) or "
                 "long_axis_slices="
             )
-        if len(candidates) < 3:
-            raise VentricleFitError(
-                f"{source} gives {len(candidates)} base points; pass base_level="
-            )
-        qz = t.to_local(candidates)[:, 2]
-        # the top face of the wall: its voxel staircase spans a step along the slice axis,
-        # plus the rise of an oblique base plane across the ventricle
-        slope = np.tan(np.arccos(min(abs(float(u @ e_n)), 1.0)))
-        window = step_n + 2.0 * in_plane + g.outer[0] * slope
-        t_b = g.transmural(t.to_local(candidates))
-        base_used = candidates[(qz > qz.max() - window) & (t_b > -0.1) & (t_b < 1.1)]
-        if len(base_used) < 3:
-            raise VentricleFitError(
-                f"{source} gives {len(base_used)} base points in the wall; pass base_level="
-            )
-        truncation = float(np.median(t.to_local(base_used)[:, 2]))
-    uncertainty = first.apex_uncertainty
-    if not apex_in_view and apex_level is None and uncertainty is not None:
-        length = max(truncation + g.inner[1], 0.0)
-        lowest = float(np.min(t.to_local(np.concatenate([endo, epi]))[:, 2]))
-        allowed = max(step_n, 0.1 * length)
-        apex_at = c[2 - normal] - g.inner[1] * u[2 - normal]
-        if uncertainty > allowed:
-            raise VentricleFitError(
-                f"the apex is not in view and the slices do not locate it: the ellipsoid puts "
-                f"it at {slice_axis} = {apex_at:.1f} ± {uncertainty:.1f} mm (more than "
-                f"{allowed:.1f} mm), {lowest + g.inner[1]:.1f} mm beyond the lowest contour; "
-                "pass apex_level= or long_axis_slices="
-            )
-        _warn(
-            flags, "apex_extrapolated",
-            f"the apex is not in view: the fitted ellipsoid places the endocardial apex at "
-            f"{slice_axis} = {apex_at:.1f} ± {uncertainty:.1f} mm, {lowest + g.inner[1]:.1f} "
-            "mm beyond the lowest contour; the AHA thirds depend on it (pass apex_level= if "
-            "you know it)",
-        )  # fmt: skip
+        truncation, base_used = _base_plane(t, candidates, source, stack)
+    uncertainty = None if apex_in_view or apex_level is not None else first.apex_uncertainty
+    if uncertainty is not None:
+        _check_extrapolated_apex(t, truncation, uncertainty, endo, epi, stack, flags)
     if not -g.inner[1] < truncation < g.inner[1]:
         raise VentricleFitError(
             f"the base plane from {source} lies {truncation:.1f} mm from the fitted centre "
@@ -556,48 +531,16 @@ def fit_ventricle_to_mask(
     if apex_level is not None and truncation <= -g.inner[1] + 1e-6:
         raise VentricleFitError("base_level lies at or below apex_level; check both")
 
-    # the anterior direction
     geometry = VentricleGeometry(inner=g.inner, outer=g.outer, truncation=truncation)
-    template = VentricleTemplate(geometry, c, t.rotation)
-    insertions = None
-    angle = None
-    if anterior is not None:
-        a = np.asarray(anterior, dtype=np.float64)
-        angle = float(template.angle(a.reshape(1, 3))[0]) if a.size == 3 else float(a)
-    elif touch is not None:
-        pts = np.stack([coords[2 - a][touch[:, 2 - a]] for a in range(3)], axis=1)
-        ant, inf, septum, width = _insertions(template, pts, touch[:, normal])
-        if not np.isfinite(ant):
-            raise VentricleFitError(
-                f"the right-ventricle label {rv!r} touches the myocardium in too few voxels "
-                f"({len(touch)}) to find the insertions; check rv="
-            )
-        # the anterior wall is 90 degrees from the middle of the septum, on the side of
-        # the anterior insertion (positive about the apex-to-base axis)
-        angle, insertions = float(np.mod(septum + 90.0, 360.0)), (ant, inf)
-        w = float(np.median(width))
-        if not 40.0 <= w <= 240.0:
-            _warn(
-                flags, "rv_contact",
-                f"the right ventricle touches the LV myocardium over {w:.0f} degrees per "
-                "slice (median; a septum spans about 120): check rv= (the RV wall or blood "
-                "pool, not the LV blood pool)",
-            )  # fmt: skip
-    template = VentricleTemplate(geometry, c, t.rotation, anterior=angle)
-    if angle is None:
-        _warn(
-            flags, "anterior_unknown",
-            "no rv= or anterior=: the anterior wall (AHA segment 1) is unknown; segments are "
-            "numbered from the template's +x axis",
-            warn=False,
-        )  # fmt: skip
+    untold = VentricleTemplate(geometry, t.centre, t.rotation)
+    angle, insertions = _anterior(untold, anterior, touch, rv, stack, flags)
+    template = VentricleTemplate(geometry, t.centre, t.rotation, anterior=angle)
 
     # residuals, checks and the segments
-    qn, qp = template.to_local(endo), template.to_local(epi)
-    endo_res = _distance(qn, *g.inner)
-    epi_res = _distance(qp, *g.outer)
+    endo_res = _distance(template.to_local(endo), *g.inner)
+    epi_res = _distance(template.to_local(epi), *g.outer)
     base_res = template.to_local(base_used)[:, 2] - truncation if len(base_used) else np.empty(0)
-    limit = in_plane if max_residual is None else float(max_residual)
+    limit = stack.in_plane if max_residual is None else float(max_residual)
     rms = float(np.sqrt(np.mean(np.concatenate([endo_res, epi_res]) ** 2)))
     if rms > limit:
         _warn(
@@ -606,7 +549,7 @@ def fit_ventricle_to_mask(
             "by default): the mask is not well described by the truncated ellipsoid; check "
             "the segmentation",
         )  # fmt: skip
-    tilt = float(np.degrees(np.arccos(np.clip(abs(float(template.axis @ e_n)), 0.0, 1.0))))
+    tilt = float(np.degrees(np.arccos(np.clip(abs(float(template.axis @ stack.e_n)), 0.0, 1.0))))
     if not hold and tilt > 30.0:
         _warn(
             flags, "axis",
@@ -614,41 +557,7 @@ def fit_ventricle_to_mask(
             f"off the slice normal ({slice_axis}); the rings of slices this oblique are "
             "elongated: resample the images across the long axis, or pass axis='slice'",
         )  # fmt: skip
-    grid = np.stack(np.meshgrid(*coords, indexing="ij"), axis=-1)[inside][:, ::-1]
-    segment = _aha(template, grid)
-    counts = np.bincount(segment, minlength=18)[1:]
-    qz = template.to_local(grid)[:, 2]
-    lo_view, hi_view = float(qz.min()), float(qz.max())  # tissue voxel centres
-    bottom, top = -g.inner[1], truncation
-    third = (top - bottom) / 3.0
-    edges = {17: (-g.outer[1], bottom), 13: (bottom, bottom + third)}
-    edges |= {7: (bottom + third, bottom + 2 * third), 1: (bottom + 2 * third, top)}
-    ring_of = [17 if k == 17 else 13 if k >= 13 else 7 if k >= 7 else 1 for k in range(1, 18)]
-    ranges = {k: edges[ring_of[k - 1]] for k in range(1, 18)}
-    out_of_view = tuple(k for k, (a, b) in ranges.items() if b <= lo_view or a >= hi_view)
-    empty = [k for k in range(1, 18) if counts[k - 1] == 0 and k not in out_of_view]
-    if out_of_view:
-        _warn(
-            flags, "out_of_view",
-            f"AHA segments {list(out_of_view)} lie outside the imaged tissue (voxel centres "
-            f"at {lo_view:.1f} .. {hi_view:.1f} mm along the axis from the template centre) "
-            "and are empty",
-            warn=False,
-        )  # fmt: skip
-    if empty:
-        _warn(
-            flags, "empty_segments",
-            f"AHA segments {empty} hold no tissue voxel although their level is in view: "
-            "their strain will be missing (NaN); check the segmentation and the base level",
-        )  # fmt: skip
-    top_face = hi_view + 0.5 * step_n * abs(float(template.axis @ e_n))
-    if truncation > top_face + 3.0:
-        _warn(
-            flags, "base_out_of_view",
-            f"the base plane lies {truncation - top_face:.1f} mm beyond the imaged tissue: a "
-            "mesh of this mask has no facets on it (an empty 'base' boundary); hold the top "
-            "face of the mesh instead",
-        )  # fmt: skip
+    counts, out_of_view = _segments_in_view(template, stack, slices.inside, flags)
     return VentricleFit(
         template,
         endo_res,
@@ -658,5 +567,5 @@ def fit_ventricle_to_mask(
         segment_voxels=counts,
         out_of_view=out_of_view,
         insertions=insertions,
-        apex_uncertainty=uncertainty if not apex_in_view and apex_level is None else None,
+        apex_uncertainty=uncertainty,
     )

@@ -288,7 +288,7 @@ class VentricleFit:
         base points).
     flags : dict of str to str
         Problems found, by name, each with its numbers (empty for a clean fit); the same
-        text was issued as a :class:`~harpx.anatomy.mask_fit.VentricleFitWarning` unless
+        text was issued as a :class:`~harpx.anatomy.mask_slices.VentricleFitWarning` unless
         noted. Names:
         ``"residual"`` (rms above the limit), ``"axis"`` (fitted axis far off the slice
         normal), ``"apex_extrapolated"`` (apex out of view, placed by the ellipsoid),
