@@ -284,3 +284,21 @@ def test_axis_far_off_the_slice_normal_is_flagged():
     assert "axis" in fit.flags
     # the fit itself is still good (measured 0.06 degrees, rms 0.55 mm): a flag, not an error
     assert np.degrees(np.arccos(min(fit.template.axis @ truth.axis, 1.0))) < 1.0
+
+
+def test_a_speck_is_dropped_and_flagged_without_moving_the_fit():
+    stack = short_axis_stack()
+    speckled = stack.copy()
+    speckled.values[0, 1, 1] = 1  # one voxel in a corner, far from the wall
+    with pytest.warns(VentricleFitWarning):
+        clean = fit_ventricle_to_mask(stack, base_side="high", base_level=10.0)
+    with pytest.warns(VentricleFitWarning):
+        fit = fit_ventricle_to_mask(speckled, base_side="high", base_level=10.0)
+    assert re.match(
+        r"1 specks of 1 voxels in all \(< 1 % of the \d+-voxel", fit.flags["dropped_specks"]
+    )
+    assert "dropped_specks" not in clean.flags
+    # the speck takes no part in the fit: the same template to rounding
+    assert np.allclose(fit.template.centre, clean.template.centre, atol=1e-9)
+    assert fit.template.geometry.inner == pytest.approx(clean.template.geometry.inner, abs=1e-9)
+    assert np.array_equal(fit.segment_voxels, clean.segment_voxels)

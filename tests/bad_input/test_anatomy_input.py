@@ -49,6 +49,12 @@ def _two_blobs() -> xr.DataArray:
     return short_axis_stack(template=left, half=80.0) | short_axis_stack(template=right, half=80.0)
 
 
+def _nan() -> xr.DataArray:
+    stack = short_axis_stack().astype(np.float64)
+    stack.values[0, 0, 0] = np.nan
+    return stack
+
+
 def _far_rv() -> xr.DataArray:
     stack = short_axis_stack()
     stack.values[:, :3, :3] = 2  # a corner far from the ventricle
@@ -81,6 +87,30 @@ def _far_rv() -> xr.DataArray:
                      "2 ring slices cannot place it", id="apex-unlocatable"),
         pytest.param(lambda: short_axis_stack() * 0.7, {**GIVEN, "myocardium": 1},
                      "tissue fraction, not integer labels", id="labels-of-a-fraction"),
+        pytest.param(_nan, GIVEN, "the mask contains NaN or inf", id="nan"),
+        pytest.param(short_axis_stack, {**GIVEN, "myocardium": 3},
+                     r"labels \[3\] are not in the mask \(present: \[1\]\)", id="label-missing"),
+        pytest.param(short_axis_stack, {**GIVEN, "slice_axis": "w"}, "slice_axis='w' must be",
+                     id="slice-axis"),
+        pytest.param(short_axis_stack, {"base_side": "up", "base_level": 10.0},
+                     "base_side='up' must be", id="base-side"),
+        pytest.param(short_axis_stack, {**GIVEN, "rv": 2, "anterior": 0.0},
+                     "either rv=.* or anterior=, not both", id="rv-and-anterior"),
+        pytest.param(short_axis_stack, {**GIVEN, "axis": "tilted"}, "axis='tilted' must be",
+                     id="axis-name"),
+        pytest.param(short_axis_stack, {**GIVEN, "axis": [0.0, 0.0, 0.0]},
+                     "must be a finite non-zero vector", id="axis-zero"),
+        pytest.param(short_axis_stack, {"base_side": "high", "axis": [0.0, 0.0, -1.0]},
+                     r"base_side='high' contradicts axis=\[0\.0, 0\.0, -1\.0\]",
+                     id="base-side-contradicts-axis"),
+        pytest.param(volume, {"apex_level": -70.0}, "this mask is fitted in 3-D",
+                     id="apex-level-in-3d"),
+        pytest.param(volume, {"axis": [1.0, 0.0, 0.9]},
+                     r"48\.0 degrees off the normal of the slices \(z, limit 45\)",
+                     id="axis-hint-3d-far"),
+        pytest.param(volume, {"base_level": 200.0},
+                     r"base plane from base_level=200 mm lies .* outside the cavity",
+                     id="base-beyond-the-cavity"),
     ],
 )  # fmt: skip
 def test_untrustworthy_fits_refuse(mask, kwargs, match):
