@@ -32,28 +32,38 @@ name. Further named facet sets come from predicates on facet centres and outward
 NetCDF file, an :class:`xarray.DataArray` or a NIfTI file (with nibabel, an optional
 dependency);
 :func:`body_from_segmentation` goes straight to a :class:`~harpx.mechanics.body.Body`.
+This module checks the input, its memory need and names the result; the three steps are in
+:mod:`harpx.anatomy.voxel_mesh`.
 
 Units: mm throughout.
 """
 
 from __future__ import annotations
 
+import inspect
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.ndimage as ndi
-import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
 from harpx._moved import moved_getattr
 from harpx._typing import FloatArray, IntArray
+from harpx.anatomy.voxel_mesh import (
+    _cubes,
+    _LevelSet,
+    _outer_labels,
+    _smoothed,
+    _surface_distance,
+    _voxel_mesh,
+    _with_quality,
+)
 from harpx.errors import HarpxError, HarpxWarning, user_stacklevel
 from harpx.io.labels import read_labels
 from harpx.mechanics.mesh import MeshSpec, hex_mesh, labelled_spec
-from harpx.mechanics.quality import MeshQuality, scaled_jacobian
+from harpx.mechanics.quality import MeshQuality
 
 __all__ = [
     "MAX_BYTES",
@@ -78,15 +88,6 @@ _BYTES_PER_VOXEL_LABEL = 8
 _BYTES_PER_BOX_CUBE = 24
 _BYTES_PER_BOX_CUBE_LABEL = 8
 _BYTES_PER_CELL = 5000
-# cubes sampled per pass (bounds the temporary sample arrays to ~30 MB)
-_CHUNK = 1 << 15
-
-#: VTK corner offsets (x, y, z) of a hexahedron in a structured grid
-_VTK_OFFSETS = np.array(
-    [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]
-)
-# sub-samples per cube edge used for the label fractions
-_SUBSAMPLES = 3
 
 FacetPredicate = Callable[[FloatArray, FloatArray], ArrayLike]
 
@@ -152,20 +153,6 @@ def _padded(values: Any, first: IntArray, last: IntArray) -> FloatArray:
     return np.pad(inner, pad, mode="constant", constant_values=0.0)
 
 
-def _cube_ijk(ids: IntArray, n: IntArray) -> IntArray:
-    """(x, y, z) indices (m, 3) of cubes with flat ids (x fastest) on an ``n`` grid."""
-    ids = np.asarray(ids, dtype=np.int64)
-    return np.stack([ids % n[0], (ids // n[0]) % n[1], ids // (n[0] * n[1])], axis=1)
-
-
-def _cube_samples(ijk: IntArray, origin: FloatArray, h: float) -> FloatArray:
-    """The ``_SUBSAMPLES``³ sample points (m·27, 3) of cubes, mm."""
-    sub = (np.arange(_SUBSAMPLES) + 0.5) / _SUBSAMPLES
-    sz, sy, sx = np.meshgrid(sub, sub, sub, indexing="ij")
-    offsets = np.stack([sx.ravel(), sy.ravel(), sz.ravel()], axis=1)
-    return (origin + h * (ijk[:, None, :] + offsets[None])).reshape(-1, 3)
-
-
 def _margin(h: float, step_zyx: FloatArray, sigma: float) -> IntArray:
     """Background voxels kept or padded around the meshed labels, per (z, y, x) axis.
 
@@ -225,62 +212,59 @@ def _check_size(
     )
 
 
-def _surface_distance(
-    points: FloatArray,
-    level: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
-    phi: FloatArray,
-    lo: FloatArray,
-    step: FloatArray,
-) -> FloatArray:
-    """Distance (mm) of points from the 0.5 level of ``phi`` (see :func:`mesh_from_labels`)."""
-    x = points.copy()
-    todo = np.ones(len(x), dtype=bool)
-    for _ in range(12):  # Newton steps onto the level set, each at most one voxel
-        value, g = level(x[todo])
-        g2 = np.einsum("ni,ni->n", g, g)
-        done = np.abs(value) < 1e-4
-        ok = (g2 > 0) & ~done
-        delta = np.zeros_like(g)
-        delta[ok] = -(value[ok] / g2[ok])[:, None] * g[ok]
-        length = np.linalg.norm(delta, axis=1, keepdims=True)
-        delta *= np.minimum(1.0, float(step.min()) / np.maximum(length, 1e-300))
-        idx = np.nonzero(todo)[0]
-        x[idx] += delta
-        todo[idx[done | (g2 == 0)]] = False
-        if not todo.any():
-            break
-    value, _ = level(x)
-    out = np.linalg.norm(x - points, axis=1)
-    # where the smoothed level set is flat (far from the surface) Newton does not reach it:
-    # the Euclidean distance transform of the thresholded level set, to half a voxel
-    lost = np.abs(value) > 1e-3
-    if lost.any():
-        inside = phi >= 0.5
-        edt = ndi.distance_transform_edt(~inside, sampling=step[::-1])
-        edt = edt + ndi.distance_transform_edt(inside, sampling=step[::-1])
-        coarse = _sample(np.asarray(edt), points[lost], lo, step) - 0.5 * float(step.max())
-        out[lost] = np.maximum(coarse, 0.0)
-    return out
+def _labels_to_mesh(
+    da: Any, values: Any, mesh_labels: Sequence[int] | None, max_labels: int
+) -> tuple[bool, list[int], list[int]]:
+    """Whether the volume holds integer labels, its non-zero labels and those to mesh;
+    refuses NaN, an empty volume, an intensity image and labels that are not there."""
+    if not np.all(np.isfinite(values)):
+        raise ValueError("labels contain NaN or inf; fill them (e.g. labels.fillna(0))")
+    integral, present = _labels_present(values)
+    if not present:
+        raise SegmentationError(
+            f"labels {getattr(da, 'name', None) or ''!s} of shape {values.shape} hold no "
+            "foreground (every voxel is 0); pass the segmentation, not an empty mask"
+        )
+    if mesh_labels is None and len(present) > max_labels:
+        raise SegmentationError(
+            f"labels hold {len(present)} distinct non-zero values (more than max_labels="
+            f"{max_labels}), which looks like an intensity image rather than a segmentation; "
+            "pass an integer label volume, or mesh_labels=[...] to mesh only some labels"
+        )
+    meshed = list(present) if mesh_labels is None else [int(v) for v in mesh_labels]
+    missing = sorted(set(meshed) - set(present))
+    if missing or not meshed:
+        raise ValueError(
+            f"mesh_labels={mesh_labels!r}: labels {missing!r} are not in the volume "
+            f"(present: {present[:20]!r}{' ...' if len(present) > 20 else ''})"
+        )
+    return integral, present, meshed
 
 
-def _sample(volume: FloatArray, points: FloatArray, lo: FloatArray, step: FloatArray) -> FloatArray:
-    """Linear interpolation of a (z, y, x) volume at points (n, 3; x, y, z mm), 0 outside."""
-    index = ((points - lo) / step)[:, ::-1]
-    return ndi.map_coordinates(volume, index.T, order=1, mode="constant", cval=0.0)
-
-
-def _adjacency(pairs: IntArray, n: int) -> sp.csr_matrix:
-    a = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    a = ((a + a.T) > 0).astype(np.float64)
-    return sp.csr_matrix(a)
-
-
-def _laplacian_step(x: FloatArray, adjacency: sp.csr_matrix, movable: IntArray) -> FloatArray:
-    degree = np.asarray(adjacency.sum(axis=1)).ravel()[movable]
-    mean = (adjacency[movable] @ x) / np.maximum(degree, 1.0)[:, None]
-    out = x.copy()
-    out[movable] = np.where(degree[:, None] > 0, 0.5 * (x[movable] + mean), x[movable])
-    return out
+def _predicate_facets(
+    boundaries: Mapping[str, FacetPredicate],
+    centres: FloatArray,
+    level: _LevelSet,
+    bfacets: IntArray,
+) -> dict[str, IntArray]:
+    """The facets each predicate of ``boundaries`` selects from its facet centres (mm) and
+    outward normals (of the level set); warns about a predicate that selects none."""
+    _, gc = level(centres)
+    normals = -gc / np.maximum(np.linalg.norm(gc, axis=1, keepdims=True), 1e-12)
+    named: dict[str, IntArray] = {}
+    for name, predicate in boundaries.items():
+        hit = np.asarray(predicate(centres, normals), dtype=bool)
+        named[name] = np.sort(bfacets[hit]).astype(np.int64)
+        if not hit.any():
+            warnings.warn(
+                f"boundary {name!r} selects none of the {len(bfacets)} boundary facets "
+                "(its predicate is False everywhere); a load or condition on it would act "
+                "on nothing: check the predicate (e.g. the template's base plane against "
+                "the extent of the mask)",
+                HarpxWarning,
+                stacklevel=user_stacklevel(),
+            )
+    return named
 
 
 def mesh_from_labels(
@@ -394,27 +378,7 @@ def mesh_from_labels(
     if not 0.0 < min_quality < 1.0:
         raise ValueError(f"min_quality={min_quality!r} must lie in (0, 1)")
     values = np.asarray(da.values)
-    if not np.all(np.isfinite(values)):
-        raise ValueError("labels contain NaN or inf; fill them (e.g. labels.fillna(0))")
-    integral, present = _labels_present(values)
-    if not present:
-        raise SegmentationError(
-            f"labels {getattr(da, 'name', None) or ''!s} of shape {values.shape} hold no "
-            "foreground (every voxel is 0); pass the segmentation, not an empty mask"
-        )
-    if mesh_labels is None and len(present) > max_labels:
-        raise SegmentationError(
-            f"labels hold {len(present)} distinct non-zero values (more than max_labels="
-            f"{max_labels}), which looks like an intensity image rather than a segmentation; "
-            "pass an integer label volume, or mesh_labels=[...] to mesh only some labels"
-        )
-    meshed = list(present) if mesh_labels is None else [int(v) for v in mesh_labels]
-    missing = sorted(set(meshed) - set(present))
-    if missing or not meshed:
-        raise ValueError(
-            f"mesh_labels={mesh_labels!r}: labels {missing!r} are not in the volume "
-            f"(present: {present[:20]!r}{' ...' if len(present) > 20 else ''})"
-        )
+    integral, present, meshed = _labels_to_mesh(da, values, mesh_labels, max_labels)
 
     # the volume around the meshed labels, padded with background beyond the grid: each
     # voxel fills its extent (half a step either side of its centre), so the 0.5 level of
@@ -431,8 +395,7 @@ def mesh_from_labels(
     _check_size(h, extent, step_zyx, float(sigma), nlabel, tissue, max_bytes)
     margin = _margin(h, step_zyx, float(sigma))
     first = where.min(axis=0) - margin
-    last = where.max(axis=0) + margin
-    crop = _padded(values, first, last)
+    crop = _padded(values, first, where.max(axis=0) + margin)
     lo = lo + first[::-1] * step
     if integral:
         ints = np.rint(crop).astype(np.int64)
@@ -446,147 +409,44 @@ def mesh_from_labels(
     label_names = {v: ("body" if not integral else f"label_{v}") for v in present}
     label_names |= {int(k): str(v) for k, v in (names or {}).items()}
     is_meshed = np.isin(present, meshed)
-
-    # 1. cubes over the voxel extent of the meshed labels, one cube of margin
-    box_lo = lo + (margin[::-1] - 0.5) * step
-    box_hi = lo + (np.asarray(crop.shape[::-1]) - 1 - margin[::-1] + 0.5) * step
-    n = np.ceil((box_hi - box_lo) / h - 1e-9).astype(np.int64) + 2  # cubes per axis (x, y, z)
-    origin = 0.5 * (box_lo + box_hi) - 0.5 * n * h
     indicators = (
         np.stack([(ints == v).astype(np.float64) for v in present])  # a few labels
         if integral
         else crop[None].astype(np.float64)
     )
-    foreground = indicators[is_meshed].sum(axis=0)
-    ncube = int(np.prod(n))
-    fractions = np.empty((len(present), ncube))
-    for start in range(0, ncube, _CHUNK):  # bounded temporary arrays
-        ids = np.arange(start, min(start + _CHUNK, ncube))
-        samples = _cube_samples(_cube_ijk(ids, n), origin, h)
-        for k, ind in enumerate(indicators):  # a few labels
-            fractions[k, ids] = _sample(ind, samples, lo, step).reshape(len(ids), -1).mean(axis=1)
-    active = fractions[is_meshed].sum(axis=0) >= 0.5
-    components, count = ndi.label(active.reshape(tuple(n[::-1])))
-    if count == 0:
+
+    # 1. cubes, 2. boundary projection and smoothing, 3. quality (module notes)
+    cubes = _cubes(indicators, is_meshed, present, margin, lo, step, h)
+    if cubes is None:
         raise SegmentationError(
             f"no cube of {h:g} mm is at least half covered by labels {meshed!r}; choose a "
             "smaller element_size"
         )
-    sizes = np.bincount(components.ravel())[1:]
-    keep = components.ravel() == 1 + int(np.argmax(sizes))
-    dropped = int(active.sum() - keep.sum())
-    cube_ids = np.nonzero(keep)[0]
-    cube_ijk = _cube_ijk(cube_ids, n)  # (ncell, 3) as (x, y, z)
-    meshed_ids = np.nonzero(is_meshed)[0]
-    cell_label = np.asarray(present)[meshed_ids[np.argmax(fractions[meshed_ids][:, cube_ids], 0)]]
-
-    # 2. vertices and VTK hexahedra
-    corners = cube_ijk[:, None, :] + _VTK_OFFSETS[None]  # (ncell, 8, 3)
-    flat = (corners[..., 2] * (n[1] + 1) + corners[..., 1]) * (n[0] + 1) + corners[..., 0]
-    used, cells = np.unique(flat.ravel(), return_inverse=True)
-    cells = cells.reshape(-1, 8)
-    vi = np.stack(
-        [used % (n[0] + 1), (used // (n[0] + 1)) % (n[1] + 1), used // ((n[0] + 1) * (n[1] + 1))],
-        axis=1,
-    )
-    voxel_points = origin + h * vi
+    voxel_points, vi, cells = _voxel_mesh(cubes)
     mesh = hex_mesh(voxel_points, cells)
     bfacets = mesh.boundary_facets()
     fverts = mesh.facets[:, bfacets].T  # (nb, 4)
-    bverts = np.unique(fverts)
-
-    # level set and its gradient on the (padded) image grid
-    phi = ndi.gaussian_filter(np.clip(foreground, 0.0, 1.0), sigma=float(sigma), mode="constant")
-    grad = np.gradient(phi, *step_zyx)  # d/dz, d/dy, d/dx
-
-    def level(p: FloatArray) -> tuple[FloatArray, FloatArray]:
-        g = np.stack([_sample(grad[2 - a], p, lo, step) for a in range(3)], axis=1)
-        return _sample(phi, p, lo, step) - 0.5, g
-
-    # boundary graph: facet sides (vertex pairs differing along one axis)
-    a_idx, b_idx = np.triu_indices(4, 1)
-    pa, pb = fverts[:, a_idx].ravel(), fverts[:, b_idx].ravel()
-    side = np.count_nonzero(vi[pa] != vi[pb], axis=1) == 1
-    npts = len(voxel_points)
-    boundary_graph = _adjacency(np.column_stack([pa[side], pb[side]]), npts)
+    level = _LevelSet(indicators[is_meshed].sum(axis=0), float(sigma), lo, step)
     edges = mesh.edges.T.astype(np.int64)
-    full_graph = _adjacency(edges, npts)
-    interior = np.setdiff1d(np.arange(npts), bverts)
-
-    x = voxel_points.copy()
-    for _ in range(int(smoothing)):  # a few smoothing + projection rounds
-        x = _laplacian_step(x, boundary_graph, bverts)
-        for _newton in range(2):
-            value, g = level(x[bverts])
-            g2 = np.einsum("ni,ni->n", g, g)
-            ok = g2 > 1e-12
-            delta = np.where(ok[:, None], -value[:, None] * g / np.where(ok, g2, 1.0)[:, None], 0)
-            length = np.linalg.norm(delta, axis=1, keepdims=True)
-            delta *= np.minimum(1.0, 0.5 * h / np.maximum(length, 1e-300))
-            x[bverts] += delta
-        offset = x - voxel_points
-        length = np.linalg.norm(offset, axis=1, keepdims=True)
-        x = voxel_points + offset * np.minimum(1.0, h / np.maximum(length, 1e-300))
-    if smoothing:
-        for _ in range(2 * int(smoothing)):
-            x = _laplacian_step(x, full_graph, interior)
-
-    # 3. quality: pull vertices of poor cells back towards the voxel mesh
-    restored = np.zeros(npts, dtype=bool)
-    for _ in range(40):  # geometric: each round halves the offsets of the poor cells
-        quality = scaled_jacobian(x, cells)
-        bad = quality < min_quality
-        if not bad.any():
-            break
-        verts = np.unique(cells[bad])
-        restored[verts] = True
-        x[verts] = voxel_points[verts] + 0.5 * (x[verts] - voxel_points[verts])
-    else:
-        x = voxel_points.copy()
-        restored[:] = True
-    quality = scaled_jacobian(x, cells)
-    if np.any(quality <= 0):  # pragma: no cover - the voxel mesh is the fallback
-        raise RuntimeError(f"{int((quality <= 0).sum())} inverted cells after smoothing")
-    far = _surface_distance(x[bverts], level, phi, lo, step)
+    x = _smoothed(voxel_points, vi, edges, fverts, level, int(smoothing), h)
+    x, restored, quality = _with_quality(x, voxel_points, cells, min_quality)
+    far = _surface_distance(x[np.unique(fverts)], level)
     mesh = hex_mesh(x, cells)
 
     # names: regions from labels, facets from the label on their outer side
     regions = {
-        label_names[int(v)]: np.nonzero(cell_label == v)[0].astype(np.int64)
+        label_names[int(v)]: np.nonzero(cubes.label == v)[0].astype(np.int64)
         for v in meshed
-        if np.any(cell_label == v)
+        if np.any(cubes.label == v)
     }
     owner = mesh.f2t[0, bfacets]
-    fcentre_voxel = voxel_points[fverts].mean(axis=1)
-    cube_centre = origin + h * (cube_ijk[owner] + 0.5)
-    outward = np.rint(2.0 * (fcentre_voxel - cube_centre) / h).astype(np.int64)
-    nb_ijk = cube_ijk[owner] + outward
-    nb_flat = (nb_ijk[:, 2] * n[1] + nb_ijk[:, 1]) * n[0] + nb_ijk[:, 0]
-    nb_frac = fractions[:, nb_flat]  # (nlabel, nb)
-    background = 1.0 - nb_frac.sum(axis=0)
-    winner = np.argmax(np.vstack([background[None], nb_frac]), axis=0) - 1
-    outer = np.where(winner >= 0, np.asarray(present)[np.maximum(winner, 0)], 0)
-    outer = np.where(np.isin(outer, meshed), 0, outer)
+    outer = _outer_labels(cubes, owner, voxel_points[fverts].mean(axis=1), present, meshed)
     named: dict[str, IntArray] = {}
     for v in np.unique(outer):  # a few neighbouring labels
         name = "exterior" if v == 0 else label_names[int(v)]
         named[name] = np.sort(bfacets[outer == v]).astype(np.int64)
     if boundaries:
-        centres = x[fverts].mean(axis=1)
-        _, gc = level(centres)
-        normals = -gc / np.maximum(np.linalg.norm(gc, axis=1, keepdims=True), 1e-12)
-        for name, predicate in boundaries.items():
-            hit = np.asarray(predicate(centres, normals), dtype=bool)
-            named[name] = np.sort(bfacets[hit]).astype(np.int64)
-            if not hit.any():
-                warnings.warn(
-                    f"boundary {name!r} selects none of the {len(bfacets)} boundary facets "
-                    "(its predicate is False everywhere); a load or condition on it would act "
-                    "on nothing: check the predicate (e.g. the template's base plane against "
-                    "the extent of the mask)",
-                    HarpxWarning,
-                    stacklevel=user_stacklevel(),
-                )
+        named |= _predicate_facets(boundaries, x[fverts].mean(axis=1), level, bfacets)
     cell_fibers = None
     if fibers is not None:
         cell_fibers = np.asarray(fibers(x[cells].mean(axis=1)), dtype=np.float64)
@@ -596,7 +456,7 @@ def mesh_from_labels(
         min_scaled_jacobian=float(quality.min()),
         mean_scaled_jacobian=float(quality.mean()),
         inverted=int(np.count_nonzero(quality <= 0)),
-        dropped_cells=dropped,
+        dropped_cells=cubes.dropped,
         max_boundary_offset=float(far.max()) if smoothing else float("nan"),
         restored_vertices=int(restored.sum()),
     )
@@ -629,8 +489,7 @@ def body_from_segmentation(
     """
     from harpx.mechanics.body import Body
 
-    mesh_keys = {"variable", "names", "mesh_labels", "smoothing", "sigma", "min_quality",
-                 "boundaries", "fibers", "max_labels", "max_bytes"}  # fmt: skip
+    mesh_keys = set(inspect.signature(mesh_from_labels).parameters) - {"labels", "element_size"}
     mesh_options = {k: v for k, v in options.items() if k in mesh_keys}
     body_options = {k: v for k, v in options.items() if k not in mesh_keys}
     result = mesh_from_labels(labels, element_size=element_size, **mesh_options)
