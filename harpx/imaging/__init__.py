@@ -13,8 +13,8 @@ _LAZY: dict[str, str] = {
     "extract_phase": "harpx.imaging.harp",
     "refinement_factors": "harpx.imaging.harp",
     "synthesize_tagged": "harpx.imaging.synth",
-    "invert_motion": "harpx.imaging.synth",
-    "gridded_displacement": "harpx.imaging.synth",
+    "invert_motion": "harpx.imaging.motion",
+    "gridded_displacement": "harpx.imaging.motion",
     "PhaseSampler": "harpx.imaging.sample",
     "track_harp": "harpx.imaging.harptrack",
 }

@@ -24,10 +24,8 @@ Acquisition effects, in this order:
    1 for SPAMM): real Gaussian on the CSPAMM difference, complex Gaussian then modulus
    (Rician) for SPAMM.
 
-The inverse motion :math:`\chi_t^{-1}` comes from ``inverse`` when given, otherwise from the
-vectorised fixed point :math:`X \leftarrow x - u(X, t)` (warm-started from the previous
-frame) with a Newton polish for points where it stalls; a :class:`~harpx.errors.ConvergenceError`
-says when the motion cannot be inverted (e.g. it folds).
+The inverse motion :math:`\chi_t^{-1}` comes from ``inverse`` when given, otherwise from
+:func:`harpx.imaging.motion.invert_motion`.
 """
 
 from __future__ import annotations
@@ -38,22 +36,15 @@ from typing import Any, Literal, Required, TypedDict
 import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
-from scipy import ndimage
 
-from harpx.errors import ConvergenceError
 from harpx.imaging.fft import fft2, ifft2
+from harpx.imaging.motion import Motion, gridded_displacement, invert_motion
 from harpx.imaging.stacks import tagged_dataset
 from harpx.schema import AXES, GRID_DIMS
 
-__all__ = [
-    "AcquisitionOptions",
-    "gridded_displacement",
-    "invert_motion",
-    "synthesize_tagged",
-    "voxel_density",
-]
+# invert_motion and gridded_displacement stay importable from here (their home is motion)
+__all__ = ["AcquisitionOptions", "synthesize_tagged", "voxel_density"]
 
-Motion = Callable[[NDArray[np.float64], float], NDArray[np.float64]]
 Density = Callable[[NDArray[np.float64]], NDArray[np.float64]]
 
 
@@ -82,180 +73,6 @@ class AcquisitionOptions(TypedDict, total=False):
 
 #: Points processed per block (bounds memory: ~ 30 doubles per point are alive at once).
 BLOCK_POINTS = 1 << 20
-
-
-# --------------------------------------------------------------------------------------------
-# motion helpers
-# --------------------------------------------------------------------------------------------
-def _jacobian_inverse(
-    displacement: Motion, X: NDArray[np.float64], t: float, h: float
-) -> NDArray[np.float64]:
-    """Inverse of ``I + grad u`` at ``X`` by forward differences; identity where singular."""
-    base = displacement(X, t)
-    jac = np.empty((X.shape[0], 3, 3))
-    for k in range(3):
-        shifted = X.copy()
-        shifted[:, k] += h
-        jac[:, :, k] = (displacement(shifted, t) - base) / h
-        jac[:, k, k] += 1.0
-    det = np.linalg.det(jac)
-    singular = ~(np.abs(det) > 1e-8)
-    jac[singular] = np.eye(3)
-    return np.linalg.inv(jac)  # type: ignore[return-value]  # numpy stub: float64 in, out
-
-
-def invert_motion(
-    displacement: Motion,
-    x: ArrayLike,
-    t: float,
-    *,
-    start: ArrayLike | None = None,
-    tol: float = 1e-9,
-    max_iter: int = 100,
-) -> NDArray[np.float64]:
-    r"""Reference positions :math:`X` with :math:`X + u(X, t) = x` (vectorised over points).
-
-    Parameters
-    ----------
-    displacement : callable
-        ``u(X, t)``: Lagrangian displacement in mm of points ``X`` (n, 3) mm at time ``t`` ms.
-    x : array_like, shape (n, 3)
-        Spatial positions in mm, columns (x, y, z).
-    t : float
-        Time in ms.
-    start : array_like, shape (n, 3), optional
-        Initial guess (default ``x``), e.g. the solution of the previous frame.
-    tol : float, default 1e-9
-        Convergence tolerance on :math:`|X + u(X) - x|_\infty` per point, mm.
-    max_iter : int, default 100
-        Maximum number of iterations.
-
-    Returns
-    -------
-    ndarray, shape (n, 3)
-        :math:`X = \chi_t^{-1}(x)` in mm.
-
-    Raises
-    ------
-    ConvergenceError
-        If some points do not converge (the motion folds, or is too large for the
-        iteration); ``history`` holds the largest residual of every iteration.
-
-    Notes
-    -----
-    Fixed-point iteration :math:`X \leftarrow x - u(X, t) = X - r` started at ``start``
-    (or :math:`X = x`). It contracts with rate :math:`|\nabla u|`; when the residual falls by
-    less than 4× per step the update is preconditioned with :math:`(I + \nabla u)^{-1}`
-    (forward differences, refreshed whenever progress slows again), which turns it into a
-    chord/Newton iteration. Only points not yet converged are iterated.
-
-    Examples
-    --------
-    >>> from harpx.imaging.synth import invert_motion
-    >>> shift = lambda X, t: np.full_like(X, 0.5 * np.sin(X[:, :1]))
-    >>> x = np.array([[1.0, 2.0, 3.0]])
-    >>> X = invert_motion(shift, x, 0.0)
-    >>> bool(np.allclose(X + shift(X, 0.0), x, atol=1e-9))
-    True
-    """
-    x = np.asarray(x, dtype=np.float64)
-    X = x.copy() if start is None else np.array(start, dtype=np.float64)
-    h = 1e-7 * max(1.0, float(np.max(np.abs(x)))) if x.size else 1e-7
-    history: list[float] = []
-    # compact working set: points still iterating, written back to X as they converge
-    index = np.arange(x.shape[0])
-    Xa, xa = X.copy(), x
-    precond: NDArray[np.float64] | None = None
-    previous = np.inf
-    for _ in range(max_iter):
-        if index.size == 0:
-            return X
-        r = Xa + displacement(Xa, t) - xa
-        err2 = np.einsum("ij,ij->i", r, r)
-        worst = float(np.sqrt(err2.max()))
-        history.append(worst)
-        done = err2 < tol * tol
-        if done.any():
-            X[index[done]] = Xa[done]
-            keep = ~done
-            index, Xa, xa, r = index[keep], Xa[keep], xa[keep], r[keep]
-            if precond is not None:
-                precond = precond[keep]
-            if index.size == 0:
-                return X
-        if worst > 0.25 * previous:  # slow contraction: (re)build the preconditioner here
-            precond = _jacobian_inverse(displacement, Xa, t, h)
-        previous = worst
-        Xa -= r if precond is None else np.einsum("nij,nj->ni", precond, r)
-    X[index] = Xa
-    raise ConvergenceError(
-        f"inverting the motion at t={t!r} ms failed for {index.size} of {x.shape[0]} points "
-        f"after {max_iter} iterations (max |X + u(X) - x| = {history[-1]:.3g} mm > "
-        f"tol={tol:g} mm); the motion may fold (det(I + grad u) <= 0) or be too large for "
-        "the iteration; pass inverse=callable(x, t) with the exact inverse",
-        history,
-    )
-
-
-def gridded_displacement(field: xr.DataArray) -> Motion:
-    """Turn a gridded displacement (time, axis, z, y, x) into a callable ``u(X, t)``.
-
-    Trilinear in space (constant beyond the grid) and linear in time (constant beyond the
-    first and last frame). NaNs (outside the body) are filled from the nearest finite voxel.
-
-    Parameters
-    ----------
-    field : xarray.DataArray
-        Dims (time, axis, z, y, x) with coords ``time`` (ms), ``axis`` (x, y, z) and evenly
-        spaced ``z``, ``y``, ``x`` (mm); values in mm.
-
-    Returns
-    -------
-    callable
-        ``u(X, t)`` for points ``X`` (n, 3) in mm, returning (n, 3) mm.
-    """
-    dims = ("time", "axis", *GRID_DIMS)
-    if set(field.dims) != set(dims):
-        raise ValueError(f"gridded displacement needs dims {dims!r}, got {field.dims!r}")
-    field = field.transpose(*dims).sel(axis=list(AXES))
-    data = np.asarray(field.values, dtype=np.float64)
-    bad = ~np.isfinite(data)
-    if bad.any():
-        for n in range(data.shape[0]):
-            for a in range(3):
-                values = data[n, a]
-                missing = ~np.isfinite(values)
-                if missing.all():
-                    values[...] = 0.0
-                elif missing.any():
-                    idx = ndimage.distance_transform_edt(
-                        missing, return_distances=False, return_indices=True
-                    )
-                    values[...] = values[tuple(idx)]
-    times = np.asarray(field["time"].values, dtype=np.float64)
-    origin = np.array([float(field[d].values[0]) for d in GRID_DIMS])
-    step = np.array(
-        [float(np.diff(field[d].values).mean()) if field.sizes[d] > 1 else 1.0 for d in GRID_DIMS]
-    )
-
-    def u(X: NDArray[np.float64], t: float) -> NDArray[np.float64]:
-        X = np.asarray(X, dtype=np.float64)
-        index = ((X[:, [2, 1, 0]] - origin) / step).T
-        if times.size == 1:
-            frames, weights = [0], [1.0]
-        else:
-            k = int(np.clip(np.searchsorted(times, t) - 1, 0, times.size - 2))
-            w = float(np.clip((t - times[k]) / (times[k + 1] - times[k]), 0.0, 1.0))
-            frames, weights = [k, k + 1], [1.0 - w, w]
-        out = np.zeros((X.shape[0], 3))
-        for n, w in zip(frames, weights, strict=True):
-            if w == 0.0:
-                continue
-            for a in range(3):
-                out[:, a] += w * ndimage.map_coordinates(data[n, a], index, order=1, mode="nearest")
-        return out
-
-    return u
 
 
 # --------------------------------------------------------------------------------------------
@@ -412,6 +229,116 @@ def _crop_kspace(volume: NDArray[np.float64], plane: tuple[int, int], fraction: 
 # --------------------------------------------------------------------------------------------
 # the synthesiser
 # --------------------------------------------------------------------------------------------
+def _checked_acquisition(
+    shape: Sequence[int],
+    spacing: Sequence[float],
+    times: ArrayLike,
+    sequence: str,
+    snr: float | None,
+    t1: float,
+    oversample: int,
+    kspace_fraction: float,
+    slice_thickness: float | None,
+) -> tuple[tuple[int, int, int], NDArray[np.float64], NDArray[np.float64]]:
+    """The grid size, spacing (mm) and frame times (ms) of :func:`synthesize_tagged`, each
+    option checked (a ``ValueError`` names the one that is wrong)."""
+    grid = tuple(int(n) for n in shape)
+    spacing_arr = np.asarray(spacing, dtype=np.float64)
+    if len(grid) != 3 or min(grid) < 1:
+        raise ValueError(f"'shape' must be 3 positive sizes (nz, ny, nx), got {grid!r}")
+    if spacing_arr.shape != (3,) or not np.all(spacing_arr > 0):
+        raise ValueError(f"'spacing' must be 3 positive spacings (dz, dy, dx) mm, got {spacing!r}")
+    times_arr = np.atleast_1d(np.asarray(times, dtype=np.float64))
+    if times_arr.ndim != 1 or times_arr.size == 0 or not np.all(np.isfinite(times_arr)):
+        raise ValueError(f"'times' must be a non-empty 1D array of ms, got {times!r}")
+    if times_arr[0] < 0 or np.any(np.diff(times_arr) <= 0):
+        raise ValueError(f"'times' must be >= 0 ms after tagging and increasing, got {times!r}")
+    if sequence not in ("SPAMM", "CSPAMM"):
+        raise ValueError(f"'sequence' must be 'SPAMM' or 'CSPAMM', got {sequence!r}")
+    if snr is not None and not snr > 0:
+        raise ValueError(f"'snr' must be positive or None, got {snr!r}")
+    if not t1 > 0:
+        raise ValueError(f"'t1' must be positive (ms), got {t1!r}")
+    if (
+        isinstance(oversample, bool)
+        or not isinstance(oversample, int | np.integer)
+        or oversample < 1
+    ):
+        raise ValueError(f"'oversample' must be an integer >= 1, got {oversample!r}")
+    if not 0.0 < kspace_fraction <= 1.0:
+        raise ValueError(f"'kspace_fraction' must be in (0, 1], got {kspace_fraction!r}")
+    if slice_thickness is not None and not slice_thickness > 0:
+        raise ValueError(
+            f"'slice_thickness' must be positive (mm) or None, got {slice_thickness!r}"
+        )
+    return (grid[0], grid[1], grid[2]), spacing_arr, times_arr
+
+
+def _voxel_centres(
+    shape: tuple[int, int, int], spacing: NDArray[np.float64], origin: Sequence[float] | None
+) -> list[NDArray[np.float64]]:
+    """Voxel centres along z, y, x (mm); ``origin`` is voxel (0, 0, 0), default the grid
+    centred on 0."""
+    if origin is None:
+        origin_arr = -0.5 * (np.asarray(shape) - 1) * spacing
+    else:
+        origin_arr = np.asarray(origin, dtype=np.float64)
+        if origin_arr.shape != (3,):
+            raise ValueError(f"'origin' must be (z0, y0, x0) in mm, got {origin!r}")
+    return [origin_arr[k] + spacing[k] * np.arange(shape[k]) for k in range(3)]
+
+
+def _slice_lattices(
+    slice_axes: Sequence[str],
+    slice_thickness: float | None,
+    spacing: NDArray[np.float64],
+    oversample: int,
+) -> dict[tuple[Any, ...], tuple[list[NDArray[np.float64]], list[int]]]:
+    """One sampling lattice per distinct slice profile: its sub-sample offsets along z, y, x
+    (``oversample`` per voxel; across a slice of ``slice_thickness`` as many as cover it at
+    that density) and the tags that share it, and so share the motion's inversion."""
+    iso = [_offsets(oversample, spacing[k]) for k in range(3)]
+    lattices: dict[tuple[Any, ...], tuple[list[NDArray[np.float64]], list[int]]] = {}
+    for j, s in enumerate(slice_axes):
+        offs = []
+        for k, dim in enumerate(GRID_DIMS):
+            if dim == s and slice_thickness is not None:
+                nsub = max(oversample, int(np.ceil(oversample * slice_thickness / spacing[k])))
+                offs.append(_offsets(nsub, slice_thickness))
+            else:
+                offs.append(iso[k])
+        key = tuple(tuple(np.round(o, 12)) for o in offs)
+        lattices.setdefault(key, (offs, []))[1].append(j)
+    return lattices
+
+
+def _tag_signal(
+    rho: NDArray[np.float64], theta: NDArray[np.float64], sequence: str, beta: float, fade: float
+) -> NDArray[np.float64]:
+    """Tagged signal of tissue density ``rho`` at tag phase ``theta`` (rad) with tag fading
+    ``fade`` = exp(-t/T1): ``rho * m`` of the module notes."""
+    if sequence == "CSPAMM":
+        signal: NDArray[np.float64] = rho * (2.0 * np.sin(beta) ** 2 * fade) * np.cos(theta)
+        return signal
+    tagged = np.cos(beta) ** 2 + np.sin(beta) ** 2 * np.cos(theta)
+    spamm: NDArray[np.float64] = rho * (tagged * fade + (1.0 - fade))
+    return spamm
+
+
+def _with_noise(
+    image: NDArray[np.float64], sequence: str, sigma: float, rng: np.random.Generator
+) -> NDArray[np.float64]:
+    """Images with the noise of the module notes (step 3), standard deviation ``sigma``; a
+    noise-free SPAMM image is its modulus."""
+    if sigma > 0:
+        if sequence == "CSPAMM":
+            noisy: NDArray[np.float64] = image + sigma * rng.standard_normal(image.shape)
+            return noisy
+        noise = rng.standard_normal((2, *image.shape))
+        return np.hypot(image + sigma * noise[0], sigma * noise[1])
+    return np.abs(image) if sequence == "SPAMM" else image
+
+
 def synthesize_tagged(
     displacement: Motion | xr.DataArray,
     *,
@@ -508,35 +435,9 @@ def synthesize_tagged(
     >>> ds.image.dims, ds.attrs["harpx_schema"]
     (('tag', 'time', 'z', 'y', 'x'), 'tagged/1')
     """
-    shape = tuple(int(n) for n in shape)
-    spacing_arr = np.asarray(spacing, dtype=np.float64)
-    if len(shape) != 3 or min(shape) < 1:
-        raise ValueError(f"'shape' must be 3 positive sizes (nz, ny, nx), got {shape!r}")
-    if spacing_arr.shape != (3,) or not np.all(spacing_arr > 0):
-        raise ValueError(f"'spacing' must be 3 positive spacings (dz, dy, dx) mm, got {spacing!r}")
-    times_arr = np.atleast_1d(np.asarray(times, dtype=np.float64))
-    if times_arr.ndim != 1 or times_arr.size == 0 or not np.all(np.isfinite(times_arr)):
-        raise ValueError(f"'times' must be a non-empty 1D array of ms, got {times!r}")
-    if times_arr[0] < 0 or np.any(np.diff(times_arr) <= 0):
-        raise ValueError(f"'times' must be >= 0 ms after tagging and increasing, got {times!r}")
-    if sequence not in ("SPAMM", "CSPAMM"):
-        raise ValueError(f"'sequence' must be 'SPAMM' or 'CSPAMM', got {sequence!r}")
-    if snr is not None and not snr > 0:
-        raise ValueError(f"'snr' must be positive or None, got {snr!r}")
-    if not t1 > 0:
-        raise ValueError(f"'t1' must be positive (ms), got {t1!r}")
-    if (
-        isinstance(oversample, bool)
-        or not isinstance(oversample, int | np.integer)
-        or oversample < 1
-    ):
-        raise ValueError(f"'oversample' must be an integer >= 1, got {oversample!r}")
-    if not 0.0 < kspace_fraction <= 1.0:
-        raise ValueError(f"'kspace_fraction' must be in (0, 1], got {kspace_fraction!r}")
-    if slice_thickness is not None and not slice_thickness > 0:
-        raise ValueError(
-            f"'slice_thickness' must be positive (mm) or None, got {slice_thickness!r}"
-        )
+    shape, spacing_arr, times_arr = _checked_acquisition(
+        shape, spacing, times, sequence, snr, t1, oversample, kspace_fraction, slice_thickness
+    )
     beta_deg = (45.0 if sequence == "SPAMM" else 90.0) if flip_angle is None else float(flip_angle)
     beta = np.deg2rad(beta_deg)
     labels, direction, frequency, slice_axes = _parse_tags(tags, tag_period, slice_axis)
@@ -549,15 +450,7 @@ def synthesize_tagged(
             f"'displacement' must be a callable u(X, t) or a DataArray, got {type(displacement)!r}"
         )
     rng = np.random.default_rng(rng)
-
-    nz, ny, nx = shape
-    if origin is None:
-        origin_arr = -0.5 * (np.asarray(shape) - 1) * spacing_arr
-    else:
-        origin_arr = np.asarray(origin, dtype=np.float64)
-        if origin_arr.shape != (3,):
-            raise ValueError(f"'origin' must be (z0, y0, x0) in mm, got {origin!r}")
-    centres = [origin_arr[k] + spacing_arr[k] * np.arange(shape[k]) for k in range(3)]
+    centres = _voxel_centres(shape, spacing_arr, origin)
 
     def density(X: NDArray[np.float64]) -> NDArray[np.float64]:
         if body is None:
@@ -565,9 +458,7 @@ def synthesize_tagged(
         return np.clip(np.asarray(body(X), dtype=np.float64), 0.0, 1.0)
 
     # reference frame: body density (voxel averaged) and truth at the voxel centres
-    iso = [_offsets(oversample, spacing_arr[k]) for k in range(3)]
     body_img = voxel_density(density, centres, spacing_arr, oversample=oversample)
-    inside = body_img >= 0.5
     voxel_pts = _lattice_blocks(centres, [np.zeros(1)] * 3)
     u0 = np.concatenate([np.asarray(u(p, float(times_arr[0]))) for _, p in voxel_pts])
     if np.max(np.abs(u0)) > 1e-6:
@@ -577,27 +468,14 @@ def synthesize_tagged(
             "at times[0]"
         )
 
-    # one sampling lattice per distinct slice profile; tags sharing it share the inversion
-    lattices: dict[tuple, list[int]] = {}
-    offsets_of: dict[tuple, list[NDArray[np.float64]]] = {}
-    for j, s in enumerate(slice_axes):
-        offs = []
-        for k, dim in enumerate(GRID_DIMS):
-            if dim == s and slice_thickness is not None:
-                nsub = max(oversample, int(np.ceil(oversample * slice_thickness / spacing_arr[k])))
-                offs.append(_offsets(nsub, slice_thickness))
-            else:
-                offs.append(iso[k])
-        key = tuple(tuple(np.round(o, 12)) for o in offs)
-        lattices.setdefault(key, []).append(j)
-        offsets_of[key] = offs
-
+    # 1. partial volume and slice profile: the signal at each lattice's sub-samples, taken
+    # back to the reference configuration, averaged per voxel
     fade = np.exp(-times_arr / t1)
     image = np.empty((len(labels), times_arr.size, *shape))
-    truth = np.empty((times_arr.size, 3, *shape))
     wave = 2.0 * np.pi * frequency[:, None] * direction  # rad/mm, (tag, xyz)
-    for key, members in lattices.items():
-        offs = offsets_of[key]
+    for offs, members in _slice_lattices(
+        slice_axes, slice_thickness, spacing_arr, oversample
+    ).values():
         blocks = _lattice_blocks(centres, offs)
         previous: list[NDArray[np.float64] | None] = [None] * len(blocks)
         for n, t in enumerate(times_arr):
@@ -611,34 +489,23 @@ def synthesize_tagged(
                 previous[b] = X
                 rho = density(X)
                 for j in members:
-                    theta = X @ wave[j]
-                    if sequence == "CSPAMM":
-                        signal = rho * (2.0 * np.sin(beta) ** 2 * fade[n]) * np.cos(theta)
-                    else:
-                        tagged = np.cos(beta) ** 2 + np.sin(beta) ** 2 * np.cos(theta)
-                        signal = rho * (tagged * fade[n] + (1.0 - fade[n]))
+                    signal = _tag_signal(rho, X @ wave[j], sequence, beta, float(fade[n]))
                     image[j, n, zs] = _voxel_mean(signal, zs.stop - zs.start, centres, offs)
 
+    truth = np.empty((times_arr.size, 3, *shape))
     for n, t in enumerate(times_arr):
         u_vox = np.concatenate([np.asarray(u(p, float(t))) for _, p in voxel_pts])
         truth[n] = u_vox.T.reshape(3, *shape)
-    truth[:, :, ~inside] = np.nan
+    truth[:, :, body_img < 0.5] = np.nan
 
+    # 2. finite resolution, 3. noise
     if kspace_fraction < 1.0:
         for j, s in enumerate(slice_axes):
             first, second = (1 + k for k, d in enumerate(GRID_DIMS) if d != s)
             image[j] = _crop_kspace(image[j], (first, second), kspace_fraction)
-
     peak = 2.0 * np.sin(beta) ** 2 if sequence == "CSPAMM" else 1.0
     sigma = 0.0 if snr is None else peak / float(snr)
-    if sigma > 0:
-        if sequence == "CSPAMM":
-            image += sigma * rng.standard_normal(image.shape)
-        else:
-            noise = rng.standard_normal((2, *image.shape))
-            image = np.hypot(image + sigma * noise[0], sigma * noise[1])
-    elif sequence == "SPAMM":
-        image = np.abs(image)
+    image = _with_noise(image, sequence, sigma, rng)
 
     attrs: dict[str, Any] = {
         "noise_sigma": float(sigma),

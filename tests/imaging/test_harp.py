@@ -18,7 +18,8 @@ import xarray as xr
 from harpx.errors import SchemaError
 from harpx.imaging._kernels import wrap
 from harpx.imaging.harp import extract_phase, refinement_factors
-from harpx.imaging.synth import invert_motion, synthesize_tagged
+from harpx.imaging.motion import invert_motion
+from harpx.imaging.synth import synthesize_tagged
 from harpx.schema import validate
 from tests._helpers import raise_if_dask_computes, shear, still
 

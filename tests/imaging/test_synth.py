@@ -7,7 +7,8 @@ import pytest
 import xarray as xr
 
 from harpx.errors import ConvergenceError
-from harpx.imaging.synth import gridded_displacement, invert_motion, synthesize_tagged
+from harpx.imaging.motion import gridded_displacement, invert_motion
+from harpx.imaging.synth import synthesize_tagged
 from harpx.schema import validate
 from tests._helpers import shear, still
 
