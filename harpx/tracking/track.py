@@ -333,35 +333,14 @@ def track(
         overlap = constraint.points.shape[0] >= _OVERLAP_POINTS
         problem = FrameProblem(body, constraint, settings, solver, dirichlet, terms, timings,
                                executor=pool if overlap else None)  # fmt: skip
-        disk = PhaseParameters.from_dataset(phase).disk_bandpass  # the blur correction models it
-        passes = settings.effective_blur_passes if disk else 0
-        smoother, across = None, None  # checked before the first pass: it needs the wall
-        if settings.wall_smoothing is not None:
-            if passes:
-                depth = transmural_depth(body)
-                smoother = wall_smoother(body, settings.wall_smoothing, depth)
-                across = cells_across_wall(body, depth)
-            _warn_wall_smoothing(across)
-        first_tolerance = settings.tolerance
-        if passes:  # a correction pass re-converges every frame: the first pass less tightly
-            first_tolerance = max(
-                settings.tolerance, settings.tuning.first_pass_voxels * _voxel(phase)
-            )
-        result = _track_frames(problem, phase, setup_start, loose=first_tolerance)
+        plan = _BlurPlan.of(body, phase, settings)  # before the first pass: it needs the wall
+        result = _track_frames(problem, phase, setup_start, loose=plan.first_tolerance)
         wall = result.wall.copy()  # per frame, over every pass
         timings.first_pass = float(wall[1:].sum())
         pass_iterations = [int(result.iterations.sum())]
         correction_mean = np.zeros(phase.sizes["time"])
-        for _ in range(passes):
-            clock = _time.perf_counter()
-            constraint.release_frame()  # the last frame's sampler buffers, before the blur's
-            # the corrected images, built frame by frame when the constraint reads them
-            motion = result.U if smoother is None else smooth_along_wall(body, result.U, smoother)
-            corrected, correction_mean = lazily_deblurred(phase, body, motion)
-            constraint.replace_images(corrected)  # frame 0 is uncorrected: its samples stay
-            del corrected  # the constraint holds it
-            timings.blur += _time.perf_counter() - clock
-            result = _track_frames(problem, constraint.phase, _time.perf_counter(), result)
+        for _ in range(plan.passes):
+            result, correction_mean = _correction_pass(problem, phase, result, plan.smoother)
             wall[1:] += result.wall[1:]
             timings.correction_pass += float(result.wall[1:].sum())
             pass_iterations.append(int(result.iterations.sum()))
@@ -384,14 +363,72 @@ def track(
         "rigid_modes_removed": int(seen.unseen_modes.shape[0]),
         "outside_fraction": float(outside),
         "tags_off_frequency": off_frequency,
-        "blur_passes_applied": int(passes),
-        **({} if across is None else {"wall_cells_across": round(across, 2)}),
-        "first_pass_tolerance": float(first_tolerance),
-        **_blur_model_attrs(phase, passes),
+        "blur_passes_applied": int(plan.passes),
+        **({} if plan.across is None else {"wall_cells_across": round(plan.across, 2)}),
+        "first_pass_tolerance": float(plan.first_tolerance),
+        **_blur_model_attrs(phase, plan.passes),
         "iterations_per_pass": np.asarray(pass_iterations, dtype=np.int64),
         **timings.as_attrs(),
     }
-    diagnostics: dict[str, Any] = {
+    diagnostics = _diagnostics(result, correction_mean, wall, seen)
+    out = tracked_dataset(body, result.U, phase, diagnostics, attrs)
+    timings.output = _time.perf_counter() - clock
+    timings.total = _time.perf_counter() - entry
+    out.attrs.update(timings.as_attrs())
+    return out
+
+
+@dataclass(frozen=True)
+class _BlurPlan:
+    """The blur-correction passes of a run and what they need (:func:`track`)."""
+
+    passes: int  # correction passes after the first (0 without a disk band-pass)
+    first_tolerance: float  # the first pass's step tolerance, mm (looser when passes follow)
+    smoother: Any  # the along-wall smoother of the predicted motion (``wall_smoothing``)
+    across: float | None  # cells across the wall (``wall_smoothing``), None otherwise
+
+    @classmethod
+    def of(cls, body: Any, phase: xr.Dataset, settings: TrackingSettings) -> _BlurPlan:
+        disk = PhaseParameters.from_dataset(phase).disk_bandpass  # the correction models it
+        passes = settings.effective_blur_passes if disk else 0
+        smoother, across = None, None
+        if settings.wall_smoothing is not None:
+            if passes:
+                depth = transmural_depth(body)
+                smoother = wall_smoother(body, settings.wall_smoothing, depth)
+                across = cells_across_wall(body, depth)
+            _warn_wall_smoothing(across)
+        first_tolerance = settings.tolerance
+        if passes:  # a correction pass re-converges every frame: the first pass less tightly
+            first_tolerance = max(
+                settings.tolerance, settings.tuning.first_pass_voxels * _voxel(phase)
+            )
+        return cls(passes, first_tolerance, smoother, across)
+
+
+def _correction_pass(
+    problem: FrameProblem, phase: xr.Dataset, result: _Pass, smoother: Any
+) -> tuple[_Pass, np.ndarray]:
+    """One blur-correction pass: the images ``phase`` corrected for the blur of the motion
+    tracked so far (smoothed along the wall with ``smoother``), every frame tracked again
+    from ``result``; and the mean correction per frame (rad)."""
+    body, constraint, timings = problem.body, problem.constraint, problem.timings
+    clock = _time.perf_counter()
+    constraint.release_frame()  # the last frame's sampler buffers, before the blur's
+    # the corrected images, built frame by frame when the constraint reads them
+    motion = result.U if smoother is None else smooth_along_wall(body, result.U, smoother)
+    corrected, correction_mean = lazily_deblurred(phase, body, motion)
+    constraint.replace_images(corrected)  # frame 0 is uncorrected: its samples stay
+    del corrected  # the constraint holds it
+    timings.blur += _time.perf_counter() - clock
+    return _track_frames(problem, constraint.phase, _time.perf_counter(), result), correction_mean
+
+
+def _diagnostics(
+    result: _Pass, correction_mean: np.ndarray, wall: np.ndarray, seen: Any
+) -> dict[str, Any]:
+    """The per-frame and per-cell diagnostics of a tracked result (``tracked/1``)."""
+    return {
         "epsilon": result.eps,
         "epsilon_target": result.target,
         "epsilon_floor": result.floor,
@@ -407,11 +444,6 @@ def track(
         "observed_directions": (("cell",), seen.cell_rank),
         "observed_fraction": (("cell", "axis"), seen.cell_seen),
     }
-    out = tracked_dataset(body, result.U, phase, diagnostics, attrs)
-    timings.output = _time.perf_counter() - clock
-    timings.total = _time.perf_counter() - entry
-    out.attrs.update(timings.as_attrs())
-    return out
 
 
 @dataclass
