@@ -102,8 +102,8 @@ the :math:`Y_{ab}` and :math:`2\psi` for :math:`Z`, projected factors
 
 Here :math:`Y_{ab} : \bar F = g_a \cdot g_b = \tilde C_{ab}` (times :math:`\sqrt2` for
 :math:`a \ne b`) and :math:`\hat Z = P / (j \psi)`. The rank-one and rank-two parts are
-evaluated as one batched product :math:`K^T (M K)` of ``(9, 9)`` matrices per point, which
-keeps the tangent at ~0.3 s for 115k points.
+evaluated as one batched product :math:`K^T (M K)` of ``(9, 9)`` matrices per point
+(timings in ``benchmarks/results/mechanics.md``).
 
 The active fibre stress and fibre growth laws live in :mod:`harpx.mechanics.fiber_laws`.
 
