@@ -298,6 +298,16 @@ _TRACKING_OPTIONS: dict[str, str] = {
 }
 
 
+def _phase_defaults() -> dict[str, Any]:
+    """The phase options' defaults: :func:`~harpx.imaging.harp.extract_phase`'s own."""
+    import inspect
+
+    from harpx.imaging.harp import extract_phase
+
+    parameters = inspect.signature(extract_phase).parameters.values()
+    return {p.name: p.default for p in parameters if p.default is not inspect.Parameter.empty}
+
+
 def _tracking_options(parser: argparse.ArgumentParser) -> None:
     """Add the tracking options; their defaults are :class:`TrackingSettings`'s own."""
     from dataclasses import fields
@@ -534,7 +544,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="scene size: paper (13 frames of 13 × 160² voxels, 4320 cells: a minute or two) "
         "or small (5 frames of 7 × 48² voxels, 432 cells: seconds)",
     )
-    demo.add_argument("--upsample", type=int, default=2, help="in-plane phase upsampling")
+    phase_defaults = _phase_defaults()
+    demo.add_argument(
+        "--upsample",
+        type=int,
+        default=phase_defaults["upsample"],
+        help="in-plane phase upsampling",
+    )
     _tracking_options(demo)
     demo.add_argument(
         "--elements",
@@ -562,9 +578,17 @@ def build_parser() -> argparse.ArgumentParser:
     phase = sub.add_parser("phase", help="harmonic phase of a tagged archive", formatter_class=fmt)
     phase.add_argument("input", help="tagged/1 archive")
     phase.add_argument("output", help="phase/1 archive to write")
-    phase.add_argument("--upsample", type=int, default=2, help="in-plane upsampling factor")
     phase.add_argument(
-        "--radius", type=float, default=0.5, help="band-pass radius, fraction of tag frequency"
+        "--upsample",
+        type=int,
+        default=phase_defaults["upsample"],
+        help="in-plane upsampling factor",
+    )
+    phase.add_argument(
+        "--radius",
+        type=float,
+        default=phase_defaults["radius"],
+        help="band-pass radius, fraction of tag frequency",
     )
     phase.set_defaults(func=_phase)
 

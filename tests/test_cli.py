@@ -239,6 +239,23 @@ def test_tracking_defaults_are_the_librarys(command):
     assert (chosen.epsilon, chosen.effective_blur_passes, chosen.progress) == (0.1, 0, False)
 
 
+def test_phase_defaults_are_the_librarys():
+    # `harpx phase in out` and `harpx demo` extract the phase as ds.harp.phase() does
+    import inspect
+
+    from harpx.cli import build_parser
+    from harpx.imaging.harp import extract_phase
+
+    library = inspect.signature(extract_phase).parameters
+    parser = build_parser()
+    phase = parser.parse_args(["phase", "in.nc", "out.nc"])
+    assert (phase.upsample, phase.radius) == (
+        library["upsample"].default,
+        library["radius"].default,
+    )
+    assert parser.parse_args(["demo"]).upsample == library["upsample"].default
+
+
 # --- dicom: the series it found whenever it cannot choose ----------------------------------
 
 
