@@ -24,7 +24,6 @@ import argparse
 import re
 import signal
 import sys
-import textwrap
 import threading
 import time
 import warnings
@@ -32,6 +31,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from harpx.cli_output import frames_table, print_frames, print_warnings, tag_periods
 from harpx.errors import HarpxError, HarpxWarning, SchemaError
 
 _DESCRIPTION = "Motion estimation from tagged cine MRI with hyperelastic finite-element models."
@@ -45,8 +45,6 @@ _AXES = {"x": 0, "y": 1, "z": 2}
 #: Subcommands that list the warnings in their closing summary (the others print them on
 #: standard error).
 _SUMMARISED = ("track", "demo")
-#: Width of wrapped summary lines.
-_WIDTH = 100
 
 
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -134,9 +132,9 @@ def _demo(args: argparse.Namespace) -> int:
     written += [maps, runtime]
     for row in rows[1:]:  # the FE models: what happened in each frame
         print()
-        _print_frames(row["result"], row["method"])
+        print_frames(row["result"], row["method"])
     print()
-    _print_warnings(getattr(args, "warnings", []))
+    print_warnings(getattr(args, "warnings", []))
     print(f"total {time.perf_counter() - start:.1f} s")
     print(f"wrote {', '.join(p.name for p in written)} to {out}/")
     return 0
@@ -151,26 +149,10 @@ def _phase(args: argparse.Namespace) -> int:
     phase = extract_phase(ds, upsample=args.upsample, radius=args.radius)
     to_netcdf(phase, args.output)
     print(f"wrote {args.output}")
-    periods = _tag_periods(phase)
+    periods = tag_periods(phase)
     if periods:
         print(periods)
     return 0
-
-
-def _tag_periods(phase: Any) -> str:
-    """One line: per tag, the tag period the images show against the stated one (mm); ""
-    for a phase without ``tag_frequency_measured``."""
-    import numpy as np
-
-    if "tag_frequency_measured" not in phase.variables:
-        return ""
-    seen = np.asarray(phase["tag_frequency_measured"].values, dtype=float)
-    stated = np.asarray(phase["tag_frequency"].values, dtype=float)
-    parts = [
-        f"{tag} {1 / s:.2f} / {1 / f:.2f}" if np.isfinite(s) and s > 0 else f"{tag} - / {1 / f:.2f}"
-        for tag, s, f in zip(np.asarray(phase["tag"].values), seen, stated, strict=True)
-    ]
-    return "tag period seen in the images / stated (mm; - not measured): " + ", ".join(parts)
 
 
 def _track(args: argparse.Namespace) -> int:
@@ -191,96 +173,14 @@ def _track(args: argparse.Namespace) -> int:
     t = time.perf_counter()
     to_netcdf(result, args.output)
     writing = time.perf_counter() - t
-    _print_frames(result)
-    _print_warnings(getattr(args, "warnings", []))
+    print_frames(result)
+    print_warnings(getattr(args, "warnings", []))
     print(
         f"total {time.perf_counter() - start:.1f} s (reading {reading:.1f} s, tracking "
         f"{tracking:.1f} s, writing {writing:.1f} s)"
     )
     print(f"wrote {args.output}")
     return 0
-
-
-def _print_frames(ds: Any, title: str | None = None) -> None:
-    """What happened in each frame of a tracked dataset (:func:`_frames_table`), and a count."""
-    if title is None:
-        element = ds["cells"].attrs.get("element", "") if "cells" in ds else ""
-        title = f"{ds.attrs.get('method', '?')}, {ds.sizes.get('cell', 0)} {element} cells"
-    passes = ds.attrs.get("blur_passes_applied")
-    blur = f", blur correction {passes} pass{'es' if passes != 1 else ''}" if passes else ""
-    print(f"{title}{blur}; per frame:")
-    for line in _frames_table(ds):
-        print(line)
-    flags = ("target_reached", "plateau", "converged")
-    if all(k in ds for k in flags):
-        frames = range(1, ds.sizes["time"])
-        missed = [n for n in frames if not bool(ds["target_reached"].values[n])]
-        plateau = [n for n in frames if bool(ds["plateau"].values[n])]
-        stopped = [n for n in frames if not bool(ds["converged"].values[n])]
-        print(
-            f"{len(frames)} frames tracked: target missed {_which(missed)}; plateau "
-            f"{_which(plateau)}; not converged {_which(stopped)}"
-        )
-
-
-def _which(frames: Sequence[int]) -> str:
-    if not frames:
-        return "in none"
-    return ("in frame " if len(frames) == 1 else "in frames ") + ", ".join(map(str, frames))
-
-
-def _frames_table(ds: Any, *, wall_time: bool = False) -> list[str]:
-    """A tracked dataset's per-frame diagnostics as a Markdown table, with units.
-
-    ε and its target for every frame; the penalty, iterations (and ``wall_time``) of the
-    tracked frames; and a note: ``reference`` for frame 0, ``target missed``, ``plateau``
-    (ε levelled off within what the data allow), ``not converged``. Columns the dataset
-    lacks (a HARP result has no target) are left out.
-    """
-    columns: list[tuple[str, str, str]] = [
-        ("epsilon", "epsilon (rad)", "{:.3g}"),
-        ("epsilon_target", "target (rad)", "{:.3g}"),
-        ("penalty", "penalty (relative)", "{:.3g}"),
-        ("iterations", "iterations", "{:.0f}"),
-    ]
-    if wall_time:
-        columns.append(("wall_time", "wall time (s)", "{:.2f}"))
-    present = [c for c in columns if c[0] in ds]
-    flags = [k for k in ("target_reached", "plateau", "converged") if k in ds]
-    header = ["frame", "time (ms)", *(c[1] for c in present), *(["note"] if flags else [])]
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    for n, t in enumerate(ds["time"].values):
-        cells = [str(n), f"{float(t):g}"]
-        for name, _, fmt in present:
-            tracked_only = name in ("penalty", "iterations", "wall_time")
-            cells.append("" if n == 0 and tracked_only else fmt.format(float(ds[name].values[n])))
-        if flags:
-            notes = ["reference"] if n == 0 else []
-            if n and "target_reached" in ds and not bool(ds["target_reached"].values[n]):
-                notes.append("target missed")
-            if n and "plateau" in ds and bool(ds["plateau"].values[n]):
-                notes.append("plateau")
-            if n and "converged" in ds and not bool(ds["converged"].values[n]):
-                notes.append("not converged")
-            cells.append(", ".join(notes))
-        lines.append("| " + " | ".join(cells) + " |")
-    return lines
-
-
-def _print_warnings(caught: Sequence[warnings.WarningMessage]) -> None:
-    """The warnings of a run: their count and the first line of each (repeats counted)."""
-    counts: dict[str, int] = {}
-    for item in caught:
-        lines = str(item.message).strip().splitlines()
-        key = f"{item.category.__name__}: {lines[0] if lines else ''}"
-        counts[key] = counts.get(key, 0) + 1
-    if not counts:
-        print("warnings: none")
-        return
-    print(f"warnings ({len(caught)}):")
-    for text, count in counts.items():
-        repeat = f" (×{count})" if count > 1 else ""
-        print(textwrap.fill(text + repeat, _WIDTH, initial_indent="  - ", subsequent_indent="    "))
 
 
 #: TrackingSettings fields the ``demo`` and ``track`` commands expose, with their help
@@ -296,16 +196,6 @@ _TRACKING_OPTIONS: dict[str, str] = {
     "automatically until the target is met",
     "max_iterations": "Gauss-Newton iterations per penalty stage",
 }
-
-
-def _phase_defaults() -> dict[str, Any]:
-    """The phase options' defaults: :func:`~harpx.imaging.harp.extract_phase`'s own."""
-    import inspect
-
-    from harpx.imaging.harp import extract_phase
-
-    parameters = inspect.signature(extract_phase).parameters.values()
-    return {p.name: p.default for p in parameters if p.default is not inspect.Parameter.empty}
 
 
 def _tracking_options(parser: argparse.ArgumentParser) -> None:
@@ -398,7 +288,7 @@ def _report(args: argparse.Namespace) -> int:
             f"{args.archive!r} is a {kind!r} archive; report needs a 'tracked/1' archive: {hint}"
         )
     print(f"{args.archive}: {kind}, method {ds.attrs.get('method')}")
-    for line in _frames_table(ds, wall_time=True):
+    for line in frames_table(ds, wall_time=True):
         print(line)
     if "wall_time" in ds and ds.sizes["time"] and float(ds["wall_time"].values[0]) > 0:
         blur = " and the blur correction" if ds.attrs.get("blur_passes_applied") else ""
@@ -544,11 +434,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="scene size: paper (13 frames of 13 × 160² voxels, 4320 cells: a minute or two) "
         "or small (5 frames of 7 × 48² voxels, 432 cells: seconds)",
     )
-    phase_defaults = _phase_defaults()
+    from harpx.imaging.harp import DEFAULT_RADIUS, DEFAULT_UPSAMPLE  # extract_phase's
+
     demo.add_argument(
         "--upsample",
         type=int,
-        default=phase_defaults["upsample"],
+        default=DEFAULT_UPSAMPLE,
         help="in-plane phase upsampling",
     )
     _tracking_options(demo)
@@ -581,13 +472,13 @@ def build_parser() -> argparse.ArgumentParser:
     phase.add_argument(
         "--upsample",
         type=int,
-        default=phase_defaults["upsample"],
+        default=DEFAULT_UPSAMPLE,
         help="in-plane upsampling factor",
     )
     phase.add_argument(
         "--radius",
         type=float,
-        default=phase_defaults["radius"],
+        default=DEFAULT_RADIUS,
         help="band-pass radius, fraction of tag frequency",
     )
     phase.set_defaults(func=_phase)

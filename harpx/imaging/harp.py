@@ -26,7 +26,19 @@ from harpx.imaging.noise import harmonic_noise
 from harpx.imaging.tag_frequency import measure_tag_frequency, tag_frequency_mismatch
 from harpx.schema import AXES, GRID_DIMS, grid_step, standard_attrs, validate
 
-__all__ = ["extract_phase", "refinement_factors", "slice_geometry"]
+__all__ = [
+    "DEFAULT_RADIUS",
+    "DEFAULT_UPSAMPLE",
+    "extract_phase",
+    "refinement_factors",
+    "slice_geometry",
+]
+
+#: :func:`extract_phase`'s default in-plane upsampling factor (the CLI's too)
+DEFAULT_UPSAMPLE = 2
+#: :func:`extract_phase`'s default band-pass radius, a fraction of the tag frequency (the
+#: CLI's too)
+DEFAULT_RADIUS = 0.5
 
 
 def _check_upsample(upsample: int) -> None:
@@ -347,8 +359,8 @@ def slice_geometry(ds: xr.Dataset) -> dict[str, xr.Variable]:
 def extract_phase(
     ds: xr.Dataset,
     *,
-    upsample: int = 2,
-    radius: float = 0.5,
+    upsample: int = DEFAULT_UPSAMPLE,
+    radius: float = DEFAULT_RADIUS,
     threads: int | None = None,
     dtype: Literal["float32", "float64"] = "float32",
 ) -> xr.Dataset:
