@@ -137,11 +137,12 @@ def test_fe_holds_three_quarter_period_steps_where_harp_jumps(make, carrier):
         warnings.simplefilter("ignore", HarpxWarning)
         harp_out = track_harp(phase, points=scene.tagged)
     harp = float(tracking_error(harp_out, scene.tagged).mean_all)
-    # noise-free images: FE measured 0.08 mm (rotation) and 0.001 mm (translation), bounded
-    # by the issue's 0.5 mm (a third of a voxel); HARP starts each point from its last
-    # position and lands a tag (8 mm) away wherever the step exceeds half a period
-    # (measured 3.0 and 4.0 mm mean), bounded below by the issue's 2 mm
-    assert fe < 0.5, (carrier, fe)
+    # noise-free images: the issue asks for 0.5 mm (a third of a voxel); FE measured 0.071 mm
+    # (rotation) and 0.0019 mm (translation), bounded 20-30 % above so that a regression
+    # shows; HARP starts each point from its last position and lands a tag (8 mm) away
+    # wherever the step exceeds half a period (measured 3.5 and 8.1 mm mean), bounded below
+    # by the issue's 2 mm
+    assert fe < {"mechanics + slower centre": 0.085, "predictor": 0.0025}[carrier], (carrier, fe)
     assert harp > 2.0, (carrier, harp)
 
 
@@ -171,7 +172,7 @@ def test_ramped_translation_keeps_its_steady_motion_through_a_phase_tie():
         out = track(phase, scene.body())
     assert out.target_reached.all(), out.epsilon.values
     # noise-free images: measured 0.0020 mm mean against the truth, where a jump costs 8 mm
-    assert mean_error(out, scene.tagged) < 0.01
+    assert mean_error(out, scene.tagged) < 0.0025
 
 
 def test_a_whole_period_per_frame_ends_flagged():

@@ -114,8 +114,9 @@ def test_phase_follows_a_large_smooth_deformation():
     X = invert_motion(shear, x, times[1])  # the images were made without this inverse
     err = phase_errors(phase, 1, X)[:, inside(X, PERIOD / 2)].mean(axis=1)
     # requirement 0.1 rad; shear up to 0.25 moves the spectral peak by a quarter of the
-    # filter radius, adding a little bias to the static ~0.02 (measured 0.04-0.06)
-    assert np.all(err < 0.1), f"mean |phase error| per tag at t=100 ms: {err}"
+    # filter radius, adding a little bias to the static ~0.02 (measured 0.041, 0.059 and
+    # 0.043 rad per tag), bounded 20 % above the largest
+    assert np.all(err < 0.072), f"mean |phase error| per tag at t=100 ms: {err}"
 
 
 def test_upsampling_before_filtering_reduces_edge_errors(static_cspamm):

@@ -113,9 +113,10 @@ def test_analytic_near_edges_is_still_close(rng: np.random.Generator) -> None:
     phi, grad, valid = PhaseSampler(ds, 0).sample(points)
     phi_true, grad_true = expected(ds, points)
     assert valid.all()
-    # odd-reflection extension keeps edge errors second order (measured 2e-3 rad, 5e-3 rad/mm)
-    assert np.abs(wrap(phi - phi_true)).max() < 1e-2
-    assert np.abs(grad - grad_true).max() < 2e-2
+    # odd-reflection extension keeps edge errors second order (measured 1.84e-3 rad and
+    # 4.7e-3 rad/mm; bounded 25 % above)
+    assert np.abs(wrap(phi - phi_true)).max() < 2.3e-3
+    assert np.abs(grad - grad_true).max() < 5.9e-3
 
 
 def test_analytic_single_slice_2d(rng: np.random.Generator) -> None:
@@ -198,9 +199,10 @@ def test_linear_order_is_second_order(rng: np.random.Generator) -> None:
     points = random_points(ds, rng, 1000)
     phi, grad, _ = PhaseSampler(ds, 0, order=1).sample(points)
     phi_true, grad_true = expected(ds, points)
-    # trilinear: h^2/8 |D''| ~ 1e-2 rad at h = 1.5 mm (measured 6e-3); slope O(h) ~ 1e-2
-    assert np.abs(wrap(phi - phi_true)).max() < 2e-2
-    assert np.abs(grad - grad_true).max() < 3e-2
+    # trilinear: h^2/8 |D''| ~ 1e-2 rad at h = 1.5 mm (measured 5.5e-3); slope O(h) ~ 1e-2
+    # (measured 8.9e-3 rad/mm); bounded 25 % above
+    assert np.abs(wrap(phi - phi_true)).max() < 6.9e-3
+    assert np.abs(grad - grad_true).max() < 1.1e-2
 
 
 @pytest.mark.parametrize("shape", [(10, 26, 28), (1, 30, 32)], ids=["3d", "single-slice"])

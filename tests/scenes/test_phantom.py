@@ -55,9 +55,10 @@ def _edge_band(tagged: xr.Dataset, width: float) -> xr.DataArray:
 def test_fe_error_is_sub_voxel_without_tag_jumps(fe, scene):
     err = tracking_error(fe, scene.tagged)
     assert fe.target_reached.all(), fe.epsilon.values
-    # measured 0.16 mm mean, 0.51 mm p95 (1.5 mm voxels); bounds from issue 4
-    assert float(err.mean_all) < 0.3, err["mean"].values
-    assert float(err.p95_all) < 1.0, err.p95.values
+    # issue 4 asks for 0.3 mm mean and 1 mm p95 (1.5 mm voxels); measured 0.197 mm mean and
+    # 0.569 mm p95, bounded 20 % above so that a lost gain shows
+    assert float(err.mean_all) < 0.24, err["mean"].values
+    assert float(err.p95_all) < 0.68, err.p95.values
     # a tag jump would leave errors of about a tag period (6 mm) somewhere
     assert float(err.max_all) < 3.0, err["max"].values
 
@@ -105,9 +106,9 @@ def test_hex8_and_hex20_agree(phase, scene, fe):
     diff = np.sqrt(
         ((fe.displacement_grid - hex20.displacement_grid) ** 2).sum("axis", skipna=False)
     )
-    # the two element orders track the same images to the same ε: measured 0.053 mm mean
-    # difference; issue 4 asks for agreement within 0.1 mm
-    assert float(diff.isel(time=slice(1, None)).mean()) < 0.1
+    # the two element orders track the same images to the same ε: issue 4 asks for agreement
+    # within 0.1 mm; measured 0.051 mm mean difference, bounded 20 % above
+    assert float(diff.isel(time=slice(1, None)).mean()) < 0.062
     e8 = float(tracking_error(fe, scene.tagged).mean_all)
     e20 = float(tracking_error(hex20, scene.tagged).mean_all)
     assert abs(e8 - e20) < 0.1, (e8, e20)

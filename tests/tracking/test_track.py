@@ -79,9 +79,10 @@ def test_error_against_truth_is_sub_voxel(tracked, scene):
     ds, _ = scene
     err = tracking_error(tracked, ds)
     # ideal phase: the error is the coarse 144-cell model's misfit of a lagged rotation with
-    # 12 mm edge displacement; measured 0.14-0.24 mm mean per frame, bounded at 0.2 voxel
-    assert float(err.mean_all) < 0.3, err.mean.values
-    assert float(err.p95_all) < 1.0, err.p95.values
+    # 12 mm edge displacement (the requirement: 0.3 mm mean, 0.2 voxel; 1 mm p95); measured
+    # 0.217 mm mean and 0.613 mm p95, bounded 20 % above so that a lost gain shows
+    assert float(err.mean_all) < 0.26, err.mean.values
+    assert float(err.p95_all) < 0.74, err.p95.values
     # no tag jumps: a jump would leave errors near a tag period (8 mm)
     assert float(err.max_all) < 2.0, err.max.values
     assert float(err.coverage) > 0.95
