@@ -207,51 +207,17 @@ def opening_angle(
     if not np.isclose(np.mod(cut_angle + 45.0, 90.0), 45.0):
         raise ValueError(f"cut_angle={cut_angle!r} must be a multiple of 90 degrees")
     c0 = np.asarray(centre, dtype=np.float64)
-    cells = body.cells
-    centroid = body.nodes[cells].mean(axis=1)
     if slab is None:
         lo, hi = float(body.nodes[:, 2].min()), float(body.nodes[:, 2].max())
         mid, half = lo + 0.6 * (hi - lo), 0.06 * (hi - lo)
         slab = (mid - half, mid + half)
+    centroid = body.nodes[body.cells].mean(axis=1)
     keep = np.nonzero((centroid[:, 2] >= slab[0]) & (centroid[:, 2] <= slab[1]))[0]
     if keep.size == 0:
         raise ValueError(f"slab={slab!r} mm contains no cell centroid")
-    # the state that is cut: the reference, or a deformed state carried as prestrain
-    nodes = body.nodes.copy()
-    Fg = None if body.growth_tensor is None else body.growth_tensor[keep]
-    fibers = None if body.fibers_qp is None else body.fibers_qp[keep]
-    if u_reference is not None:
-        u_ref = np.asarray(u_reference, dtype=np.float64)
-        if u_ref.shape != (body.ndof,):
-            raise ValueError(f"u_reference has shape {u_ref.shape!r}; expected ({body.ndof},)")
-        F_ref = body.deformation_gradient(u_ref)[keep]
-        inv_ref = np.asarray(np.linalg.inv(F_ref), dtype=np.float64)
-        Fg = inv_ref if Fg is None else np.matmul(Fg, inv_ref)
-        nodes = nodes + u_ref.reshape(-1, 3)[: len(nodes)]
-        if fibers is not None:
-            fibers = np.einsum("eqij,eqj->eqi", F_ref, fibers)
-    sub = cells[keep]
-    used, local = np.unique(sub, return_inverse=True)
-    local = local.reshape(sub.shape)
-    pts = nodes[used]
-    # radial half-plane of the cut: e_t · (x - c) = 0 with e_r · (x - c) > 0
-    a = np.deg2rad(cut_angle)
-    e_r, e_t = np.array([np.cos(a), np.sin(a)]), np.array([-np.sin(a), np.cos(a)])
-    rel = pts[:, :2] - c0
+    nodes, Fg, fibers = _state_cut(body, keep, u_reference)
+    pts, local, faces = _cut_ring(nodes, body.cells[keep], cut_angle, c0, slab)
     size = float(np.ptp(pts[:, :2], axis=0).max())
-    on_cut = (np.abs(rel @ e_t) < 1e-9 * size) & (rel @ e_r > 0)
-    touches = on_cut[local]
-    clockwise = ((pts[local].mean(axis=1)[:, :2] - c0) @ e_t < 0)[:, None]
-    if not (np.any(touches & clockwise) and np.any(touches & ~clockwise)):
-        raise ValueError(
-            f"the slab {slab!r} mm is not a closed ring with a mesh line on the cut half-plane "
-            f"at {cut_angle!r}°; move or widen the slab"
-        )
-    copy = np.full(len(pts), -1, dtype=np.int64)
-    copy[on_cut] = len(pts) + np.arange(int(on_cut.sum()))
-    local = np.where(touches & clockwise, copy[local], local)
-    pts = np.concatenate([pts, pts[on_cut]])
-    faces = (np.nonzero(on_cut)[0], copy[on_cut])
 
     kwargs: dict[str, Any] = {} if fibers is None else {"fibers": fibers}
     with warnings.catch_warnings():  # the cut's nodes coincide on purpose
@@ -264,30 +230,7 @@ def opening_angle(
         raise AssertionError("ring Gauss points do not match the body's")  # pragma: no cover
     if Fg is not None:
         set_growth(ring, Fg)
-
-    # 3-2-1 support on the radial line opposite the cut
-    opposite = -e_r
-    rr = pts[:, :2] - c0
-    normal = np.array([-opposite[1], opposite[0]])
-    line = np.nonzero((np.abs(rr @ normal) < 1e-6 * size) & (rr @ opposite > 0))[0]
-    if line.size < 3:
-        raise ValueError("no mesh line opposite the cut for the 3-2-1 support")
-    radius = rr[line] @ opposite
-    zmid = 0.5 * (pts[line, 2].min() + pts[line, 2].max())
-    A = line[np.argmin(np.abs(pts[line, 2] - zmid) + np.abs(radius - np.median(radius)))]
-    # B: across the wall from A (far radially, close in z); C: far from A along z
-    dr = np.abs(radius - rr[A] @ opposite)
-    dz = np.abs(pts[line, 2] - pts[A, 2])
-    B = line[np.argmax(dr - 3.0 * dz)]
-    C = line[np.argmax(dz - 0.5 * dr)]
-    if B == A or C == A:
-        raise ValueError("the slab needs at least two nodes across and along the support line")
-    radial_axis = int(np.argmax(np.abs(opposite)))
-    tangential = 1 - radial_axis
-    support = NodeFixed(
-        np.stack([pts[A]] * 3 + [pts[B]] * 2 + [pts[C]]),
-        (0, 1, 2, tangential, 2, tangential),
-    )
+    support, corners = _support_opposite(pts, cut_angle, c0, size)
     result = release(ring, [support], tol=tol)
     u = result.u
     cur = pts + u.reshape(-1, 3)
@@ -309,5 +252,89 @@ def opening_angle(
             stacklevel=user_stacklevel(),
         )
     info = {"slab": tuple(slab), "cells": int(keep.size), "faces_apart_z": apart,
-            "support": (int(A), int(B), int(C))}  # fmt: skip
+            "support": corners}  # fmt: skip
     return OpeningAngle(opening, ring, u, faces, result.iterations, info, gap=gap, planar=planar)
+
+
+def _state_cut(
+    body: Body, keep: IntArray, u_reference: ArrayLike | None
+) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+    """The state that is cut: node positions (mm), the growth of the cells ``keep`` (with a
+    deformed state's :math:`F_r^{-1}` carried as prestrain) and their fibres."""
+    nodes = body.nodes.copy()
+    Fg = None if body.growth_tensor is None else body.growth_tensor[keep]
+    fibers = None if body.fibers_qp is None else body.fibers_qp[keep]
+    if u_reference is None:
+        return nodes, Fg, fibers
+    u_ref = np.asarray(u_reference, dtype=np.float64)
+    if u_ref.shape != (body.ndof,):
+        raise ValueError(f"u_reference has shape {u_ref.shape!r}; expected ({body.ndof},)")
+    F_ref = body.deformation_gradient(u_ref)[keep]
+    inv_ref = np.asarray(np.linalg.inv(F_ref), dtype=np.float64)
+    Fg = inv_ref if Fg is None else np.matmul(Fg, inv_ref)
+    nodes = nodes + u_ref.reshape(-1, 3)[: len(nodes)]
+    if fibers is not None:
+        fibers = np.einsum("eqij,eqj->eqi", F_ref, fibers)
+    return nodes, Fg, fibers
+
+
+def _cut_ring(
+    nodes: FloatArray,
+    cells: IntArray,
+    cut_angle: float,
+    c0: FloatArray,
+    slab: tuple[float, float],
+) -> tuple[FloatArray, IntArray, tuple[IntArray, IntArray]]:
+    """The ring of ``cells`` cut open along the radial half-plane at ``cut_angle``: its
+    points (the nodes on the cut doubled), its cells, and the nodes of the two cut faces
+    (counter-clockwise side, clockwise side)."""
+    used, local = np.unique(cells, return_inverse=True)
+    local = local.reshape(cells.shape)
+    pts = nodes[used]
+    # radial half-plane of the cut: e_t · (x - c) = 0 with e_r · (x - c) > 0
+    a = np.deg2rad(cut_angle)
+    e_r, e_t = np.array([np.cos(a), np.sin(a)]), np.array([-np.sin(a), np.cos(a)])
+    rel = pts[:, :2] - c0
+    size = float(np.ptp(pts[:, :2], axis=0).max())
+    on_cut = (np.abs(rel @ e_t) < 1e-9 * size) & (rel @ e_r > 0)
+    touches = on_cut[local]
+    clockwise = ((pts[local].mean(axis=1)[:, :2] - c0) @ e_t < 0)[:, None]
+    if not (np.any(touches & clockwise) and np.any(touches & ~clockwise)):
+        raise ValueError(
+            f"the slab {slab!r} mm is not a closed ring with a mesh line on the cut half-plane "
+            f"at {cut_angle!r}°; move or widen the slab"
+        )
+    copy = np.full(len(pts), -1, dtype=np.int64)
+    copy[on_cut] = len(pts) + np.arange(int(on_cut.sum()))
+    local = np.where(touches & clockwise, copy[local], local)
+    return np.concatenate([pts, pts[on_cut]]), local, (np.nonzero(on_cut)[0], copy[on_cut])
+
+
+def _support_opposite(
+    pts: FloatArray, cut_angle: float, c0: FloatArray, size: float
+) -> tuple[NodeFixed, tuple[int, int, int]]:
+    """The 3-2-1 support on the radial line opposite the cut, and its nodes A, B, C: A
+    fixed, B (across the wall) held tangentially and along z, C (along z) tangentially."""
+    a = np.deg2rad(cut_angle)
+    opposite = -np.array([np.cos(a), np.sin(a)])
+    rr = pts[:, :2] - c0
+    normal = np.array([-opposite[1], opposite[0]])
+    line = np.nonzero((np.abs(rr @ normal) < 1e-6 * size) & (rr @ opposite > 0))[0]
+    if line.size < 3:
+        raise ValueError("no mesh line opposite the cut for the 3-2-1 support")
+    radius = rr[line] @ opposite
+    zmid = 0.5 * (pts[line, 2].min() + pts[line, 2].max())
+    A = line[np.argmin(np.abs(pts[line, 2] - zmid) + np.abs(radius - np.median(radius)))]
+    # B: across the wall from A (far radially, close in z); C: far from A along z
+    dr = np.abs(radius - rr[A] @ opposite)
+    dz = np.abs(pts[line, 2] - pts[A, 2])
+    B = line[np.argmax(dr - 3.0 * dz)]
+    C = line[np.argmax(dz - 0.5 * dr)]
+    if B == A or C == A:
+        raise ValueError("the slab needs at least two nodes across and along the support line")
+    tangential = 1 - int(np.argmax(np.abs(opposite)))
+    support = NodeFixed(
+        np.stack([pts[A]] * 3 + [pts[B]] * 2 + [pts[C]]),
+        (0, 1, 2, tangential, 2, tangential),
+    )
+    return support, (int(A), int(B), int(C))
