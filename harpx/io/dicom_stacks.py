@@ -76,26 +76,7 @@ def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
     label = f"series {first.description!r} ({first.series_uid})"
     orientation = first.require("orientation")
     spacing = first.require("pixel_spacing")
-    for im in images:
-        im.require("position")
-        im.require("time")
-        im_orientation = im.require("orientation")
-        if np.max(np.abs(im_orientation - orientation)) > ORIENTATION_TOL:
-            raise HarpxError(
-                f"slices of {label} are not parallel: {im.where()} has ImageOrientationPatient "
-                f"{np.round(im_orientation, 4).tolist()} but {first.where()} has "
-                f"{np.round(orientation, 4).tolist()}; a series must be one stack of parallel "
-                "slices (split it, e.g. by passing the files of each orientation separately)"
-            )
-        im_spacing = im.require("pixel_spacing")
-        if (im.rows, im.columns) != (first.rows, first.columns) or np.max(
-            np.abs(im_spacing - spacing)
-        ) > 1e-6 * max(spacing):
-            raise HarpxError(
-                f"images of {label} differ in matrix size or PixelSpacing: {im.where()} has "
-                f"{im.rows}x{im.columns} at {im_spacing.tolist()} mm, {first.where()} "
-                f"{first.rows}x{first.columns} at {spacing.tolist()} mm"
-            )
+    _check_alike(images, orientation, spacing, label)
     _check_geometry(first, orientation, spacing, label)
     along_row, along_column = orientation[:3], orientation[3:]
     normal = np.cross(along_row, along_column)
@@ -116,24 +97,82 @@ def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
             f"against {images[base].where()}); a stack needs its slice positions to differ "
             "only along the slice normal"
         )
-    frames: list[list[_Image]] = []
-    for members in slices:
-        ims = sorted((images[k] for k in members), key=lambda im: im.time)
-        gaps = np.diff([im.time for im in ims])
-        if gaps.size and gaps.min() < _TIME_DUPLICATE:
-            k = int(np.argmin(gaps))
-            a, b = ims[k], ims[k + 1]
-            if a.sop_uid and a.sop_uid == b.sop_uid and a.frame == b.frame:
-                raise HarpxError(
-                    f"{a.where()} and {b.where()} are the same image twice (SOPInstanceUID "
-                    f"{a.sop_uid!r}): one is a copy of the other; remove the copy"
-                )
+    frames = [_cine(sorted((images[k] for k in members), key=lambda im: im.require("time")), label)
+              for members in slices]  # fmt: skip
+    times = _frame_times(frames, time_tolerance, label)
+    offsets = local[[s[0] for s in slices], 2] - local[base, 2]
+    _check_gaps(offsets, [images[s[0]] for s in slices], label)
+    below, above = _slab_margins(first, offsets, label)
+    thickness = first.thickness if first.thickness is not None and first.thickness > 0 else None
+    return _Stack(
+        uid=first.series_uid,
+        description=first.description,
+        origin=positions[base],
+        along_row=along_row,
+        along_column=along_column,
+        normal=normal,
+        pixel_spacing=spacing,
+        rows=first.rows,
+        columns=first.columns,
+        offsets=offsets,
+        slab=(float(offsets[0] - below), float(offsets[-1] + above)),
+        times=times,
+        images=frames,
+        thickness=thickness,
+    )
+
+
+def _check_alike(
+    images: list[_Image], orientation: FloatArray, spacing: FloatArray, label: str
+) -> None:
+    """Every image of a series has a position and a time, and the first one's orientation,
+    matrix size and pixel spacing; else HarpxError naming the two images."""
+    first = images[0]
+    for im in images:
+        im.require("position")
+        im.require("time")
+        im_orientation = im.require("orientation")
+        if np.max(np.abs(im_orientation - orientation)) > ORIENTATION_TOL:
             raise HarpxError(
-                f"{label} has two images at the same slice position and TriggerTime "
-                f"{ims[k].time} ms: {ims[k].where()} and {ims[k + 1].where()}; put repeated "
-                "acquisitions (e.g. CSPAMM A and B) in separate series or select the files"
+                f"slices of {label} are not parallel: {im.where()} has ImageOrientationPatient "
+                f"{np.round(im_orientation, 4).tolist()} but {first.where()} has "
+                f"{np.round(orientation, 4).tolist()}; a series must be one stack of parallel "
+                "slices (split it, e.g. by passing the files of each orientation separately)"
             )
-        frames.append(ims)
+        im_spacing = im.require("pixel_spacing")
+        if (im.rows, im.columns) != (first.rows, first.columns) or np.max(
+            np.abs(im_spacing - spacing)
+        ) > 1e-6 * max(spacing):
+            raise HarpxError(
+                f"images of {label} differ in matrix size or PixelSpacing: {im.where()} has "
+                f"{im.rows}x{im.columns} at {im_spacing.tolist()} mm, {first.where()} "
+                f"{first.rows}x{first.columns} at {spacing.tolist()} mm"
+            )
+
+
+def _cine(ims: list[_Image], label: str) -> list[_Image]:
+    """One slice's images in time order; HarpxError for two at the same TriggerTime (a copy
+    of one file, or repeated acquisitions in one series)."""
+    gaps = np.diff([im.time for im in ims])
+    if gaps.size and gaps.min() < _TIME_DUPLICATE:
+        k = int(np.argmin(gaps))
+        a, b = ims[k], ims[k + 1]
+        if a.sop_uid and a.sop_uid == b.sop_uid and a.frame == b.frame:
+            raise HarpxError(
+                f"{a.where()} and {b.where()} are the same image twice (SOPInstanceUID "
+                f"{a.sop_uid!r}): one is a copy of the other; remove the copy"
+            )
+        raise HarpxError(
+            f"{label} has two images at the same slice position and TriggerTime "
+            f"{ims[k].time} ms: {ims[k].where()} and {ims[k + 1].where()}; put repeated "
+            "acquisitions (e.g. CSPAMM A and B) in separate series or select the files"
+        )
+    return ims
+
+
+def _frame_times(frames: list[list[_Image]], time_tolerance: float, label: str) -> FloatArray:
+    """Each frame's mean TriggerTime over the slices (ms); HarpxError when the slices have
+    different numbers of frames or their times differ by more than ``time_tolerance``."""
     counts = [len(f) for f in frames]
     if len(set(counts)) > 1:
         raise HarpxError(
@@ -148,35 +187,23 @@ def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
             f"frame {int(np.argmax(spread))} (> time_tolerance={time_tolerance:g} ms); raise "
             "time_tolerance if the frames really correspond"
         )
-    offsets = local[[s[0] for s in slices], 2] - local[base, 2]
-    _check_gaps(offsets, [images[s[0]] for s in slices], label)
-    origin = positions[base]
+    mean: FloatArray = times.mean(axis=0)
+    return mean
+
+
+def _slab_margins(first: _Image, offsets: FloatArray, label: str) -> tuple[float, float]:
+    """How far the data reach beyond the first and the last slice centre (mm): half the
+    SliceThickness, else half the neighbouring gap; HarpxError for a single slice without
+    a thickness."""
     thickness = first.thickness if first.thickness is not None and first.thickness > 0 else None
     if thickness is not None:
-        below = above = 0.5 * thickness
-    elif offsets.size > 1:
-        below, above = 0.5 * (offsets[1] - offsets[0]), 0.5 * (offsets[-1] - offsets[-2])
-    else:
-        raise HarpxError(
-            f"DICOM attribute 'SliceThickness' is missing or not positive in {first.where()}; "
-            f"{label} has a single slice, so harpx needs it to know how far the slice's data "
-            "extends through plane"
-        )
-    return _Stack(
-        uid=first.series_uid,
-        description=first.description,
-        origin=origin,
-        along_row=along_row,
-        along_column=along_column,
-        normal=normal,
-        pixel_spacing=spacing,
-        rows=first.rows,
-        columns=first.columns,
-        offsets=offsets,
-        slab=(float(offsets[0] - below), float(offsets[-1] + above)),
-        times=times.mean(axis=0),
-        images=frames,
-        thickness=thickness,
+        return 0.5 * thickness, 0.5 * thickness
+    if offsets.size > 1:
+        return 0.5 * (offsets[1] - offsets[0]), 0.5 * (offsets[-1] - offsets[-2])
+    raise HarpxError(
+        f"DICOM attribute 'SliceThickness' is missing or not positive in {first.where()}; "
+        f"{label} has a single slice, so harpx needs it to know how far the slice's data "
+        "extends through plane"
     )
 
 
