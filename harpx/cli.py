@@ -434,7 +434,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="scene size: paper (13 frames of 13 × 160² voxels, 4320 cells: a minute or two) "
         "or small (5 frames of 7 × 48² voxels, 432 cells: seconds)",
     )
-    from harpx.imaging.harp import DEFAULT_RADIUS, DEFAULT_UPSAMPLE  # extract_phase's
+    from harpx.imaging.phase_parameters import DEFAULT_RADIUS, DEFAULT_UPSAMPLE
 
     demo.add_argument(
         "--upsample",

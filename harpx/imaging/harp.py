@@ -23,22 +23,11 @@ from harpx.imaging._kernels import refine_linear, refine_positions
 from harpx.imaging.bandpass import harmonic_phase
 from harpx.imaging.fft import default_threads
 from harpx.imaging.noise import harmonic_noise
+from harpx.imaging.phase_parameters import DEFAULT_RADIUS, DEFAULT_UPSAMPLE
 from harpx.imaging.tag_frequency import measure_tag_frequency, tag_frequency_mismatch
 from harpx.schema import AXES, GRID_DIMS, grid_step, standard_attrs, validate
 
-__all__ = [
-    "DEFAULT_RADIUS",
-    "DEFAULT_UPSAMPLE",
-    "extract_phase",
-    "refinement_factors",
-    "slice_geometry",
-]
-
-#: :func:`extract_phase`'s default in-plane upsampling factor (the CLI's too)
-DEFAULT_UPSAMPLE = 2
-#: :func:`extract_phase`'s default band-pass radius, a fraction of the tag frequency (the
-#: CLI's too)
-DEFAULT_RADIUS = 0.5
+__all__ = ["extract_phase", "refinement_factors", "slice_geometry"]
 
 
 def _check_upsample(upsample: int) -> None:

@@ -22,10 +22,15 @@ import xarray as xr
 from harpx.conventions import SEQUENCES
 from harpx.errors import SchemaError
 
-__all__ = ["BANDPASS_DISK", "PhaseParameters"]
+__all__ = ["BANDPASS_DISK", "DEFAULT_RADIUS", "DEFAULT_UPSAMPLE", "PhaseParameters"]
 
 #: ``attrs["bandpass"]`` of a phase extracted with the disk band-pass of ``extract_phase``.
 BANDPASS_DISK = "disk"
+#: ``extract_phase``'s default in-plane upsampling factor (the command line's too)
+DEFAULT_UPSAMPLE = 2
+#: ``extract_phase``'s default band-pass radius, a fraction of the tag frequency (the
+#: command line's too)
+DEFAULT_RADIUS = 0.5
 
 
 @dataclass(frozen=True)
