@@ -69,12 +69,7 @@ from harpx.anatomy.mask_slices import (
     _warn,
 )
 from harpx.anatomy.ventricle import VentricleGeometry
-from harpx.anatomy.ventricle_template import (
-    VentricleFit,
-    VentricleTemplate,
-    _distance,
-    fit_ventricle,
-)
+from harpx.anatomy.ventricle_template import VentricleFit, VentricleTemplate, fit_ventricle
 
 __all__ = ["fit_ventricle_to_mask"]
 
@@ -537,8 +532,8 @@ def fit_ventricle_to_mask(
     template = VentricleTemplate(geometry, t.centre, t.rotation, anterior=angle)
 
     # residuals, checks and the segments
-    endo_res = _distance(template.to_local(endo), *g.inner)
-    epi_res = _distance(template.to_local(epi), *g.outer)
+    endo_res = template.surface_distance(endo, "endo")
+    epi_res = template.surface_distance(epi, "epi")
     base_res = template.to_local(base_used)[:, 2] - truncation if len(base_used) else np.empty(0)
     limit = stack.in_plane if max_residual is None else float(max_residual)
     rms = float(np.sqrt(np.mean(np.concatenate([endo_res, epi_res]) ** 2)))

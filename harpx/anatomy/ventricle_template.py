@@ -144,6 +144,23 @@ class VentricleTemplate:
         """Transmural fraction (0 endocardium, 1 epicardium) of image points."""
         return self.geometry.transmural(self.to_local(points))
 
+    def surface_distance(self, points: ArrayLike, surface: str) -> FloatArray:
+        """Signed distance (mm) of image points (n, 3) from the endocardial (``"endo"``) or
+        epicardial (``"epi"``) ellipsoid, positive outside it: the residual of the fit.
+
+        The level-set value over its gradient (first order in the distance, exact on the
+        surface), the measure :func:`fit_ventricle` minimises.
+
+        Raises
+        ------
+        ValueError
+            If ``surface`` is neither ``"endo"`` nor ``"epi"``.
+        """
+        if surface not in ("endo", "epi"):
+            raise ValueError(f"surface={surface!r} must be 'endo' or 'epi'")
+        a, c = self.geometry.inner if surface == "endo" else self.geometry.outer
+        return _distance(self.to_local(points), a, c)
+
     def local_basis(self, points: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Radial, circumferential and longitudinal unit vectors at image points.
 

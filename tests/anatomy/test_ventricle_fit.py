@@ -114,3 +114,23 @@ def test_facet_predicates_and_base_conditions():
     tilted = VentricleTemplate(GEOMETRY, rotation=_rotation(10, 0))
     with pytest.warns(HarpxWarning, match="10.0 degrees off the image z axis"):
         tilted.base_conditions()
+
+
+def test_surface_distance_is_exact_on_the_equator_and_the_axis(rng):
+    template = VentricleTemplate(GEOMETRY, centre=(3.0, -2.0, 5.0), rotation=_rotation(20, -10))
+    # points on each surface are at distance 0 (to rounding)
+    for surface, t in (("endo", 0.0), ("epi", 1.0)):
+        on = _surface(template, t, 200, rng)
+        assert np.abs(template.surface_distance(on, surface)).max() < 1e-9
+    # along the equator (z = 0) and the long axis the level set's first-order distance is
+    # exact: r - a and |z| - c
+    local = np.array([[24.0, 0.0, 0.0], [0.0, 19.0, 0.0], [0.0, 0.0, -63.0], [0.0, 0.0, -50.0]])
+    points = template.to_image(local)
+    np.testing.assert_allclose(
+        template.surface_distance(points, "endo"), [2.0, -3.0, 3.0, -10.0], atol=1e-9
+    )
+    np.testing.assert_allclose(
+        template.surface_distance(points, "epi"), [-7.0, -12.0, -5.0, -18.0], atol=1e-9
+    )
+    with pytest.raises(ValueError, match="surface='mid' must be 'endo' or 'epi'"):
+        template.surface_distance(points, "mid")
