@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from harpx.errors import HarpxWarning
-from harpx.imaging.harp import SPAMM_MAX_RADIUS, extract_phase
+from harpx.imaging.harp import extract_phase
+from harpx.imaging.phase_parameters import SPAMM_MAX_RADIUS
 from harpx.imaging.synth import synthesize_tagged
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -48,7 +49,7 @@ def phase_error(sequence: str, radius: float) -> tuple[float, bool]:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", HarpxWarning)
         phase = extract_phase(tagged, upsample=1, radius=radius)
-    warned = any("on SPAMM images" in str(w.message) for w in caught)
+    warned = any("SPAMM images band-passed" in str(w.message) for w in caught)
     z, y, x = np.meshgrid(phase.z.values, phase.y.values, phase.x.values, indexing="ij")
     X = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
     margin = PERIOD / 2

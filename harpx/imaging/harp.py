@@ -23,11 +23,15 @@ from harpx.imaging._kernels import refine_linear, refine_positions
 from harpx.imaging.bandpass import harmonic_phase
 from harpx.imaging.fft import default_threads
 from harpx.imaging.noise import harmonic_noise
-from harpx.imaging.phase_parameters import DEFAULT_RADIUS, DEFAULT_UPSAMPLE
+from harpx.imaging.phase_parameters import (
+    DEFAULT_RADIUS,
+    DEFAULT_UPSAMPLE,
+    spamm_dc_message,
+)
 from harpx.imaging.tag_frequency import measure_tag_frequency, tag_frequency_mismatch
 from harpx.schema import AXES, GRID_DIMS, grid_step, standard_attrs, validate
 
-__all__ = ["SPAMM_MAX_RADIUS", "extract_phase", "refinement_factors", "slice_geometry"]
+__all__ = ["extract_phase", "refinement_factors", "slice_geometry"]
 
 
 def _check_upsample(upsample: int) -> None:
@@ -37,27 +41,12 @@ def _check_upsample(upsample: int) -> None:
         )
 
 
-#: Largest band-pass radius (a fraction of the tag frequency) that SPAMM images are filtered
-#: with without a warning. SPAMM keeps the tissue's untagged signal, a peak at zero
-#: frequency that grows as the tags fade (T1); a disk of radius r around the tag peak comes
-#: within (1 - r) of the tag frequency of it, and closer than a tenth its leakage swamps the
-#: phase (``benchmarks/results/spamm_radius.md``).
-SPAMM_MAX_RADIUS = 0.9
-
-
 def _warn_spamm_dc(ds: xr.Dataset, radius: float) -> None:
     """HarpxWarning when SPAMM images are band-passed so wide that the zero-frequency peak
     leaks into the harmonic image."""
-    if ds.attrs.get("sequence") == "SPAMM" and float(radius) > SPAMM_MAX_RADIUS:
-        warnings.warn(
-            f"radius={float(radius):g} on SPAMM images: the band-pass reaches within "
-            f"{1.0 - float(radius):.2g} of the tag frequency of the zero-frequency peak (the "
-            "untagged tissue signal, which SPAMM keeps and which grows as the tags fade), so "
-            "its leakage distorts the phase; use radius <= "
-            f"{SPAMM_MAX_RADIUS:g} (the default {DEFAULT_RADIUS:g}), or CSPAMM images",
-            HarpxWarning,
-            stacklevel=user_stacklevel(),
-        )
+    message = spamm_dc_message(str(ds.attrs.get("sequence")), float(radius))
+    if message:
+        warnings.warn(f"phase(): {message}", HarpxWarning, stacklevel=user_stacklevel())
 
 
 def _check_options(upsample: int, radius: float) -> None:
@@ -402,7 +391,7 @@ def extract_phase(
     radius : float, default 0.5
         Band-pass radius as a fraction of the tag frequency (dimensionless, in (0, 1]); 0.5
         keeps the DC peak of SPAMM images well out of the pass band (SPAMM above
-        :data:`SPAMM_MAX_RADIUS` warns).
+        :data:`~harpx.imaging.phase_parameters.SPAMM_MAX_RADIUS` warns).
     threads : int or None, default None
         Threads for the FFTs and the per-frame work. None means ``os.cpu_count()`` for
         in-memory data and 1 for dask-backed data (dask already parallelises over chunks).
@@ -450,8 +439,8 @@ def extract_phase(
         :data:`~harpx.imaging.tag_frequency.FREQUENCY_TOLERANCE`: the band-pass is centred
         off the images' tag peak (a wrong tag period). Dask-backed data are checked by the
         trackers instead, which compute them. Also for SPAMM images filtered with ``radius``
-        above :data:`SPAMM_MAX_RADIUS`, whose pass band takes in the leakage of the
-        zero-frequency peak.
+        above :data:`~harpx.imaging.phase_parameters.SPAMM_MAX_RADIUS`, whose pass band
+        takes in the leakage of the zero-frequency peak (the trackers warn again).
 
     Notes
     -----

@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from harpx._blas import matmul_one_thread
 from harpx.errors import HarpxWarning, SchemaError, user_stacklevel
+from harpx.imaging.phase_parameters import warn_spamm_dc
 from harpx.imaging.sample import PhaseSampler, wrap
 from harpx.imaging.tag_frequency import tag_frequency_flag
 from harpx.schema import AXES, GRID_DIMS, grid_step, newer_schema, standard_attrs, validate
@@ -131,6 +132,7 @@ def track_harp(
     iterations = _iterations(iterations)
     ds = _as_phase(ds)
     off_frequency = tag_frequency_flag(ds, "conventional HARP")
+    warn_spamm_dc(ds, "conventional HARP")
     grid = ds if points is None else points if isinstance(points, xr.Dataset) else None
     grid_points = grid is not None
     flat_index: NDArray[np.int64] | None = None

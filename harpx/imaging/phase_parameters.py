@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -20,9 +21,17 @@ import numpy as np
 import xarray as xr
 
 from harpx.conventions import SEQUENCES
-from harpx.errors import SchemaError
+from harpx.errors import HarpxWarning, SchemaError, user_stacklevel
 
-__all__ = ["BANDPASS_DISK", "DEFAULT_RADIUS", "DEFAULT_UPSAMPLE", "PhaseParameters"]
+__all__ = [
+    "BANDPASS_DISK",
+    "DEFAULT_RADIUS",
+    "DEFAULT_UPSAMPLE",
+    "SPAMM_MAX_RADIUS",
+    "PhaseParameters",
+    "spamm_dc_message",
+    "warn_spamm_dc",
+]
 
 #: ``attrs["bandpass"]`` of a phase extracted with the disk band-pass of ``extract_phase``.
 BANDPASS_DISK = "disk"
@@ -31,6 +40,39 @@ DEFAULT_UPSAMPLE = 2
 #: ``extract_phase``'s default band-pass radius, a fraction of the tag frequency (the
 #: command line's too)
 DEFAULT_RADIUS = 0.5
+#: Largest band-pass radius (a fraction of the tag frequency) that SPAMM images are filtered
+#: with without a warning. SPAMM keeps the tissue's untagged signal, a peak at zero
+#: frequency that grows as the tags fade (T1); a disk of radius r around the tag peak comes
+#: within (1 - r) of the tag frequency of it, and closer than a tenth its leakage swamps the
+#: phase (``benchmarks/results/spamm_radius.md``).
+SPAMM_MAX_RADIUS = 0.9
+
+
+def spamm_dc_message(sequence: str, radius: float) -> str:
+    """Why a phase of ``sequence`` images band-passed with ``radius`` is distorted, or "".
+
+    Parameters
+    ----------
+    sequence : str
+        ``"SPAMM"`` or ``"CSPAMM"`` (CSPAMM subtracts the zero-frequency peak: always "").
+    radius : float
+        Disk band-pass radius, a fraction of the tag frequency.
+
+    Returns
+    -------
+    str
+        For SPAMM above :data:`SPAMM_MAX_RADIUS`, a sentence naming the radius, how close
+        the pass band comes to the zero-frequency peak and what to use instead; else "".
+    """
+    if sequence != "SPAMM" or radius <= SPAMM_MAX_RADIUS:
+        return ""
+    return (
+        f"SPAMM images band-passed with radius={radius:g} (a fraction of the tag frequency): "
+        f"the band reaches within {1.0 - radius:.2g} of the tag frequency of the "
+        "zero-frequency peak (the untagged tissue signal, which SPAMM keeps and which grows "
+        f"as the tags fade), whose leakage distorts the phase; use radius <= "
+        f"{SPAMM_MAX_RADIUS:g} (the default {DEFAULT_RADIUS:g}), or CSPAMM images"
+    )
 
 
 @dataclass(frozen=True)
@@ -142,3 +184,27 @@ def _real(value: Any) -> bool:
 def _whole(value: Any) -> bool:
     """A real number that is a whole number >= 1."""
     return _real(value) and float(value) >= 1 and float(value) == int(value)
+
+
+def warn_spamm_dc(phase: xr.Dataset, tracker: str) -> None:
+    """Warn that ``tracker`` tracks from a SPAMM phase band-passed wider than
+    :data:`SPAMM_MAX_RADIUS` (a phase archive made elsewhere, or before harpx warned).
+
+    Parameters
+    ----------
+    phase : xarray.Dataset
+        The ``phase/1`` dataset about to be tracked (its ``sequence``, ``radius`` and
+        ``bandpass`` attributes are read).
+    tracker : str
+        Who tracks, for the message (e.g. ``"FE tracking"``).
+
+    Warns
+    -----
+    HarpxWarning
+        With :func:`spamm_dc_message`'s text; the tracked result records ``sequence`` and
+        ``phase_radius``.
+    """
+    params = PhaseParameters.from_dataset(phase)
+    message = spamm_dc_message(params.sequence, params.radius) if params.disk_bandpass else ""
+    if message:
+        warnings.warn(f"{tracker} from {message}", HarpxWarning, stacklevel=user_stacklevel())

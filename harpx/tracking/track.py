@@ -25,7 +25,7 @@ from harpx._progress import progress_bar
 from harpx._typing import BoolArray
 from harpx.errors import ElementInversionError, HarpxWarning, SchemaError, user_stacklevel
 from harpx.imaging.coverage import explain_missing_data, phase_direction_mismatch
-from harpx.imaging.phase_parameters import PhaseParameters
+from harpx.imaging.phase_parameters import PhaseParameters, warn_spamm_dc
 from harpx.imaging.tag_frequency import tag_frequency_flag
 from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.linsolve import LinearSolver
@@ -308,6 +308,7 @@ def track(
     if swapped:
         raise SchemaError(swapped)
     off_frequency = tag_frequency_flag(phase, "FE tracking")
+    warn_spamm_dc(phase, "FE tracking")
     check_fits_image(body, phase)  # units and size, before anything large is allocated
     constraint = PhaseConstraint(
         body, phase, intorder=settings.intorder, robust_scale=settings.effective_robust_scale

@@ -17,10 +17,14 @@ import xarray as xr
 
 from harpx.errors import HarpxWarning, SchemaError
 from harpx.imaging._kernels import wrap
-from harpx.imaging.harp import SPAMM_MAX_RADIUS, extract_phase, refinement_factors
+from harpx.imaging.harp import extract_phase, refinement_factors
+from harpx.imaging.harptrack import track_harp
 from harpx.imaging.motion import invert_motion
+from harpx.imaging.phase_parameters import SPAMM_MAX_RADIUS
 from harpx.imaging.synth import synthesize_tagged
+from harpx.scenes.phantom import phantom
 from harpx.schema import validate
+from harpx.tracking.track import track
 from tests._helpers import raise_if_dask_computes, shear, still
 
 PERIOD = 7.0
@@ -158,7 +162,7 @@ def test_spamm_dc_peak_stays_out_of_the_filter():
         return np.mean([phase_errors(phase, n, X)[:, keep].mean() for n in (0, 1)])
 
     good = error(0.5)
-    with pytest.warns(HarpxWarning, match=r"radius=1 on SPAMM images: the band-pass reaches"):
+    with pytest.warns(HarpxWarning, match=r"SPAMM images band-passed with radius=1 "):
         leaky = error(1.0)
     # noise free. SPAMM keeps the body's DC term, whose sharp-edge spectrum leaks into any
     # band: ~0.05-0.15 rad here, against ~0.01 for CSPAMM. A radius of
@@ -173,8 +177,11 @@ def test_spamm_radius_beyond_the_limit_warns_and_cspamm_does_not():
     # the limit itself is quiet: radius 0.9 gave twice the phase error of 0.5 on this
     # cylinder, 0.95 four and a half times (benchmarks/spamm_radius.py)
     extract_phase(still_spamm, upsample=1, radius=SPAMM_MAX_RADIUS)
-    with pytest.warns(HarpxWarning, match=r"radius=0.95 on SPAMM images.*radius <= 0.9"):
-        extract_phase(still_spamm, upsample=1, radius=0.95)
+    with pytest.warns(HarpxWarning, match=r"phase\(\): SPAMM .* radius=0.95 .*radius <= 0.9"):
+        wide = extract_phase(still_spamm, upsample=1, radius=0.95)
+    # an archive of it, tracked later, is warned about again
+    with pytest.warns(HarpxWarning, match=r"conventional HARP from SPAMM .* radius=0.95"):
+        track_harp(wide, points=[[0.0, 0.0, 0.0]], iterations=2)
     still_cspamm = synthesize_tagged(still, times=[0.0], sequence="CSPAMM", snr=None,
                                      body=body, oversample=1, **GRID)  # fmt: skip
     extract_phase(still_cspamm, upsample=1, radius=1.0)  # no zero-frequency peak to leak
@@ -294,3 +301,14 @@ def test_displacement_true_is_refined_lazily_one_frame_a_chunk(cine):
     refined = truth.transpose("time", "axis", "z", "y", "x").values
     # the same linear weights in another order of operations: rounding only
     np.testing.assert_allclose(refined, values, rtol=0, atol=1e-12)
+
+
+def test_fe_tracking_of_a_wide_spamm_phase_archive_is_warned_about():
+    # an archive made elsewhere (or before harpx warned) says how it was filtered in its
+    # attributes; the tracker reads them (the phase itself is the default one here, so
+    # nothing else is off: without blur passes its radius plays no other part)
+    scene = phantom("small")
+    archived = extract_phase(scene.tagged).assign_attrs(radius=0.95)
+    with pytest.warns(HarpxWarning, match=r"FE tracking from SPAMM .* radius=0.95"):
+        tracked = track(archived, scene.body(), blur_passes=0)
+    assert (tracked.attrs["sequence"], tracked.attrs["phase_radius"]) == ("SPAMM", 0.95)
