@@ -57,6 +57,7 @@ References
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -74,9 +75,9 @@ from harpx.cardiac.quality import (
     strain_seen_fraction,
     template_segment_volume,
 )
+from harpx.cardiac.wall_points import _cell_weights, _grid_strain, _hex8_gauss_points, _observation
 from harpx.conventions import ELEMENT_CORNERS
 from harpx.errors import HarpxWarning, user_stacklevel
-from harpx.mechanics.cells import VTK_HEX_CORNERS, hex8_shape
 
 __all__ = [
     "AHA_NAMES",
@@ -329,42 +330,18 @@ def lv_measures(
     data = valid if has_data is None else valid & np.asarray(has_data, dtype=bool).reshape(-1)
     seen = (np.full((len(p), 3), np.nan) if observed is None
             else strain_seen_fraction(basis, observed))  # fmt: skip
-    onehot = (segment[:, None] == np.arange(1, 18)[None, :]) & data[:, None]  # (n, 17)
-    wseg = onehot * w[:, None]
-    volume = wseg.sum(axis=0)
-    template_volume = template_segment_volume(template)
-    coverage = np.minimum(volume / template_volume, 1.0)
-    has = (coverage >= min_coverage) & (volume > 0)
-    norm = np.where(has, volume, np.nan)
-
-    def by_segment(values: FloatArray) -> FloatArray:
-        """Volume-weighted segment means of (..., n, c) values -> (..., 17, c)."""
-        filled = np.where(data[:, None], values, 0.0)
-        return np.einsum("...nc,ns->...sc", filled, wseg) / norm[:, None]
-
-    seg = by_segment(local)
-    seg_eng = by_segment(engineering)
-    seg_seen = by_segment(seen)
+    segments = _Segments.of(segment, data, w, template, min_coverage)
+    seg = segments.mean(local)
+    seg_eng = segments.mean(engineering)
+    seg_seen = segments.mean(seen)
+    coverage, has = segments.coverage, segments.has
     source = source_labels(seg_seen, has[:, None])
     peak_e, peak_t = _peak(seg, times)
     peak_eng, _ = _peak(seg_eng, times)
-
-    rot = _rotation(q0, x, template)
     levels = {"base": (segment <= 6) & data, "apex": (segment >= 13) & (segment <= 16) & data}
-
-    def level_mean(values: FloatArray, m: BoolArray) -> FloatArray:
-        """Volume-weighted mean over the points ``m`` along the last axis (NaN if none)."""
-        if not m.any():
-            return np.full(values.shape[:-1], np.nan)
-        return np.asarray((values[..., m] * w[m]).sum(axis=-1) / w[m].sum())
-
-    level_rot = np.stack([level_mean(rot, m) for m in levels.values()], axis=1)
-    height = [float(level_mean(q0[:, 2], m)) for m in levels.values()]
-    distance = height[0] - height[1]
+    level_rot, distance, twist_seen = _level_rotation(q0, x, template, levels, w, seen)
     twist = level_rot[:, 1] - level_rot[:, 0]
-    # rotation needs the in-plane motion and which material sits in the plane (longitudinal)
-    level_seen = [level_mean(seen[:, 1:].T, m) for m in levels.values()]
-    twist_seen = float(np.min(level_seen)) if observed is not None else np.nan
+    twist_seen = twist_seen if observed is not None else np.nan
     twist_source = str(source_labels(twist_seen)) if np.isfinite(distance) else "no data"
     summary = _warn_quality(coverage, has, source, twist_source, min_coverage)
 
@@ -396,9 +373,11 @@ def lv_measures(
         peak_eng, ("segment", "component"), "1", "peak segment engineering strain"
     )
     out["peak_time"] = var(peak_t, ("segment", "component"), "ms", "time of peak strain")
-    out["segment_volume"] = var(volume, ("segment",), "mm3", "volume of the segment with data")
+    out["segment_volume"] = var(
+        segments.volume, ("segment",), "mm3", "volume of the segment with data"
+    )
     out["segment_template_volume"] = var(
-        template_volume, ("segment",), "mm3", "volume of the segment in the template"
+        segments.template_volume, ("segment",), "mm3", "volume of the segment in the template"
     )
     out["strain_observed_fraction"] = var(
         seg_seen, ("segment", "component"), "1", "mean fraction of the direction the tags see"
@@ -425,70 +404,62 @@ def lv_measures(
     return out
 
 
-def _cell_weights(points: FloatArray, cells: IntArray, element: str) -> FloatArray:
-    """Cell volumes from the corner vertices, mm³: exact for straight tetrahedra; for
-    hexahedra the estimate |det J(centre)|·8."""
-    if ELEMENT_CORNERS.get(element, 8) == 4:
-        x = points[cells[:, :4]]
-        return np.abs(np.linalg.det(x[:, 1:] - x[:, :1])) / 6.0
-    x = points[cells[:, :8]]
-    d = np.einsum("nai,aj->nij", x, VTK_HEX_CORNERS) / 4.0
-    return np.abs(np.linalg.det(d))
+@dataclass(frozen=True)
+class _Segments:
+    """The wall points' AHA segments as volume weights (:func:`lv_measures`)."""
+
+    weights: FloatArray  # (n, 17): each point's volume in its segment, 0 elsewhere or no data
+    data: BoolArray  # (n,): points with data
+    volume: FloatArray  # (17,): volume with data per segment, mm³
+    template_volume: FloatArray  # (17,): the segment's volume in the template, mm³
+    coverage: FloatArray  # (17,): volume / template volume, at most 1
+    has: BoolArray  # (17,): coverage at least ``min_coverage`` (and some volume)
+
+    @classmethod
+    def of(
+        cls, segment: IntArray, data: BoolArray, w: FloatArray, template: Any, min_coverage: float
+    ) -> _Segments:
+        onehot = (segment[:, None] == np.arange(1, 18)[None, :]) & data[:, None]  # (n, 17)
+        weights = onehot * w[:, None]
+        volume = weights.sum(axis=0)
+        template_volume = template_segment_volume(template)
+        coverage = np.minimum(volume / template_volume, 1.0)
+        has = (coverage >= min_coverage) & (volume > 0)
+        return cls(weights, data, volume, template_volume, coverage, has)
+
+    def mean(self, values: FloatArray) -> FloatArray:
+        """Volume-weighted segment means of (..., n, c) values -> (..., 17, c); NaN for a
+        segment without enough data."""
+        norm = np.where(self.has, self.volume, np.nan)
+        filled = np.where(self.data[:, None], values, 0.0)
+        means: FloatArray = np.einsum("...nc,ns->...sc", filled, self.weights) / norm[:, None]
+        return means
 
 
-def _hex8_gauss_points(
-    points: FloatArray, cells: IntArray, displacement: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Reference positions (8 ncell, 3), Green strain (time, 8 ncell, 3, 3), current
-    positions (time, 8 ncell, 3) and volumes (8 ncell,) mm³ of the 2 × 2 × 2 Gauss points
-    of trilinear hexahedra (in the order of their VTK corners), cell by cell, from the nodal
-    ``displacement`` (time, node, 3) mm: the field the tracker's hex8 cells carry."""
-    shape, dshape = hex8_shape(VTK_HEX_CORNERS / np.sqrt(3.0))  # N_a(ξ_q), ∂N_a/∂ξ_k
-    x = points[cells[:, :8]]  # (e, a, i)
-    jac = np.einsum("eai,qak->eqik", x, dshape)  # ∂X_i/∂ξ_k
-    inverse = np.linalg.inv(jac)
-    grad = np.einsum("qak,eqkj->eqaj", dshape, inverse)  # ∂N_a/∂X_j
-    weights = np.abs(np.linalg.det(jac)).reshape(-1)  # Gauss weights 1
-    ue = displacement[:, cells[:, :8]]  # (t, e, a, i)
-    F = np.einsum("teai,eqaj->teqij", ue, grad) + np.eye(3)
-    E = 0.5 * (np.einsum("teqki,teqkj->teqij", F, F) - np.eye(3))
-    X = np.einsum("qa,eai->eqi", shape, x)
-    current = X[None] + np.einsum("qa,teai->teqi", shape, ue)
-    nt, ne = ue.shape[:2]
-    return X.reshape(-1, 3), E.reshape(nt, ne * 8, 3, 3), current.reshape(nt, ne * 8, 3), weights
+def _level_rotation(
+    q0: FloatArray,
+    current: FloatArray,
+    template: Any,
+    levels: dict[str, BoolArray],
+    w: FloatArray,
+    seen: FloatArray,
+) -> tuple[FloatArray, float, float]:
+    """Rotation (time, level) of each short-axis level's points (degrees, volume-weighted),
+    the distance between the levels along the axis (mm), and the smallest fraction of the
+    in-plane directions the tags see at a level."""
 
+    def level_mean(values: FloatArray, m: BoolArray) -> FloatArray:
+        """Volume-weighted mean over the points ``m`` along the last axis (NaN if none)."""
+        if not m.any():
+            return np.full(values.shape[:-1], np.nan)
+        return np.asarray((values[..., m] * w[m]).sum(axis=-1) / w[m].sum())
 
-def _grid_strain(u: xr.DataArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Voxel centres (n, 3), Green strain (time, n, 3, 3), current positions (time, n, 3)."""
-    u = u.transpose("time", "axis", "z", "y", "x")
-    data = np.asarray(u.values, dtype=np.float64)
-    z, y, x = (np.asarray(u[d].values, dtype=np.float64) for d in ("z", "y", "x"))
-    # du_i/dX_j by central differences on the grid (NaN next to missing voxels)
-    d = np.gradient(data, z, y, x, axis=(2, 3, 4))  # list over (z, y, x)
-    grad = np.stack([d[2], d[1], d[0]], axis=2)  # (time, i, j=x,y,z, z, y, x)
-    nt = data.shape[0]
-    grad = grad.reshape(nt, 3, 3, -1).transpose(0, 3, 1, 2)  # (time, n, i, j)
-    F = grad + np.eye(3)
-    E = 0.5 * (np.einsum("tnki,tnkj->tnij", F, F) - np.eye(3))
-    Z, Y, X = np.meshgrid(z, y, x, indexing="ij")
-    pts = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
-    disp = data.reshape(nt, 3, -1).transpose(0, 2, 1)
-    return pts, E, pts[None] + disp
-
-
-def _observation(tracked: xr.Dataset) -> tuple[FloatArray | None, BoolArray | None]:
-    """Per-cell seen fraction of x, y, z and cells with data of a finite-element result."""
-    if "observed_fraction" not in tracked:
-        return None, None
-    f = tracked["observed_fraction"].transpose("cell", "axis")
-    if "axis" in f.coords:
-        f = f.sel(axis=["x", "y", "z"])
-    observed = np.asarray(f.values, dtype=np.float64)
-    if "observed_directions" in tracked:
-        has = np.asarray(tracked["observed_directions"].values).reshape(-1) >= 1
-    else:
-        has = observed.sum(axis=1) > 0.0
-    return observed, has
+    rot = _rotation(q0, current, template)
+    level_rot = np.stack([level_mean(rot, m) for m in levels.values()], axis=1)
+    height = [float(level_mean(q0[:, 2], m)) for m in levels.values()]
+    # rotation needs the in-plane motion and which material sits in the plane (longitudinal)
+    level_seen = [level_mean(seen[:, 1:].T, m) for m in levels.values()]
+    return level_rot, height[0] - height[1], float(np.min(level_seen))
 
 
 def _warn_not_recorded(what: str) -> None:

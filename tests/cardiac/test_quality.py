@@ -257,7 +257,7 @@ def test_segment_means_integrate_over_the_gauss_points_of_trilinear_cells(rng):
     # independent truths: an affine motion has F = I + A at every point; for any motion the
     # Gauss points' volumes add up to skfem's cell volumes and their volume-weighted strain
     # is the cell mean harpx's Body integrates with its own 2 × 2 × 2 rule
-    from harpx.cardiac.strain import _hex8_gauss_points
+    from harpx.cardiac.wall_points import _hex8_gauss_points
 
     body = body_of()
     points = body.dof_points
