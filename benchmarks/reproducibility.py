@@ -44,22 +44,14 @@ def child(case: str, out: Path) -> None:
     import warnings
 
     sys.path.insert(0, str(HERE))
-    from track_case import _phantom, _scene
+    from track_case import inputs
 
     from harpx.imaging.harp import extract_phase
     from harpx.tracking.results import tracking_error
     from harpx.tracking.track import track
 
-    kwargs = {}
-    if case.startswith("phantom"):
-        tagged, body = _phantom("small" if case == "phantom-small" else "paper")
-        phase = extract_phase(tagged, upsample=2)
-    else:
-        name = "lv" if case.startswith("lv") else "short-axis"
-        scene = _scene(name, "small" if case.endswith("small") else "paper")
-        tagged, phase = scene.tagged, extract_phase(scene.tagged)
-        body = scene.body("stress-free") if name == "lv" else scene.body()
-        kwargs["dirichlet"] = list(scene.dirichlet() if name == "lv" else scene.dirichlet)
+    tagged, body, options, kwargs = inputs(case)
+    phase = extract_phase(tagged, **options)
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -94,6 +94,20 @@ def _cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
+def inputs(case: str) -> tuple[xr.Dataset, Any, dict[str, Any], dict[str, Any]]:
+    """The tagged images, the body, the ``extract_phase`` and the ``track`` keywords of
+    ``case`` (one of :data:`CASES`)."""
+    if case.startswith("phantom"):
+        element = "hex20" if case == "phantom-hex20" else "hex8"
+        tagged, body = _phantom("small" if case == "phantom-small" else "paper", element)
+        return tagged, body, {"upsample": 2}, {}
+    name = "lv" if case.startswith("lv") else "short-axis"
+    scene = _scene(name, "small" if case.endswith("small") else "paper")
+    body = scene.body("stress-free") if name == "lv" else scene.body()
+    dirichlet = list(scene.dirichlet() if name == "lv" else scene.dirichlet)
+    return scene.tagged, body, {}, {"dirichlet": dirichlet}
+
+
 def run(case: str) -> dict[str, Any]:
     """Run ``case`` (one of :data:`CASES`) and return its figures."""
     import harpx
@@ -101,18 +115,7 @@ def run(case: str) -> dict[str, Any]:
     from harpx.tracking.results import tracking_error
     from harpx.tracking.track import track
 
-    kwargs: dict[str, Any] = {}
-    upsample: dict[str, Any] = {}
-    if case.startswith("phantom"):
-        element = "hex20" if case == "phantom-hex20" else "hex8"
-        tagged, body = _phantom("small" if case == "phantom-small" else "paper", element)
-        upsample = {"upsample": 2}
-    else:
-        name = "lv" if case.startswith("lv") else "short-axis"
-        scene = _scene(name, "small" if case.endswith("small") else "paper")
-        tagged = scene.tagged
-        body = scene.body("stress-free") if name == "lv" else scene.body()
-        kwargs["dirichlet"] = list(scene.dirichlet() if name == "lv" else scene.dirichlet)
+    tagged, body, upsample, kwargs = inputs(case)
     wall, cpu = time.perf_counter(), _cpu()
     phase = extract_phase(tagged, **upsample)
     with warnings.catch_warnings():
