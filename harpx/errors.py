@@ -9,6 +9,17 @@ from __future__ import annotations
 import sys
 from collections.abc import Iterable, Sequence
 
+__all__ = [
+    "ArchiveError",
+    "CoincidentNodesWarning",
+    "ConvergenceError",
+    "ElementInversionError",
+    "HarpxError",
+    "HarpxWarning",
+    "SchemaError",
+    "user_stacklevel",
+]
+
 
 class HarpxError(Exception):
     """Base class of every harpx error."""

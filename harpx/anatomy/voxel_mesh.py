@@ -29,6 +29,8 @@ import scipy.sparse as sp
 from harpx._typing import FloatArray, IntArray
 from harpx.mechanics.quality import scaled_jacobian
 
+__all__: list[str] = []
+
 # cubes sampled per pass (bounds the temporary sample arrays to ~30 MB)
 _CHUNK = 1 << 15
 

@@ -18,6 +18,8 @@ from harpx._typing import BoolArray, FloatArray, IntArray
 from harpx.conventions import ELEMENT_CORNERS
 from harpx.mechanics.cells import VTK_HEX_CORNERS, hex8_shape
 
+__all__: list[str] = []
+
 
 def _cell_weights(points: FloatArray, cells: IntArray, element: str) -> FloatArray:
     """Cell volumes from the corner vertices, mm³: exact for straight tetrahedra; for

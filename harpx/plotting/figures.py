@@ -13,6 +13,14 @@ from harpx._typing import PathLike
 from harpx.errors import SchemaError
 from harpx.plotting._common import _magnitude, _require
 
+__all__ = [
+    "displacement_maps",
+    "error_vs_runtime",
+    "opening_angle_view",
+    "plot_stretch_agreement",
+    "run_seconds",
+]
+
 
 def displacement_maps(
     results: Mapping[str, xr.Dataset],

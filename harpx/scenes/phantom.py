@@ -23,6 +23,8 @@ from harpx.mechanics.mesh import MeshSpec, cylinder
 from harpx.scenes._common import MeshScene
 from harpx.scenes._motion import RotationalImpact
 
+__all__ = ["PhantomGeometry", "Scene", "phantom"]
+
 Size = Literal["small", "paper"]
 
 

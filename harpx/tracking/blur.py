@@ -107,6 +107,17 @@ from harpx.tracking.slab import (
     slice_operator,
 )
 
+__all__ = [
+    "BLUR_MODELS",
+    "SIGNAL_FLOOR",
+    "blur_correction",
+    "blur_models",
+    "deblurred",
+    "lazily_deblurred",
+    "splat",
+    "splat_operator",
+]
+
 #: Splatted signal below this fraction of its largest modulus counts as outside the tissue.
 SIGNAL_FLOOR = 1e-3
 

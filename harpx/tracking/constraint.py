@@ -61,6 +61,14 @@ from harpx.tracking.observability import Observability, observability
 if TYPE_CHECKING:
     from harpx.mechanics.body import Body
 
+__all__ = [
+    "ConstraintState",
+    "PhaseConstraint",
+    "WINDOW_PERIODS",
+    "constraint_quadrature",
+    "shear_modulus",
+]
+
 # floats per temporary block when forming element matrices (bounds memory to ~64 MB)
 _BLOCK_FLOATS = 8_000_000
 

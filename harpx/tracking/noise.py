@@ -49,6 +49,8 @@ import numpy as np
 from harpx._typing import FloatArray
 from harpx.imaging.sample import wrap
 
+__all__ = ["MAX_FADING", "epsilon_floor", "noise_floor", "reference_residual"]
+
 #: Largest growth of the floor by tag fading (a frame whose tags faded tenfold has no usable
 #: phase left; that is the sampler's magnitude floor's job to say).
 MAX_FADING = 10.0

@@ -37,6 +37,15 @@ from harpx._typing import BoolArray, FloatArray, IntArray
 if TYPE_CHECKING:
     from harpx.mechanics.body import Body
 
+__all__ = [
+    "Observability",
+    "UNSEEN_TOLERANCE",
+    "describe_direction",
+    "observability",
+    "rigid_modes",
+    "seen_projectors",
+]
+
 #: Eigenvalues of the normalised rigid-mode Gram matrix below this count as unseen.
 UNSEEN_TOLERANCE = 1e-8
 

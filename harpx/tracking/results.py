@@ -12,6 +12,14 @@ from harpx._typing import FloatArray
 from harpx.schema import fill_standard_attrs, standard_attrs
 from harpx.tracking.resample import interpolate_displacement
 
+__all__ = [
+    "acquired_grid",
+    "displacement_on_grid",
+    "grid_points",
+    "tracked_dataset",
+    "tracking_error",
+]
+
 
 def grid_points(ds: xr.Dataset) -> FloatArray:
     """Voxel-centre positions (nz·ny·nx, 3) in mm, columns (x, y, z), C order over (z, y, x)."""

@@ -14,6 +14,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+__all__ = ["SolverTuning", "TrackingSettings"]
+
 Method = Literal["penalty", "augmented-lagrangian"]
 Predictor = Literal["none", "linear"]
 Regularization = Literal["increment", "total"]

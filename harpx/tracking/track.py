@@ -48,6 +48,8 @@ from harpx.tracking.wall import (
     wall_smoother,
 )
 
+__all__ = ["track"]
+
 STRATEGIES = {"penalty": track_frame_penalty, "augmented-lagrangian": track_frame_augmented}
 #: Constraint points from which a worker thread samples the images while the solve
 #: assembles (:func:`~harpx.tracking.equilibrium.equilibrate`): below this the arrays are
