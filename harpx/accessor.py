@@ -49,7 +49,13 @@ class Forward:
         self.name = name
 
     def function(self) -> Callable[..., Any]:
-        """The function forwarded to (importing its module)."""
+        """The function forwarded to (importing its module).
+
+        Returns
+        -------
+        callable
+            ``<module>.<function>`` of :attr:`target`.
+        """
         module, _, function = self.target.rpartition(".")
         found: Callable[..., Any] = getattr(importlib.import_module(module), function)
         return found
@@ -91,6 +97,12 @@ class PlotMethods:
     Each method forwards the dataset and its keywords to the plotting function named in its
     docstring. The plotting package is imported at the first call, so matplotlib stays
     unloaded until a picture is asked for.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        The dataset to draw (a ``tagged/1``, ``phase/1`` or ``tracked/1`` dataset, as each
+        picture needs).
     """
 
     def __init__(self, ds: xr.Dataset) -> None:
@@ -111,6 +123,11 @@ class HarpAccessor:
 
     Each method forwards the dataset to the function named in its docstring; on a dataset,
     ``help(ds.harp.track)`` shows that function's whole documentation.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        The dataset the methods act on (xarray passes it when ``ds.harp`` is first read).
     """
 
     def __init__(self, ds: xr.Dataset) -> None:

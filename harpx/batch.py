@@ -296,6 +296,11 @@ def track_subject(
     -------
     pathlib.Path
         ``target``.
+
+    Raises
+    ------
+    SchemaError
+        If ``source`` is not a ``tagged/1`` or ``phase/1`` archive.
     """
     from harpx.tracking.track import track
 
@@ -425,6 +430,13 @@ def local_cluster(n_workers: int = 2) -> Any:
         Scheduler, workers and dashboard (if bokeh is installed) listen on the loopback
         interface only (127.0.0.1, a free port), never on the network. Close it (or use it
         as a context manager) when done.
+
+    Raises
+    ------
+    ValueError
+        If ``n_workers`` is below 1.
+    ImportError
+        If dask.distributed is not installed (the message says how to install it).
 
     Notes
     -----

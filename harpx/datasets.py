@@ -361,6 +361,11 @@ def shorten_mantissa(values: np.ndarray, bits: int) -> np.ndarray:
     ndarray of float64
         ``|out| <= |values|`` with the same sign, relative change below ``2**-bits``.
 
+    Raises
+    ------
+    ValueError
+        If ``bits`` is not in 1 … 52.
+
     Examples
     --------
     >>> float(shorten_mantissa(np.array([np.pi]), 8)[0])

@@ -98,6 +98,12 @@ def user_stacklevel() -> int:
     Call it where the warning is issued: ``warnings.warn(msg, HarpxWarning,
     stacklevel=user_stacklevel())``. The warning then points at the user's line however
     deep inside harpx it was raised (through the accessor, the CLI or helpers).
+
+    Returns
+    -------
+    int
+        Number of frames from the caller of this function up to the first frame whose
+        module is not part of harpx (1 when the caller is called from outside harpx).
     """
     frame = sys._getframe(1)
     level = 1

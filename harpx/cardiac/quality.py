@@ -311,8 +311,11 @@ def strain_seen_fraction(basis: tuple[FloatArray, ...], observed: ArrayLike) -> 
 
     Parameters
     ----------
-    basis, observed
-        As for :func:`seen_fraction`.
+    basis : tuple of 3 ndarray, shape (n, 3)
+        Unit radial, circumferential and longitudinal directions, as for
+        :func:`seen_fraction`.
+    observed : array_like, shape (n, 3)
+        Seen fraction of the image axes x, y, z, in [0, 1], as for :func:`seen_fraction`.
 
     Returns
     -------

@@ -312,6 +312,12 @@ def harmonic_images(
         ``radius·|freq|`` centred on ``+freq``. For a tag pattern ``A cos(2π k·x)`` it is
         about ``(A/2) exp(i 2π k·x)``.
 
+    Raises
+    ------
+    ValueError
+        If ``slices`` has fewer than 2 dimensions, ``freq`` is zero, ``radius`` is not in
+        (0, 1] or ``upsample`` is not one or two integers >= 1.
+
     Notes
     -----
     The upsampling is applied in the Fourier domain through its exact transfer function
@@ -422,6 +428,13 @@ def harmonic_phase(
         Harmonic phase ``angle(H)`` in rad, in ``[-π, π)``.
     magnitude : ndarray of ``dtype``, same shape
         ``|H|`` (image intensity units).
+
+    Raises
+    ------
+    ValueError
+        If ``dtype`` is not float32 or float64, ``volume`` has fewer than 3 dimensions,
+        ``slice_axis`` is not 0, 1 or 2, ``upsample`` is not 3 integers >= 1, the in-plane
+        tag frequency is zero, ``radius`` is not in (0, 1], or ``out`` does not match.
     """
     dtype = np.dtype(dtype)
     if dtype not in (np.dtype(np.float32), np.dtype(np.float64)):

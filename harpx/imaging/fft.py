@@ -348,6 +348,11 @@ def rfft2(a: ArrayLike, *, threads: int | None = None) -> NDArray[np.complex128]
     -------
     ndarray of complex128, shape (..., n1, n2 // 2 + 1)
         The non-negative half of the spectrum along the last axis.
+
+    Raises
+    ------
+    ValueError
+        If ``a`` has fewer than 2 dimensions or is complex.
     """
     a = np.asarray(a)
     _check2d(a, "a")
@@ -374,6 +379,11 @@ def irfft2(
     -------
     ndarray of float64, shape (..., n1, n2)
         The real inverse transform, normalised by ``1/(n1 n2)``.
+
+    Raises
+    ------
+    ValueError
+        If ``a`` has fewer than 2 dimensions or its last two do not match ``shape``.
     """
     a = np.asarray(a)
     _check2d(a, "a")

@@ -155,6 +155,11 @@ def gridded_displacement(field: xr.DataArray) -> Motion:
     -------
     callable
         ``u(X, t)`` for points ``X`` (n, 3) in mm, returning (n, 3) mm.
+
+    Raises
+    ------
+    ValueError
+        If ``field`` does not have the dims (time, axis, z, y, x).
     """
     dims = ("time", "axis", *GRID_DIMS)
     if set(field.dims) != set(dims):

@@ -191,8 +191,10 @@ def harmonic_noise(
     freq, slice_index : xarray.Variable
         :func:`harmonic_noise_block`'s arrays of the same names, with dims
         (tag, component) and (tag).
-    spacing, radius
-        As for :func:`harmonic_noise_block`.
+    spacing : (float, float, float)
+        Grid spacing (dz, dy, dx), mm, as for :func:`harmonic_noise_block`.
+    radius : float
+        Band-pass radius, as for :func:`harmonic_noise_block`.
 
     Returns
     -------

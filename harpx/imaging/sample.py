@@ -37,7 +37,7 @@ import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
 from harpx.errors import SchemaError
-from harpx.imaging._kernels import wrap
+from harpx.imaging._kernels import percentile_99, wrap
 from harpx.imaging.bspline import (
     _EDGE,
     _cubic_taps,
@@ -255,7 +255,7 @@ class PhaseSampler:
         for t in range(ntag):
             mag = magnitude[t].squeeze(axis=tuple(a - 1 for a in squeeze))
             inside = mask[t] if mask is not None and mask[t].any() else None
-            self._floor[t] = magnitude_floor * _percentile_99(mag, inside)
+            self._floor[t] = magnitude_floor * percentile_99(mag, inside)
 
     # ------------------------------------------------------------------------------------
     def sample(
@@ -314,9 +314,21 @@ class PhaseSampler:
     def phase(
         self, points: ArrayLike, *, per_tag: bool = False
     ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-        """Phase only (cheaper than :meth:`sample`): ``(phi (n, ntag), valid)``.
+        """Phase only, as :meth:`sample` without the gradient (cheaper).
 
-        ``valid`` has shape (n,), or (n, ntag) with ``per_tag`` (as in :meth:`sample`).
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            Positions in mm, columns (x, y, z).
+        per_tag : bool, default False
+            Report validity per tag, as in :meth:`sample`.
+
+        Returns
+        -------
+        phi : numpy.ndarray, shape (n, ntag)
+            Wrapped harmonic phase in rad, in [-π, π) (0 where invalid).
+        valid : numpy.ndarray of bool, shape (n,) or (n, ntag)
+            As in :meth:`sample`.
         """
         phi, _, valid = self._phase(_as_points(points), per_tag)
         return phi, valid
@@ -325,6 +337,11 @@ class PhaseSampler:
         self, points: ArrayLike
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
         """:meth:`phase` (``per_tag=True``) and :meth:`magnitude` from one evaluation.
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            Positions in mm, columns (x, y, z).
 
         Returns
         -------
@@ -350,10 +367,21 @@ class PhaseSampler:
         return phi, size, valid
 
     def magnitude(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-        """Harmonic magnitude ``|H|`` of every tag: ``(magnitude (n, ntag), valid (n,))``.
+        """Harmonic magnitude ``|H|`` of every tag at points.
 
-        Unlike :meth:`sample`, points below the magnitude floor keep their magnitude (they
-        are still reported invalid); points outside the field of view get 0.
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            Positions in mm, columns (x, y, z).
+
+        Returns
+        -------
+        magnitude : numpy.ndarray, shape (n, ntag)
+            ``|H|`` in the units of the dataset's ``magnitude``. Unlike :meth:`sample`, points
+            below the magnitude floor keep their value (they are still invalid); points
+            outside the field of view get 0.
+        valid : numpy.ndarray of bool, shape (n,)
+            As in :meth:`sample`.
         """
         pts = _as_points(points)
         _, size, valid_tags = self._evaluate(pts, derivatives=False)
@@ -374,13 +402,26 @@ class PhaseSampler:
         Returns
         -------
         numpy.ndarray of bool, shape (n, ntag)
+            True where the tag was acquired at the point.
         """
         return self._locate(_as_points(points))[1]
 
     def outside_window(self, points: ArrayLike) -> int:
-        """How many ``points`` (n, 3) mm lie in the field of view but outside the prepared
-        window (``region``): a sampler of the whole grid would sample them, this one calls
-        them invalid. 0 for a sampler of the whole grid."""
+        """Count the points in the field of view but outside the prepared window.
+
+        A sampler of the whole grid would sample them; one prepared for a ``region`` calls
+        them invalid.
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            Positions in mm, columns (x, y, z).
+
+        Returns
+        -------
+        int
+            Number of such points (0 for a sampler of the whole grid).
+        """
         if not self._windowed:
             return 0
         pts = _as_points(points)
@@ -598,46 +639,6 @@ class PhaseSampler:
         cell = np.clip(np.floor(u).astype(np.int64), 0, extended - 2)
         frac = (u - cell).astype(padded.dtype, copy=False)
         return runs, (cell + start) @ strides[:d], frac, offsets
-
-
-def _percentile_99(values: NDArray[np.floating], inside: NDArray[np.bool_] | None) -> float:
-    """``np.percentile(v, 99)`` (0 if empty) of the finite values ``v`` of ``values[inside]``.
-
-    The same number as numpy's (linear method), found without partitioning all the values:
-    the two order statistics it interpolates lie above the 98th percentile of an evenly
-    strided subsample (checked by counting; otherwise every value is partitioned), so only
-    the few values above that are partitioned.
-    """
-    keep = np.isfinite(values)  # one NaN block must not make the floor NaN
-    if inside is not None:
-        keep &= inside
-    n = int(np.count_nonzero(keep))
-    if n == 0:
-        return 0.0
-    virtual = (n - 1) * 0.99  # numpy's linear method
-    below = int(np.floor(virtual))
-    gamma = virtual - below
-    below = min(max(below, 0), n - 1)
-    above = min(below + 1, n - 1)
-    flat = values.ravel()
-    stride = max(1, flat.size // 20000)
-    probe = flat[::stride][keep.ravel()[::stride]]
-    candidates: NDArray[np.floating] | None = None
-    skipped = 0
-    if n > 50000 and probe.size > 100:
-        threshold = np.percentile(probe, 98)
-        selected = keep & (values >= threshold)
-        skipped = n - int(np.count_nonzero(selected))
-        if skipped <= below:
-            candidates = values[selected]
-    if candidates is None:
-        candidates, skipped = values[keep], 0
-    part = np.partition(candidates, [below - skipped, above - skipped])
-    a, b = part[below - skipped], part[above - skipped]
-    # numpy's _lerp, in the values' precision
-    diff = b - a
-    result = b - diff * (1.0 - gamma) if gamma >= 0.5 else a + diff * gamma
-    return float(result)
 
 
 def _floating(values: ArrayLike) -> NDArray[np.floating]:

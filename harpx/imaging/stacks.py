@@ -151,7 +151,13 @@ class SliceStack:
         )
 
     def corners(self) -> tuple[FloatArray, FloatArray]:
-        """Positions (8, 3) of the corners of the pixel-centre hull and of the slab, mm."""
+        """Corners of the pixel-centre hull and of the slab.
+
+        Returns
+        -------
+        hull, slab : ndarray, shape (8, 3)
+            Corner positions (x, y, z) in mm.
+        """
 
         def box(low: float, high: float) -> FloatArray:
             local = np.array(
@@ -228,7 +234,20 @@ class SliceStack:
 
     @staticmethod
     def volume(data: xr.DataArray, slice_axis: str) -> FloatArray:
-        """``data`` (..., z, y, x) of an axis-aligned stack as (..., slice, row, column)."""
+        """The image array of an axis-aligned stack in stack order.
+
+        Parameters
+        ----------
+        data : xarray.DataArray
+            Images with dims (..., z, y, x).
+        slice_axis : {"x", "y", "z"}
+            The grid axis normal to the slices.
+
+        Returns
+        -------
+        ndarray, shape (..., slice, row, column)
+            ``data``'s values as float64, leading dims first.
+        """
         r_axis, c_axis = _IN_PLANE[slice_axis]
         lead = [d for d in data.dims if d not in GRID_DIMS]
         return np.asarray(data.transpose(*lead, slice_axis, c_axis, r_axis).values, np.float64)
@@ -599,7 +618,12 @@ def image_coords(
     x: ArrayLike,
     tag_direction: ArrayLike | None = None,
 ) -> dict[str, tuple[Any, ...]]:
-    """Coordinates shared by ``tagged/1`` and ``phase/1`` (arguments as :func:`tagged_dataset`).
+    """Coordinates shared by ``tagged/1`` and ``phase/1``.
+
+    Parameters
+    ----------
+    tag, tag_frequency, slice_axis, time, z, y, x, tag_direction : see :func:`tagged_dataset`
+        The coordinates, as :func:`tagged_dataset` takes them.
 
     Returns
     -------

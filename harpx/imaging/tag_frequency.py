@@ -197,10 +197,21 @@ def tags_off_frequency(phase: xr.Dataset, measured: ArrayLike | None = None) -> 
 
 
 def tag_frequency_mismatch(phase: xr.Dataset, measured: ArrayLike | None = None) -> str:
-    """The warning for the tags of :func:`tags_off_frequency` (same arguments), or "".
+    """The warning for the tags of :func:`tags_off_frequency`, or "".
 
-    It quotes, per tag, the frequency and period the images show and the stated ones, and
-    says what to check: the tag period given for scanner files.
+    Parameters
+    ----------
+    phase : xarray.Dataset
+        A ``phase/1`` dataset, as :func:`tags_off_frequency` takes it.
+    measured : array_like, optional
+        As in :func:`tags_off_frequency`.
+
+    Returns
+    -------
+    str
+        Per tag off its stated frequency, the frequency and period the images show and the
+        stated ones, and what to check (the tag period given for scanner files); "" when
+        every tag is where it is stated to be.
     """
     off = _off_frequency(phase, measured)
     if not off:

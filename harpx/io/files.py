@@ -81,6 +81,16 @@ def temporary_prefix(name: str) -> str:
 
     The prefix lets :func:`remove_stale_temporaries` tell the leftovers of a killed
     harpx write from the temporary file of a write still running.
+
+    Parameters
+    ----------
+    name : str
+        File name (without directory) of the file being written.
+
+    Returns
+    -------
+    str
+        ``".<name>.harpx-<host>-<pid>-"``.
     """
     return f".{name}.harpx-{socket.gethostname()}-{os.getpid()}-"
 

@@ -138,14 +138,14 @@ def to_meshio(
     TypeError
         If ``tracked`` is not an xarray.Dataset or ``path`` not a str or os.PathLike.
 
+    See Also
+    --------
+    read_body_mesh : the reference mesh of an export, for :class:`~harpx.mechanics.body.Body`.
+
     Notes
     -----
     Each file is replaced atomically; when overwriting an earlier export, frames numbered
     beyond the new frame count are left on disk (the new PVD does not list them).
-
-    See Also
-    --------
-    read_body_mesh : the reference mesh of an export, for :class:`~harpx.mechanics.body.Body`.
 
     Examples
     --------
@@ -506,6 +506,7 @@ def read_meshio(path: PathLike) -> meshio.Mesh:
     Returns
     -------
     meshio.Mesh
+        The mesh as meshio reads it (points in the file's units).
 
     Raises
     ------

@@ -34,6 +34,7 @@ _MAP_DOC_TAIL = """
     Returns
     -------
     matplotlib.axes.Axes
+        The axes drawn in (a new figure's when ``ax`` is None).
 
     Raises
     ------

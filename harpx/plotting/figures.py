@@ -51,6 +51,7 @@ def displacement_maps(
     Returns
     -------
     matplotlib.figure.Figure
+        The figure (also written to ``path`` when given).
 
     Raises
     ------
@@ -108,6 +109,16 @@ def run_seconds(result: xr.Dataset) -> float:
     ``time_total`` of a ``tracked/1`` dataset from :func:`harpx.tracking.track.track` (the
     whole call, from the phase images to the dataset), else the sum of its per-frame
     ``wall_time`` (conventional HARP's :func:`harpx.imaging.harptrack.track_harp`).
+
+    Parameters
+    ----------
+    result : xarray.Dataset
+        A ``tracked/1`` dataset.
+
+    Returns
+    -------
+    float
+        Wall time in s.
 
     Raises
     ------
@@ -175,6 +186,7 @@ def error_vs_runtime(
     Returns
     -------
     matplotlib.figure.Figure
+        The figure (also written to ``path`` when given).
 
     Raises
     ------
@@ -221,6 +233,7 @@ def opening_angle_view(result: Any, ax: Any = None, *, scale: float = 1.0) -> An
     Returns
     -------
     matplotlib.axes.Axes
+        The axes drawn in (a new figure's when ``ax`` is None).
     """
     if ax is None:
         _, ax = plt.subplots(figsize=(4, 4))
