@@ -7,8 +7,13 @@ guide shows are current (tests/test_tutorials.py writes them).
 
 from __future__ import annotations
 
+import ast
+import importlib
 import importlib.metadata
+import inspect
+import pkgutil
 import re
+import textwrap
 import tomllib
 from pathlib import Path
 
@@ -49,6 +54,38 @@ def test_the_version_is_written_once():
 
 def test_no_docstring_cites_documents_outside_the_repository():
     assert re.findall(r"(?:DESIGN|REFERENCES)(?: §| section)", SOURCE) == []
+
+
+def _public_functions() -> list[tuple[str, object]]:
+    """(dotted name, function) of every function a public harpx module lists in ``__all__``."""
+    found = []
+    for info in pkgutil.walk_packages(harpx.__path__, "harpx."):
+        if any(part.startswith("_") for part in info.name.split(".")[1:]):
+            continue
+        module = importlib.import_module(info.name)
+        for name in getattr(module, "__all__", []):
+            obj = getattr(module, name)
+            if inspect.isfunction(obj) and obj.__module__ == info.name:
+                found.append((f"{info.name}.{name}", obj))
+    return found
+
+
+def test_a_public_function_that_raises_documents_it():
+    """A ``raise`` in a public function's own body has a Raises section in its docstring.
+
+    numpydoc's validation (docs/conf.py, run by ``make docs``) checks parameters and
+    returns, not exceptions; this is the check for those. Exceptions raised in helpers the
+    function calls are not seen here.
+    """
+    functions = _public_functions()
+    assert len(functions) > 200
+    silent = []
+    for name, function in functions:
+        tree = ast.parse(textwrap.dedent(inspect.getsource(function)))
+        raises = any(isinstance(n, ast.Raise) and n.exc is not None for n in ast.walk(tree))
+        if raises and "\nRaises\n------\n" not in (inspect.getdoc(function) or ""):
+            silent.append(name)
+    assert silent == []
 
 
 def test_every_guide_page_and_tutorial_is_in_the_table_of_contents():

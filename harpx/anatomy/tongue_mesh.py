@@ -255,6 +255,9 @@ def tongue_inside(
     Returns
     -------
     ndarray of bool, shape (n,)
+        True inside the body (boundary included): the point's reference coordinates
+        (:func:`tongue_reference`) lie in [0, 1] × [-1, 1] × [0, 1] and map back onto it
+        to within ``1e-6 * length``.
 
     Examples
     --------

@@ -143,7 +143,19 @@ class VentricleGeometry:
 
     # ------------------------------------------------------------------ layers
     def semi_axes(self, t: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """Semi-axes ``a(t), c(t)`` (mm) of the layer at transmural fraction ``t``."""
+        """Semi-axes ``a(t), c(t)`` (mm) of the layer at transmural fraction ``t``.
+
+        Parameters
+        ----------
+        t : array_like
+            Transmural fraction (dimensionless): 0 endocardium, 1 epicardium; values
+            outside [0, 1] extrapolate linearly.
+
+        Returns
+        -------
+        a, c : ndarray, shape of ``t``
+            Short (x, y) and long (z) semi-axis of the layer, mm.
+        """
         t = np.asarray(t, dtype=np.float64)
         a = self.inner[0] + t * (self.outer[0] - self.inner[0])
         c = self.inner[1] + t * (self.outer[1] - self.inner[1])
@@ -281,7 +293,20 @@ class VentricleGeometry:
         return e_c, e_l, t
 
     def helix_angle(self, t: ArrayLike, fiber_endo: float, fiber_epi: float) -> FloatArray:
-        """Helix angle (degrees) at transmural fraction ``t``, linear from endo to epi."""
+        """Helix angle (degrees) at transmural fraction ``t``, linear from endo to epi.
+
+        Parameters
+        ----------
+        t : array_like
+            Transmural fraction (dimensionless), clipped to [0, 1].
+        fiber_endo, fiber_epi : float
+            Helix angles at the endocardium and epicardium, degrees.
+
+        Returns
+        -------
+        ndarray, shape of ``t``
+            Helix angle, degrees.
+        """
         t = np.clip(np.asarray(t, dtype=np.float64), 0.0, 1.0)
         return fiber_endo + t * (fiber_epi - fiber_endo)
 
@@ -309,7 +334,19 @@ class VentricleGeometry:
         return f / np.linalg.norm(f, axis=1, keepdims=True)
 
     def inside(self, points: ArrayLike) -> FloatArray:
-        """Indicator (1 inside the wall, else 0) of points, shape (n,)."""
+        """Indicator of points inside the wall.
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            Points in mm.
+
+        Returns
+        -------
+        ndarray of float, shape (n,)
+            1.0 where ``0 <= t <= 1`` (:meth:`transmural`) and ``z <= truncation``,
+            else 0.0.
+        """
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         t = self.transmural(p)
         return ((t >= 0.0) & (t <= 1.0) & (p[:, 2] <= self.truncation)).astype(np.float64)
@@ -321,11 +358,24 @@ class VentricleGeometry:
         return float(np.pi * a**2 * ((zb + c) - (zb**3 + c**3) / (3.0 * c**2)))
 
     def cavity_volume(self) -> float:
-        """Analytic cavity volume below the base plane, mm³."""
+        """Analytic cavity volume below the base plane, mm³.
+
+        Returns
+        -------
+        float
+            Volume inside the endocardial ellipsoid below ``z = truncation``, mm³.
+        """
         return self._truncated_volume(*self.inner, self.truncation)
 
     def wall_volume(self) -> float:
-        """Analytic wall volume below the base plane, mm³."""
+        """Analytic wall volume below the base plane, mm³.
+
+        Returns
+        -------
+        float
+            Volume between the endo- and epicardial ellipsoids below ``z = truncation``,
+            mm³.
+        """
         return self._truncated_volume(*self.outer, self.truncation) - self.cavity_volume()
 
     def mesh(self, **options: Any) -> MeshSpec:
@@ -341,6 +391,8 @@ class VentricleGeometry:
         Returns
         -------
         MeshSpec
+            The mesh of :func:`ventricle` (regions, fibres, boundaries ``"endo"``,
+            ``"epi"`` and ``"base"``) with this geometry's semi-axes and base plane.
         """
         return ventricle(inner=self.inner, outer=self.outer, truncation=self.truncation, **options)
 

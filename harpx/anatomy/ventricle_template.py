@@ -51,6 +51,7 @@ from scipy.optimize import least_squares
 from harpx._typing import FloatArray, IntArray
 from harpx.anatomy.ventricle import VentricleGeometry
 from harpx.errors import HarpxWarning, user_stacklevel
+from harpx.mechanics.cells import vtk_corners
 from harpx.mechanics.mesh import MeshSpec, hex_mesh, labelled_spec
 
 __all__ = ["VentricleFit", "VentricleTemplate", "fit_ventricle"]
@@ -126,30 +127,88 @@ class VentricleTemplate:
         return self.to_image(np.array([[0.0, 0.0, -self.geometry.outer[1]]]))[0]
 
     def angle(self, points: ArrayLike) -> FloatArray:
-        """Angle (degrees in [0, 360)) of image points about the long axis from template +x."""
+        """Angle (degrees in [0, 360)) of image points about the long axis from template +x.
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            Image points, mm.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            Angle about the long axis (right-handed about apex-to-base) from the
+            template's +x axis, degrees in [0, 360).
+        """
         q = self.to_local(points)
         return np.asarray(np.mod(np.degrees(np.arctan2(q[:, 1], q[:, 0])), 360.0))
 
     def to_local(self, points: ArrayLike) -> FloatArray:
-        """Template coordinates ``R^T (p - c)`` of image points (n, 3), mm."""
+        """Template coordinates ``R^T (p - c)`` of image points.
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            Image points, mm.
+
+        Returns
+        -------
+        ndarray, shape (n, 3)
+            Template coordinates, mm (long axis along z, the ellipsoids' centre at 0).
+        """
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         return np.asarray((p - self.centre) @ self.rotation)
 
     def to_image(self, points: ArrayLike) -> FloatArray:
-        """Image coordinates ``c + R q`` of template points (n, 3), mm."""
+        """Image coordinates ``c + R q`` of template points.
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            Template coordinates, mm.
+
+        Returns
+        -------
+        ndarray, shape (n, 3)
+            Image coordinates, mm.
+        """
         q = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         return np.asarray(q @ self.rotation.T + self.centre)
 
     def transmural(self, points: ArrayLike) -> FloatArray:
-        """Transmural fraction (0 endocardium, 1 epicardium) of image points."""
+        """Transmural fraction (0 endocardium, 1 epicardium) of image points.
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            Image points, mm.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            ``t`` (dimensionless), as in :meth:`VentricleGeometry.transmural
+            <harpx.anatomy.ventricle.VentricleGeometry.transmural>`: < 0 inside the cavity,
+            > 1 outside the wall.
+        """
         return self.geometry.transmural(self.to_local(points))
 
     def surface_distance(self, points: ArrayLike, surface: str) -> FloatArray:
-        """Signed distance (mm) of image points (n, 3) from the endocardial (``"endo"``) or
-        epicardial (``"epi"``) ellipsoid, positive outside it: the residual of the fit.
+        """Signed distance of image points from the endo- or epicardial ellipsoid.
 
         The level-set value over its gradient (first order in the distance, exact on the
-        surface), the measure :func:`fit_ventricle` minimises.
+        surface), the measure :func:`fit_ventricle` minimises: the residual of the fit.
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            Image points, mm.
+        surface : {"endo", "epi"}
+            The endocardial or the epicardial ellipsoid.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            Signed distance, mm, positive outside the ellipsoid.
 
         Raises
         ------
@@ -184,7 +243,21 @@ class VentricleTemplate:
     def fibers(
         self, points: ArrayLike, *, fiber_endo: float = 60.0, fiber_epi: float = -60.0
     ) -> FloatArray:
-        """Unit helical fibres at image points (helix angles in degrees, endo to epi)."""
+        """Unit helical fibres at image points.
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            Image points, mm (in or near the wall).
+        fiber_endo, fiber_epi : float, default 60, -60
+            Helix angles at the endocardium and epicardium, degrees, as in
+            :meth:`VentricleGeometry.fibers <harpx.anatomy.ventricle.VentricleGeometry.fibers>`.
+
+        Returns
+        -------
+        ndarray, shape (n, 3)
+            Unit fibre directions in image coordinates.
+        """
         f = self.geometry.fibers(self.to_local(points), fiber_endo=fiber_endo, fiber_epi=fiber_epi)
         return np.asarray(f @ self.rotation.T)
 
@@ -277,16 +350,9 @@ class VentricleTemplate:
         a = np.deg2rad(self.anterior or 0.0)
         turn = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0, 0, 1]])
         points = self.to_image(spec.mesh.p.T @ turn.T)
-        moved = hex_mesh(points, _vtk_cells(spec.mesh))
+        moved = hex_mesh(points, vtk_corners(spec.mesh))
         fibers = None if spec.fibers is None else spec.fibers @ (self.rotation @ turn).T
         return labelled_spec(moved, spec.regions, spec.boundaries, fibers)
-
-
-def _vtk_cells(mesh: Any) -> Any:
-    from harpx.mechanics.mesh import _VTK_TO_SKFEM
-
-    order = np.argsort(_VTK_TO_SKFEM)
-    return mesh.t.T[:, order]
 
 
 @dataclass(frozen=True)
@@ -347,7 +413,15 @@ class VentricleFit:
         return float(np.sqrt(np.mean(d**2)))
 
     def report(self) -> dict[str, float]:
-        """Residual summary in mm: rms, mean absolute distance and 95th percentile per surface."""
+        """Residual summary in mm: rms overall, rms and 95th percentile per surface.
+
+        Returns
+        -------
+        dict of str to float
+            ``"rms"`` (:attr:`rms`) and, for each of ``"endo"``, ``"epi"`` and ``"base"``
+            that has points, ``"<surface>_rms"`` and ``"<surface>_p95"`` (95th percentile
+            of the absolute distance), mm.
+        """
         out: dict[str, float] = {"rms": self.rms}
         for name, d in (
             ("endo", self.endo_residual),

@@ -1,10 +1,9 @@
 """A deformable body: mesh, element, material, fibres, regions and quadrature data.
 
 :class:`Body` ties a scikit-fem hexahedral or tetrahedral mesh to a material and precomputes
-everything the
-vectorised assembly (:mod:`harpx.mechanics.assembly`) needs: reference gradients of the shape
-functions at every quadrature point, quadrature weights, element-to-dof maps, per-point fibre
-directions, active-stress levels and growth tensors.
+everything the vectorised assembly (:mod:`harpx.mechanics.assembly`) needs: reference
+gradients of the shape functions at every quadrature point, quadrature weights,
+element-to-dof maps, per-point fibre directions, active-stress levels and growth tensors.
 
 Elements (``ELEMENTS``): ``hex8`` (trilinear, 2x2x2 Gauss), ``hex20`` (serendipity,
 3x3x3 Gauss), ``tet4`` (linear tetrahedron, 1 point) and ``tet10`` (quadratic tetrahedron,
@@ -35,7 +34,6 @@ import numpy as np
 import skfem
 from numpy.typing import ArrayLike
 from scipy import sparse
-from skfem.io.meshio import HEX_MAPPING
 
 from harpx._moved import moved_getattr
 from harpx._typing import FloatArray, IntArray
@@ -43,6 +41,7 @@ from harpx.mechanics import kinematics
 from harpx.mechanics.body_inputs import (
     check_fibers_given,
     check_vertices,
+    growth_tensors,
     named_sets,
     quadrature_fibers,
     resolve_mesh,
@@ -52,6 +51,7 @@ from harpx.mechanics.cells import (
     ElementName,
     Volumetric,
     _skfem_mesh,
+    vtk_cells,
 )
 
 __all__ = ["Body"]
@@ -70,8 +70,7 @@ class Body:
     mesh : skfem.MeshHex1, skfem.MeshHex2, skfem.MeshTet1, skfem.MeshTet2 or MeshSpec
         The reference configuration (mm): a scikit-fem hexahedral or tetrahedral mesh
         (``MeshHex2``: curved hexahedra for hex20, ``MeshTet2``: curved quadratic
-        tetrahedra) or a
-        :class:`~harpx.mechanics.mesh.MeshSpec` from the builders in
+        tetrahedra) or a :class:`~harpx.mechanics.mesh.MeshSpec` from the builders in
         :mod:`harpx.mechanics.mesh`. A :class:`meshio.Mesh` goes through
         :meth:`from_meshio`; a mesh file through :func:`harpx.io.mesh.read_body`.
     material : object
@@ -106,25 +105,23 @@ class Body:
           locking-free; Q1/P0, Q2/P0, and P2/P0 for tet10);
         * linear dilatation: element-linear dilatation and pressure (Q2/P1-disc, hex20
           only, locking-free and optimal order). Switch to it for hex20 in bending with
-          fewer than about six cells through the thickness, where Q2/P0 is too soft: on the
-          Land et al. 2015 beam (10 x 1 x 1 mm, 2 cells thick) Q2/P0 is 14 % and Q2/P1
-          0.7 % off the reference deflection. Q2/P0 stays the default: it is cheaper and
-          the tracking scenes were tuned with it;
+          few cells through the thickness, where Q2/P0 is too soft. Q2/P0 stays the
+          default: it is cheaper and the tracking scenes were tuned with it;
         * nodal dilatation (tetrahedra): the volume change averaged over the cells around
           each vertex, weighted by the vertex's linear shape function, with a continuous
           linear pressure: tet4 P1/P1 (Bonet & Burton 1998) and tet10 P2/P1 (Taylor–Hood
           with a lumped pressure mass), locking-free. For tet10 it is the accurate choice in
-          bending: on the Land et al. 2015 beam -2.1 % / -0.56 % with 60 / 480 tetrahedra,
-          where P2/P0 (``"mean-dilatation"``) is +38 % / +5.1 % (first order, too soft).
-          P2/P0 has about 5 times fewer stiffness entries (the vertex pressure couples the
-          dofs of all cells around a vertex): switch to it only on fine meshes without
-          bending (many cells through every wall), or for compressible materials, where the
-          lumping limits P2/P1 to the same L2 rate (1.6);
+          bending, where P2/P0 (``"mean-dilatation"``) is first order and too soft. P2/P0
+          has fewer stiffness entries (the vertex pressure couples the dofs of all cells
+          around a vertex): switch to it only on fine meshes without bending, or for
+          compressible materials, where the pressure lumping limits P2/P1 to the same
+          L2 rate;
         * pointwise: the plain displacement formulation; locks for nearly incompressible
           materials.
 
         Default: the element's first locking-free one (nodal dilatation for tet4 and tet10,
-        mean dilatation for the hexahedra).
+        mean dilatation for the hexahedra). The user guide (workflow, step 3) compares
+        them on a bending benchmark.
 
     Attributes
     ----------
@@ -235,7 +232,7 @@ class Body:
         )
         self.dof_points: FloatArray = np.ascontiguousarray(sb.doflocs.T)
         self.node_dofs: IntArray = 3 * np.arange(self.n_dof_nodes)[:, None] + np.arange(3)
-        self.cells: IntArray = self._vtk_cells()
+        self.cells: IntArray = vtk_cells(mesh, kind, cell_sdofs, self.nodes, self.dof_points)
         # linear (P1) shape functions of the cell's vertices at the Gauss points: the
         # weights of the nodal dilatation (tetrahedra; skfem's reference vertices 0, e1, e2, e3)
         Xr = np.asarray(sb.X)  # (3, nqp) reference coordinates
@@ -309,53 +306,11 @@ class Body:
         if growth is None:
             self.growth, self.growth_tensor, self.growth_jacobian = None, None, None
             return
-        fibers = self.fibers_qp
-        if fibers is None:
-            if not hasattr(growth, "tensors"):
-                raise ValueError(
-                    "fibre growth needs 'fibers' but none were given; pass fibers=(ncell, 3) "
-                    "unit vectors (or use a mesh builder that provides them)"
-                )
-            fibers = np.zeros((self.ncell, self.nqp, 3))  # a tensor field needs no fibres
-        if hasattr(growth, "tensor"):
-            Fg = np.asarray(growth.tensor(fibers), dtype=np.float64)
-            Fg = np.broadcast_to(Fg, (self.ncell, self.nqp, 3, 3))
-        else:
-            theta = np.asarray(growth, dtype=np.float64)
-            if theta.shape != (self.ncell,) or np.any(theta <= 0):
-                raise ValueError(
-                    f"growth stretch array has shape {theta.shape!r}; expected "
-                    f"({self.ncell},) positive values, or a FiberGrowth"
-                )
-            Fg = kinematics.growth_tensor(fibers, theta[:, None])
+        Fg = growth_tensors(growth, self.fibers_qp, self.ncell, self.nqp)
         self.growth = growth
         self.growth_tensor = np.ascontiguousarray(Fg)
         Jg = np.linalg.det(self.growth_tensor)
         self.growth_jacobian = (Jg * self.dV).sum(axis=1) / self.cell_volume
-
-    def _vtk_cells(self) -> IntArray:
-        if isinstance(self.mesh, skfem.MeshTet1):
-            corners = self.mesh.t.T.astype(np.int64)  # skfem and VTK agree on tetrahedra
-        else:
-            corners = self.mesh.t.T[:, HEX_MAPPING[:8]].astype(np.int64)  # VTK corner order
-        vtk_edges = self.kind.vtk_edges
-        nc = corners.shape[1]
-        if vtk_edges.shape[0] == 0:
-            return corners
-        # match each VTK edge to the element's edge dofs by the edge's end vertices
-        edge_dofs = self.cell_scalar_dofs[:, nc:]  # (nel, nedge)
-        if isinstance(self.mesh, (skfem.MeshTet2, skfem.MeshHex2)):  # edge dofs follow vertices
-            ends = self.mesh.edges[:, edge_dofs - int(self.mesh.nvertices)]  # (2, nel, nedge)
-            mid = 0.5 * (self.nodes[ends[0]] + self.nodes[ends[1]])
-        else:
-            mid = self.dof_points[edge_dofs]
-        want = 0.5 * (
-            self.nodes[corners[:, vtk_edges[:, 0]]] + self.nodes[corners[:, vtk_edges[:, 1]]]
-        )
-        d = np.linalg.norm(want[:, :, None, :] - mid[:, None, :, :], axis=-1)
-        order = np.argmin(d, axis=2)
-        edges = np.take_along_axis(edge_dofs, order, axis=1)
-        return np.concatenate([corners, edges], axis=1)
 
     # ------------------------------------------------------------ read-only accessors
     @property
@@ -369,7 +324,18 @@ class Body:
         return self._N_values
 
     def cell_average(self, q: FloatArray) -> FloatArray:
-        """Volume average per cell of a quadrature-point field ``q`` (ncell, nqp, ...)."""
+        """Volume average per cell of a quadrature-point field.
+
+        Parameters
+        ----------
+        q : ndarray, shape (ncell, nqp, ...)
+            Values at the quadrature points (any trailing shape, e.g. (3, 3) for a tensor).
+
+        Returns
+        -------
+        ndarray, shape (ncell, ...)
+            ``q`` averaged over each cell, weighted by the reference volume ``dV``.
+        """
         return self._cell_average(q)
 
     def cached(self, key: str, build: Callable[[], _T]) -> _T:
@@ -413,7 +379,18 @@ class Body:
         return u
 
     def nodal_displacement(self, u: ArrayLike) -> FloatArray:
-        """Displacement of every dof node, shape (n_dof_nodes, 3), mm."""
+        """Displacement of every dof node.
+
+        Parameters
+        ----------
+        u : array_like, shape (ndof,)
+            Displacement dofs, mm.
+
+        Returns
+        -------
+        ndarray, shape (n_dof_nodes, 3)
+            x, y, z displacement of each dof node (rows as in ``dof_points``), mm.
+        """
         return self._check_u(u).reshape(-1, 3)
 
     def facet_dofs(self, name: str | ArrayLike, components: Sequence[int] = (0, 1, 2)) -> IntArray:
@@ -439,7 +416,26 @@ class Body:
         return np.sort((3 * sd[:, None] + comps[None, :]).ravel())
 
     def facets(self, name: str | ArrayLike) -> IntArray:
-        """Facet ids of a named boundary (or the given ids, checked)."""
+        """Facet ids of a named boundary (or the given ids, checked).
+
+        Parameters
+        ----------
+        name : str or array_like of int
+            Boundary name from ``body.boundaries``, or facet ids (columns of
+            ``mesh.facets``).
+
+        Returns
+        -------
+        ndarray of int, shape (nfacet,)
+            The facet ids.
+
+        Raises
+        ------
+        KeyError
+            If ``name`` is a string that names no boundary.
+        ValueError
+            If the ids are not a 1-D array of valid facet indices.
+        """
         if isinstance(name, str):
             if name not in self.boundaries:
                 raise KeyError(
@@ -454,24 +450,70 @@ class Body:
         return ids
 
     def element_displacement(self, u: ArrayLike) -> FloatArray:
-        """Displacement of each cell's dof nodes, shape (ncell, nbasis, 3), mm."""
+        """Displacement of each cell's dof nodes.
+
+        Parameters
+        ----------
+        u : array_like, shape (ndof,)
+            Displacement dofs, mm.
+
+        Returns
+        -------
+        ndarray, shape (ncell, nbasis, 3)
+            Displacement per cell, basis function and component (order of
+            ``element_dofs``), mm.
+        """
         return self._check_u(u)[self.element_dofs]
 
     def deformation_gradient(self, u: ArrayLike) -> FloatArray:
-        """``F = I + Grad u`` at every quadrature point, shape (ncell, nqp, 3, 3)."""
+        """Deformation gradient ``F = I + Grad u`` at every quadrature point.
+
+        Parameters
+        ----------
+        u : array_like, shape (ndof,)
+            Displacement dofs, mm.
+
+        Returns
+        -------
+        ndarray, shape (ncell, nqp, 3, 3)
+            ``F[..., i, J] = dx_i/dX_J`` (dimensionless).
+        """
         ue = self.element_displacement(u)
         F = np.einsum("eai,eqaJ->eqiJ", ue, self.grad_N, optimize=True)
         F += np.eye(3)
         return F
 
     def jacobian(self, u: ArrayLike) -> FloatArray:
-        """``J = det F`` at every quadrature point, shape (ncell, nqp)."""
+        """Volume ratio ``J = det F`` at every quadrature point.
+
+        Parameters
+        ----------
+        u : array_like, shape (ndof,)
+            Displacement dofs, mm.
+
+        Returns
+        -------
+        ndarray, shape (ncell, nqp)
+            ``det F`` (dimensionless).
+        """
         return np.linalg.det(self.deformation_gradient(u))
 
     def displacement_at(self, u: ArrayLike, points: ArrayLike) -> FloatArray:
         """Displacement (mm) at arbitrary reference points (mm), NaN outside the mesh.
 
         See :func:`harpx.mechanics.locate.displacement_at`.
+
+        Parameters
+        ----------
+        u : array_like, shape (ndof,) or (ntime, ndof)
+            Displacement dofs, mm.
+        points : array_like, shape (n, 3) or (3,)
+            Reference positions, mm.
+
+        Returns
+        -------
+        ndarray, shape (n, 3) (or (ntime, n, 3), or (3,) for one point)
+            Displacement, mm; NaN for points outside the mesh.
         """
         from harpx.mechanics.locate import displacement_at
 
@@ -482,11 +524,38 @@ class Body:
         return np.einsum("eq,eq...->e...", w, q)
 
     def green_strain(self, u: ArrayLike) -> FloatArray:
-        """Volume-averaged Green--Lagrange strain per cell, shape (ncell, 3, 3)."""
+        """Volume-averaged Green--Lagrange strain per cell.
+
+        Parameters
+        ----------
+        u : array_like, shape (ndof,)
+            Displacement dofs, mm.
+
+        Returns
+        -------
+        ndarray, shape (ncell, 3, 3)
+            ``E = (F^T F - I) / 2`` averaged over each cell (dimensionless).
+        """
         return self._cell_average(kinematics.green_strain(self.deformation_gradient(u)))
 
     def fiber_stretch(self, u: ArrayLike) -> FloatArray:
-        """Volume-averaged fibre stretch ``|F f0|`` per cell, shape (ncell,)."""
+        """Volume-averaged fibre stretch ``|F f0|`` per cell.
+
+        Parameters
+        ----------
+        u : array_like, shape (ndof,)
+            Displacement dofs, mm.
+
+        Returns
+        -------
+        ndarray, shape (ncell,)
+            Fibre stretch averaged over each cell (dimensionless, 1 undeformed).
+
+        Raises
+        ------
+        ValueError
+            If the body has no fibres.
+        """
         if self.fibers_qp is None:
             raise ValueError("fiber_stretch needs 'fibers'; pass fibers=... to Body")
         lam = kinematics.fiber_stretch(self.deformation_gradient(u), self.fibers_qp)

@@ -39,6 +39,7 @@ from harpx.mechanics.meshspec import MeshSpec, check_nodes, check_unused_nodes, 
 __all__ = [
     "check_fibers_given",
     "check_vertices",
+    "growth_tensors",
     "named_sets",
     "quadrature_fibers",
     "resolve_mesh",
@@ -54,8 +55,14 @@ def resolve_mesh(
 
     Parameters
     ----------
-    mesh, fibers, element, volumetric
-        As given to :class:`~harpx.mechanics.body.Body`.
+    mesh : skfem.MeshHex1, skfem.MeshHex2, skfem.MeshTet1, skfem.MeshTet2 or MeshSpec
+        The reference configuration (mm), as given to :class:`~harpx.mechanics.body.Body`.
+    fibers : array_like, callable or None
+        The fibres as given to :class:`~harpx.mechanics.body.Body` (passed through).
+    element : {"hex8", "hex20", "tet4", "tet10"} or None
+        The element, or None for what the mesh implies.
+    volumetric : {"mean-dilatation", "linear-dilatation", "nodal-dilatation", "pointwise"} or None
+        The volumetric treatment, or None for the element's first.
 
     Returns
     -------
@@ -198,6 +205,9 @@ def named_sets(
     Returns
     -------
     regions, boundaries : dict of str to ndarray of int
+        Named cell ids (the given ones, else the MeshSpec's, else the mesh's subdomains,
+        else ``{"body": all cells}``) and named facet ids (given, MeshSpec's, mesh's, or
+        none).
 
     Raises
     ------
@@ -275,6 +285,17 @@ def quadrature_fibers(
 def check_fibers_given(material: Any, active: Any, growth: Any, fibers_qp: Any) -> None:
     """Refuse a fibre material, active contraction or fibre growth without fibres.
 
+    Parameters
+    ----------
+    material : object
+        The body's material; it needs fibres if its ``needs_fibers`` is true.
+    active : ActiveContraction or None
+        The active fibre stress law, if any.
+    growth : FiberGrowth, GrowthField, array_like or None
+        The growth, if any.
+    fibers_qp : ndarray, shape (ncell, nqp, 3), or None
+        The fibres at the quadrature points (from :func:`quadrature_fibers`).
+
     Raises
     ------
     ValueError
@@ -291,3 +312,48 @@ def check_fibers_given(material: Any, active: Any, growth: Any, fibers_qp: Any) 
                 f"{what} needs 'fibers' but none were given; pass fibers=(ncell, 3) "
                 "unit vectors (or use a mesh builder that provides them)"
             )
+
+
+def growth_tensors(growth: Any, fibers_qp: FloatArray | None, ncell: int, nqp: int) -> FloatArray:
+    """Growth tensor ``Fg`` at every quadrature point (``F = Fe Fg``).
+
+    Parameters
+    ----------
+    growth : object or array_like of shape (ncell,)
+        A law or field with ``tensor(fibers_qp) -> Fg`` (e.g.
+        :class:`~harpx.mechanics.fiber_laws.FiberGrowth`), or one fibre stretch θ per cell
+        (``Fg = I + (θ - 1) f0 ⊗ f0``, dimensionless, > 0).
+    fibers_qp : ndarray, shape (ncell, nqp, 3), or None
+        Unit fibres at the quadrature points.
+    ncell, nqp : int
+        Number of cells and of quadrature points per cell.
+
+    Returns
+    -------
+    ndarray, shape (ncell, nqp, 3, 3)
+        ``Fg`` (dimensionless; may be a broadcast view).
+
+    Raises
+    ------
+    ValueError
+        If there are no fibres (unless ``growth`` has ``tensors``, a field that needs
+        none), or the stretch array is not ``ncell`` positive values.
+    """
+    fibers = fibers_qp
+    if fibers is None:
+        if not hasattr(growth, "tensors"):
+            raise ValueError(
+                "fibre growth needs 'fibers' but none were given; pass fibers=(ncell, 3) "
+                "unit vectors (or use a mesh builder that provides them)"
+            )
+        fibers = np.zeros((ncell, nqp, 3))  # a tensor field needs no fibres
+    if hasattr(growth, "tensor"):
+        Fg = np.asarray(growth.tensor(fibers), dtype=np.float64)
+        return np.broadcast_to(Fg, (ncell, nqp, 3, 3))
+    theta = np.asarray(growth, dtype=np.float64)
+    if theta.shape != (ncell,) or np.any(theta <= 0):
+        raise ValueError(
+            f"growth stretch array has shape {theta.shape!r}; expected "
+            f"({ncell},) positive values, or a FiberGrowth"
+        )
+    return kinematics.growth_tensor(fibers, theta[:, None])

@@ -16,6 +16,7 @@ import meshio
 import numpy as np
 import skfem
 from numpy.typing import ArrayLike
+from skfem.io.meshio import HEX_MAPPING
 
 from harpx._typing import FloatArray, IntArray
 
@@ -27,6 +28,8 @@ __all__ = [
     "curved_tet_mesh",
     "default_element",
     "volume_blocks",
+    "vtk_cells",
+    "vtk_corners",
     "vtk_hex_corner_jacobians",
 ]
 
@@ -104,8 +107,19 @@ _VOLUMETRIC = ("mean-dilatation", "linear-dilatation", "nodal-dilatation", "poin
 
 
 def default_element(mesh: Any) -> ElementName:
-    """The element a mesh implies: hex8 / hex20 for straight / curved (``MeshHex2``)
-    hexahedra, tet4 / tet10 for linear / quadratic tetrahedra."""
+    """The element a mesh implies.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshHex1, skfem.MeshHex2, skfem.MeshTet1 or skfem.MeshTet2
+        The mesh.
+
+    Returns
+    -------
+    {"hex8", "hex20", "tet4", "tet10"}
+        hex8 / hex20 for straight / curved (``MeshHex2``) hexahedra, tet4 / tet10 for
+        linear / quadratic (``MeshTet2``) tetrahedra; hex8 for any other mesh.
+    """
     if isinstance(mesh, skfem.MeshHex2):
         return "hex20"
     if isinstance(mesh, skfem.MeshTet2):
@@ -210,6 +224,68 @@ def volume_blocks(
             )
         cell_data[name] = np.concatenate(parts)
     return kind, cells, cell_data
+
+
+def vtk_corners(mesh: Any) -> IntArray:
+    """Vertex ids of every cell in VTK corner order (``hexahedron`` or ``tetra``).
+
+    Parameters
+    ----------
+    mesh : skfem.MeshHex1, skfem.MeshHex2, skfem.MeshTet1 or skfem.MeshTet2
+        A scikit-fem mesh.
+
+    Returns
+    -------
+    ndarray of int64, shape (ncell, 8) or (ncell, 4)
+        Columns of ``mesh.t`` in VTK order (scikit-fem and VTK agree on tetrahedra).
+    """
+    if isinstance(mesh, skfem.MeshTet1):
+        return np.asarray(mesh.t.T, dtype=np.int64)
+    return np.asarray(mesh.t.T[:, HEX_MAPPING[:8]], dtype=np.int64)
+
+
+def vtk_cells(
+    mesh: Any, kind: ElementKind, cell_dofs: IntArray, nodes: FloatArray, dof_points: FloatArray
+) -> IntArray:
+    """Dof-node ids of every cell in VTK/meshio order, edge nodes after the corners.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshHex1, skfem.MeshHex2, skfem.MeshTet1 or skfem.MeshTet2
+        The body's mesh.
+    kind : ElementKind
+        The element; its ``vtk_edges`` give the VTK order of the edge nodes (none for hex8
+        and tet4).
+    cell_dofs : ndarray of int, shape (ncell, nbasis)
+        Scalar dof ids per cell (vertex dofs first, then edge dofs, in scikit-fem order).
+    nodes : ndarray, shape (nvertex, 3)
+        Mesh vertices, mm.
+    dof_points : ndarray, shape (n_dof_nodes, 3)
+        Positions of all dof nodes, mm.
+
+    Returns
+    -------
+    ndarray of int64, shape (ncell, 8), (ncell, 20), (ncell, 4) or (ncell, 10)
+        ``hexahedron``, ``hexahedron20``, ``tetra`` or ``tetra10`` connectivity. Each VTK
+        edge is matched to the cell's edge dof at its midpoint (for curved cells, the
+        midpoint of the straight edge between its end vertices).
+    """
+    corners = vtk_corners(mesh)
+    vtk_edges = kind.vtk_edges
+    nc = corners.shape[1]
+    if vtk_edges.shape[0] == 0:
+        return corners
+    edge_dofs = cell_dofs[:, nc:]  # (nel, nedge)
+    if isinstance(mesh, (skfem.MeshTet2, skfem.MeshHex2)):  # edge dofs follow vertices
+        ends = mesh.edges[:, edge_dofs - int(mesh.nvertices)]  # (2, nel, nedge)
+        mid = 0.5 * (nodes[ends[0]] + nodes[ends[1]])
+    else:
+        mid = dof_points[edge_dofs]
+    want = 0.5 * (nodes[corners[:, vtk_edges[:, 0]]] + nodes[corners[:, vtk_edges[:, 1]]])
+    d = np.linalg.norm(want[:, :, None, :] - mid[:, None, :, :], axis=-1)
+    order = np.argmin(d, axis=2)
+    edges = np.take_along_axis(edge_dofs, order, axis=1)
+    return np.concatenate([corners, edges], axis=1)
 
 
 #: The 8 corners of the reference hexahedron in VTK order, as (xi, eta, zeta) in {-1, 1}.
@@ -394,6 +470,11 @@ def curved_tet_mesh(mesh: skfem.MeshTet1, edge_points: ArrayLike | None = None) 
     -------
     skfem.MeshTet2
         Carries the boundaries and subdomains of ``mesh``.
+
+    Raises
+    ------
+    ValueError
+        If ``edge_points`` is not (3, nedge), one point per column of ``mesh.edges``.
     """
     mid = 0.5 * (mesh.p[:, mesh.edges[0]] + mesh.p[:, mesh.edges[1]])
     pts = mid if edge_points is None else np.asarray(edge_points, dtype=np.float64)

@@ -291,5 +291,16 @@ class FiberGrowth:
         _check("stretch", self.stretch)
 
     def tensor(self, fiber: ArrayLike) -> FloatArray:
-        """Growth tensor ``Fg`` (dimensionless), shape ``(..., 3, 3)`` for ``fiber (..., 3)``."""
+        """Growth tensor ``Fg = I + (stretch - 1) f0 ⊗ f0``.
+
+        Parameters
+        ----------
+        fiber : array_like, shape (..., 3)
+            Reference fiber directions ``f0`` (normalised here).
+
+        Returns
+        -------
+        ndarray, shape (..., 3, 3)
+            ``Fg`` (dimensionless).
+        """
         return growth_tensor(fiber, self.stretch)

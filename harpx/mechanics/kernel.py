@@ -220,6 +220,11 @@ def factored_tangent(
         :math:`\psi_r`, :math:`W_{rq} = \psi_r J\, dV_q`, so that :math:`C` is the
         derivative of :math:`\int \psi_r J\, dV`): ``W`` (ncell, npr, nqp) in mm³ and ``Q``
         (ncell, npr, npr) in kPa/mm⁶.
+
+    Raises
+    ------
+    ValueError
+        If ``h_weight`` is given but ``factors`` has no ``h_index``.
     """
     G, GT, Gn = grads.G, grads.GT, grads.Gn
     nel, nq, nb, _ = G.shape

@@ -38,7 +38,18 @@ def _dot(a: FloatArray, b: FloatArray) -> float:
 
 
 def vector_norm(a: FloatArray) -> float:
-    """Euclidean norm without BLAS (see :func:`_dot`)."""
+    """Euclidean norm without BLAS (see :func:`_dot`).
+
+    Parameters
+    ----------
+    a : ndarray, shape (n,)
+        A vector.
+
+    Returns
+    -------
+    float
+        ``sqrt(a · a)``.
+    """
     return float(np.sqrt(_dot(a, a)))
 
 
@@ -50,6 +61,18 @@ class Stop:
     the residual (an estimate of the error of ``x``, :meth:`reached`) is at most ``reuse |x|``.
     It runs at most ``limit`` iterations, gives up early (:meth:`give_up`) and records in
     ``iterations`` how many it ran.
+
+    Parameters
+    ----------
+    b : ndarray, shape (n,)
+        The right-hand side; its norm is ``first``, the scale of ``target``.
+    reuse : float
+        Relative accuracy in (0, 1) (``LinearSolver(reuse=...)``).
+    limit : int
+        Iteration limit of the loop (steps, for :func:`refine`).
+    measure : {"residual", "step"}, default "residual"
+        What ``reuse`` bounds: the relative residual, or the relative error of ``x`` as the
+        preconditioner estimates it (``LinearSolver(reuse_measure=...)``).
     """
 
     def __init__(
@@ -70,6 +93,22 @@ class Stop:
         preconditioner close to the matrix it is close to the error ``x* − x`` itself, so
         ``|M⁻¹ r| <= reuse |x|`` bounds the relative error of the step (inexact Newton;
         Dembo, Eisenstat & Steihaug 1982, SIAM J. Numer. Anal. 19:400).
+
+        Parameters
+        ----------
+        norm : float
+            The loop's residual norm ``|b − K x|``; recorded as ``self.norm``.
+        x : ndarray, shape (n,)
+            The current iterate.
+        correction : ndarray, shape (n,), or None
+            ``M⁻¹ r`` for ``measure="step"`` (None there means not reached); not used for
+            ``measure="residual"``.
+
+        Returns
+        -------
+        bool
+            ``norm <= target`` (``"residual"``), or ``|correction| <= reuse |x|``
+            (``"step"``).
         """
         self.norm = norm
         if self.measure == "residual":
@@ -77,9 +116,15 @@ class Stop:
         return correction is not None and vector_norm(correction) <= self.reuse * vector_norm(x)
 
     def accepted_residual(self) -> float:
-        """The largest true residual norm ``|b − K x|`` accepted once the loop has stopped:
-        ``target``, or with ``measure="step"`` also twice the loop's own last residual (its
-        recurrence drifts from the true one by rounding only)."""
+        """The largest true residual norm ``|b − K x|`` accepted once the loop has stopped.
+
+        Returns
+        -------
+        float
+            ``target``, or with ``measure="step"`` the larger of ``target`` and twice the
+            loop's own last residual norm (its recurrence drifts from the true one by
+            rounding only).
+        """
         return self.target if self.measure == "residual" else max(self.target, 2.0 * self.norm)
 
     def give_up(self, k: int, norm: float) -> bool:
@@ -89,6 +134,19 @@ class Stop:
         far would not reach ``target`` within ``_GIVE_UP_SLACK`` times ``limit`` iterations
         (CG speeds up as it goes, hence the slack). A factorisation gone stale shows in the
         first iterations, and a failed attempt then costs a few solve phases.
+
+        Parameters
+        ----------
+        k : int
+            The iteration just completed (from 1).
+        norm : float
+            The loop's residual norm after it.
+
+        Returns
+        -------
+        bool
+            True if ``norm`` is not finite, or from iteration ``_GIVE_UP_AFTER`` on if it is
+            not below ``first`` or decreases too slowly.
         """
         if not np.isfinite(norm):
             return True
@@ -104,7 +162,25 @@ _Operator = Callable[[FloatArray], FloatArray]
 
 
 def cg(apply: _Operator, precondition: _Operator, b: FloatArray, stop: Stop) -> FloatArray | None:
-    """Preconditioned conjugate gradients from zero; None: not converged (or gave up)."""
+    """Preconditioned conjugate gradients from zero.
+
+    Parameters
+    ----------
+    apply : callable
+        ``apply(v) -> K v``, the product with the matrix, shape (n,) to (n,).
+    precondition : callable
+        ``precondition(r) -> M⁻¹ r``, the solve with the held factorisation.
+    b : ndarray, shape (n,)
+        Right-hand side.
+    stop : Stop
+        Stopping rule for ``b``; its ``iterations`` is set to the iterations run.
+
+    Returns
+    -------
+    ndarray, shape (n,) or None
+        The solution once ``stop`` is reached; None if the loop breaks down (a singular or
+        indefinite matrix), gives up or runs out of iterations.
+    """
     x = np.zeros_like(b)
     r = b.copy()
     z = precondition(r)
@@ -145,6 +221,23 @@ def refine(
     J. ACM 14:316; Carson & Higham 2018, SIAM J. Sci. Comput. 40:A817). Unlike conjugate
     gradients it needs no definiteness. It stops when :meth:`Stop.reached` holds for the
     residual and correction of the current ``x``, and returns ``x`` plus that correction.
+
+    Parameters
+    ----------
+    apply : callable
+        ``apply(v) -> K v``, the product with the matrix, shape (n,) to (n,).
+    precondition : callable
+        ``precondition(r) -> M⁻¹ r``, the solve with the held factorisation.
+    b : ndarray, shape (n,)
+        Right-hand side.
+    stop : Stop
+        Stopping rule for ``b``; its ``limit`` bounds the steps, ``iterations`` records them.
+
+    Returns
+    -------
+    ndarray, shape (n,) or None
+        The refined solution; None if the residual or correction is not finite or
+        ``stop`` is not reached within ``stop.limit`` steps.
     """
     x = precondition(b)
     for k in range(1, stop.limit + 1):
@@ -163,7 +256,25 @@ def refine(
 def bicgstab(
     apply: _Operator, precondition: _Operator, b: FloatArray, stop: Stop
 ) -> FloatArray | None:
-    """Right-preconditioned BiCGSTAB from zero; None: not converged (or gave up)."""
+    """Right-preconditioned BiCGSTAB from zero.
+
+    Parameters
+    ----------
+    apply : callable
+        ``apply(v) -> K v``, the product with the matrix, shape (n,) to (n,).
+    precondition : callable
+        ``precondition(r) -> M⁻¹ r``, the solve with the held factorisation.
+    b : ndarray, shape (n,)
+        Right-hand side.
+    stop : Stop
+        Stopping rule for ``b``; its ``iterations`` is set to the iterations run.
+
+    Returns
+    -------
+    ndarray, shape (n,) or None
+        The solution once ``stop`` is reached; None if the loop breaks down, gives up or
+        runs out of iterations.
+    """
     x = np.zeros_like(b)
     r = b.copy()
     shadow = b.copy()

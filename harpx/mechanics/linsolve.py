@@ -133,7 +133,15 @@ def _umfpack_works() -> bool:
 
 
 def available_methods() -> list[str]:
-    """Solver methods usable on this machine."""
+    """Solver methods usable on this machine.
+
+    Returns
+    -------
+    list of str
+        The methods of ``METHODS`` other than ``"auto"`` that work here: ``"pardiso"``
+        (first, if pypardiso imports and solves a tiny system), ``"superlu"``,
+        ``"superlu-colamd"``, then ``"umfpack"`` and ``"amg-cg"`` if their packages import.
+    """
     out = ["superlu", "superlu-colamd"]
     if _pardiso_works():
         out.insert(0, "pardiso")
@@ -149,12 +157,19 @@ def available_methods() -> list[str]:
 
 
 def rigid_body_modes(points: FloatArray) -> FloatArray:
-    """The six rigid-body modes at dof nodes, shape (3 n, 6) (dof order 3 n + component).
+    """The six rigid-body modes at dof nodes (dof order 3 n + component).
 
     Parameters
     ----------
     points : ndarray, shape (n, 3)
         Node positions, mm.
+
+    Returns
+    -------
+    ndarray, shape (3 n, 6)
+        Columns: unit translations along x, y and z (dimensionless), then infinitesimal
+        rotations about z, x and y through the centroid of ``points`` (displacement per
+        radian, mm); not normalised.
     """
     n = len(points)
     x = points - points.mean(axis=0)
@@ -181,22 +196,27 @@ class LinearSolver:
         PARDISO only: relative residual ``|b - K x| / |b|`` to which a matrix on the pattern
         of the last factorised one may be solved iteratively, preconditioned with that
         factorisation (module notes), e.g. 1e-8. None (default): every matrix is factorised.
+    reuse_iterations : int, default 15
+        With ``reuse``: the iteration limit of the Krylov loop, or more where a
+        factorisation costs more than twice as many iterations
+        (:attr:`iteration_budget`); a matrix the loop does not solve within its limit is
+        factorised afresh.
     reuse_measure : {"residual", "step"}, default "residual"
         What ``reuse`` bounds: the relative residual, or (``"step"``) the relative error of
         ``x`` as the held factorisation estimates it, ``|M⁻¹(b − K x)| / |x|`` -- what a
         Newton step needs (an inexact Newton method): a step accurate to 1 % moves the
         iterates as an exact one does, where a relative residual says little about the
         error along the matrix's soft directions.
-    reuse_iterations : int, default 15
-        With ``reuse``: the iteration limit of the Krylov loop, or more where a
-        factorisation costs more than twice as many iterations
-        (:attr:`iteration_budget`); a matrix the loop does not solve within its limit is
-        factorised afresh.
     threads : int, optional
         PARDISO only: threads of each call (MKL's thread-local setting, restored after the
         call), e.g. 1 where another thread of the caller keeps the other cores busy, or
         on a machine shared with other jobs, where spinning OpenMP threads wait for cores.
         None (default): MKL's own setting.
+    release_cores : bool, default False
+        PARDISO only: let its threads sleep as soon as each call returns (the Intel OpenMP
+        runtime's wait, ``kmp_set_blocktime(0)``, for the calling thread's team, restored
+        after the call) instead of spinning for a next call, e.g. where the caller's own
+        threads need those cores between solves. No effect under another threading layer.
     factors : {"double", "single"}, default "double"
         PARDISO with ``reuse`` only: precision of the factorisation (PARDISO's
         ``iparm[27]``). Single-precision factors take half the memory, and their solve
@@ -206,11 +226,6 @@ class LinearSolver:
         ill-conditioned for that (no convergence in ``_REFINE_STEPS`` steps) the solver
         goes over to double-precision factors for good (:attr:`factors` says which).
         Other methods ignore it.
-    release_cores : bool, default False
-        PARDISO only: let its threads sleep as soon as each call returns (the Intel OpenMP
-        runtime's wait, ``kmp_set_blocktime(0)``, for the calling thread's team, restored
-        after the call) instead of spinning for a next call, e.g. where the caller's own
-        threads need those cores between solves. No effect under another threading layer.
 
     Attributes
     ----------
@@ -594,25 +609,33 @@ class LinearSolver:
         Returns
         -------
         ndarray, shape (n,)
+            The solution ``x`` (float64): from a factorisation, or with ``reuse`` (PARDISO)
+            from the Krylov loop or the refinement to the relative accuracy ``reuse``, or
+            for ``"amg-cg"`` to the relative residual ``rtol``.
 
         Raises
         ------
         ConvergenceError
-            If the factorisation fails or the iterative method does not converge.
+            If the factorisation fails (a PARDISO error, or a zero pivot of SuperLU: the
+            matrix is singular) or the iterative method does not converge. A direct solve of
+            a nearly singular matrix can still return NaN or inf values; the caller checks
+            (:func:`~harpx.mechanics.newton.solve` cuts the load step back).
         """
         if self.method == "pardiso":
             return self._pardiso_solve(K, b, symmetric)
         self.factorizations += 1
         if self.method in ("superlu", "superlu-colamd"):
+            options: dict[str, Any] = {}
             if self.method == "superlu" and symmetric:
-                lu = spla.splu(
-                    K.tocsc(),
-                    permc_spec="MMD_AT_PLUS_A",
-                    diag_pivot_thresh=0.0,
-                    options={"SymmetricMode": True},
-                )
-            else:
-                lu = spla.splu(K.tocsc())
+                options = {"permc_spec": "MMD_AT_PLUS_A", "diag_pivot_thresh": 0.0}
+                options["options"] = {"SymmetricMode": True}
+            try:
+                lu = spla.splu(K.tocsc(), **options)
+            except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
+                raise ConvergenceError(
+                    f"SuperLU could not factorise the {K.shape[0]}-dof matrix ({exc}); check "
+                    "the Dirichlet conditions remove all rigid-body modes"
+                ) from exc
             self.analyses += 1
             return lu.solve(b)
         if self.method == "umfpack":

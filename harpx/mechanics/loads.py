@@ -69,25 +69,76 @@ _EPS[0, 2, 1] = _EPS[2, 1, 0] = _EPS[1, 0, 2] = -1.0
 
 @runtime_checkable
 class ResidualTerm(Protocol):
-    """Protocol of an additional residual term (pressure, body force, tracking, ...)."""
+    """Protocol of an additional residual term (pressure, body force, tracking, ...).
+
+    Any object with a matching ``residual_tangent`` method is a residual term
+    (``isinstance(obj, ResidualTerm)`` checks for the method); the protocol itself is not
+    instantiated.
+    """
 
     def residual_tangent(
         self, body: Body, u: FloatArray, s: float
     ) -> tuple[FloatArray, sparse.spmatrix | None]:
-        """Contribution ``r`` (ndof,) to ``R = f_int - f_ext`` (mN) and ``K = ∂r/∂u``."""
+        """Contribution ``r`` to ``R = f_int - f_ext`` and its tangent ``K = ∂r/∂u``.
+
+        Parameters
+        ----------
+        body : Body
+            The body being solved.
+        u : ndarray, shape (ndof,)
+            Current displacement dofs, mm.
+        s : float
+            Load factor in [0, 1] (dimensionless).
+
+        Returns
+        -------
+        r : ndarray, shape (ndof,)
+            The term's residual contribution (minus its external force), mN.
+        K : scipy.sparse matrix, shape (ndof, ndof), or None
+            ``∂r/∂u`` (mN/mm), preferably on the body's stiffness pattern; None if ``r``
+            does not depend on ``u`` (dead load).
+        """
         ...
 
 
 @runtime_checkable
 class Dirichlet(Protocol):
-    """Protocol of a Dirichlet condition."""
+    """Protocol of a Dirichlet condition.
+
+    Any object with matching ``dofs`` and ``values`` methods is a Dirichlet condition
+    (e.g. :class:`Fixed`, :class:`Prescribed`); the protocol itself is not instantiated.
+    """
 
     def dofs(self, body: Body) -> IntArray:
-        """Constrained dof ids."""
+        """Constrained dof ids.
+
+        Parameters
+        ----------
+        body : Body
+            The body the condition applies to.
+
+        Returns
+        -------
+        ndarray of int
+            Ids of the constrained displacement dofs.
+        """
         ...
 
     def values(self, body: Body, s: float) -> FloatArray:
-        """Prescribed displacement (mm) of ``dofs(body)`` at load factor ``s``."""
+        """Prescribed displacement of ``dofs(body)`` at load factor ``s``.
+
+        Parameters
+        ----------
+        body : Body
+            The body the condition applies to.
+        s : float
+            Load factor in [0, 1] (dimensionless).
+
+        Returns
+        -------
+        ndarray, shape (ndofs,)
+            Displacement of each dof of ``dofs(body)``, in that order, mm.
+        """
         ...
 
 
@@ -154,7 +205,25 @@ class Fixed(_BoundaryDofs):
     components: tuple[int, ...] = (0, 1, 2)
 
     def values(self, body: Body, s: float) -> FloatArray:
-        """Zeros (mm)."""
+        """Prescribed values of ``dofs(body)``: zeros.
+
+        Parameters
+        ----------
+        body : Body
+            The body the condition applies to.
+        s : float
+            Load factor in [0, 1] (dimensionless; not used).
+
+        Returns
+        -------
+        ndarray, shape (ndofs,)
+            Zeros, one per dof of ``dofs(body)``, mm.
+
+        Raises
+        ------
+        EmptyBoundaryError
+            If ``facet`` names a boundary without facets.
+        """
         return np.zeros(self.dofs(body).size)
 
 
@@ -184,7 +253,28 @@ class Prescribed(_BoundaryDofs):
     components: tuple[int, ...] = (0, 1, 2)
 
     def values(self, body: Body, s: float) -> FloatArray:
-        """Prescribed values (mm) of ``dofs(body)``."""
+        """Prescribed values of ``dofs(body)`` at load factor ``s``.
+
+        Parameters
+        ----------
+        body : Body
+            The body the condition applies to.
+        s : float
+            Load factor in [0, 1] (dimensionless), passed to ``displacement``.
+
+        Returns
+        -------
+        ndarray, shape (ndofs,)
+            The component of ``displacement(X, s)`` at each dof of ``dofs(body)`` (in that
+            order), ``X`` the reference position of its dof node, mm.
+
+        Raises
+        ------
+        EmptyBoundaryError
+            If ``facet`` names a boundary without facets.
+        ValueError
+            If ``displacement`` does not return shape (n, 3).
+        """
         dofs = self.dofs(body)
         nodes = dofs // 3
         X = body.dof_points[nodes]
@@ -254,7 +344,18 @@ class Pressure:
     pressure: float | Callable[[float], float]
 
     def value(self, s: float) -> float:
-        """Pressure (kPa) at load factor ``s``."""
+        """Pressure at load factor ``s``.
+
+        Parameters
+        ----------
+        s : float
+            Load factor in [0, 1] (dimensionless).
+
+        Returns
+        -------
+        float
+            ``s * pressure``, or ``pressure(s)`` for a callable, kPa.
+        """
         if callable(self.pressure):
             return float(self.pressure(s))
         return float(s) * float(self.pressure)
@@ -262,7 +363,23 @@ class Pressure:
     def residual_tangent(
         self, body: Body, u: FloatArray, s: float
     ) -> tuple[FloatArray, sparse.csr_matrix]:
-        """Residual contribution (mN) and consistent (non-symmetric) tangent.
+        """Residual contribution and consistent (non-symmetric) tangent.
+
+        Parameters
+        ----------
+        body : Body
+            The body being solved.
+        u : ndarray, shape (ndof,)
+            Current displacement dofs, mm.
+        s : float
+            Load factor in [0, 1] (dimensionless).
+
+        Returns
+        -------
+        r : ndarray, shape (ndof,)
+            Minus the pressure's nodal force on the deformed facets, mN.
+        K : scipy.sparse.csr_matrix, shape (ndof, ndof)
+            ``∂r/∂u`` on the body's stiffness pattern, mN/mm.
 
         Raises
         ------
@@ -305,7 +422,24 @@ class BodyForce:
     force: Any = field(default_factory=lambda: np.zeros(3))
 
     def residual_tangent(self, body: Body, u: FloatArray, s: float) -> tuple[FloatArray, None]:
-        """Residual contribution ``-∫ N_a b dV`` (mN); the tangent is zero (None)."""
+        """Residual contribution ``-∫ N_a b dV``; the tangent is zero (None).
+
+        Parameters
+        ----------
+        body : Body
+            The body being solved.
+        u : ndarray, shape (ndof,)
+            Current displacement dofs, mm (not used: a dead load).
+        s : float
+            Load factor in [0, 1] (dimensionless).
+
+        Returns
+        -------
+        r : ndarray, shape (ndof,)
+            Minus the nodal body force, mN.
+        K : None
+            The load does not depend on ``u``.
+        """
         cache = body.__dict__.setdefault("_body_force_quadrature", {})
         if "X" not in cache:
             cache["X"] = body.quadrature_points

@@ -143,10 +143,25 @@ class HexLocator:
         self.coeffs = np.einsum("ma,cai->cmi", _monomial_coefficients(self.corners), x)
 
     def invert(self, cells: IntArray, points: FloatArray, *, iterations: int = 25) -> FloatArray:
-        """Reference coordinates (m, 3) of ``points`` (m, 3) mm in the trilinear ``cells`` (m,).
+        """Reference coordinates of points in given trilinear cells.
 
         Newton's method from the cell centre, clipped to [-1, 2]³; not checked for
         containment (see :meth:`locate`).
+
+        Parameters
+        ----------
+        cells : ndarray of int, shape (m,)
+            Cell of each point.
+        points : ndarray, shape (m, 3)
+            Physical points, mm.
+        iterations : int, default 25
+            Newton iterations at most (a point stops once its step is below 1e-12).
+
+        Returns
+        -------
+        ndarray, shape (m, 3)
+            Reference coordinates (dimensionless; [0, 1]³ inside the cell, in the convention
+            of ``corners``), whatever the cell; the caller checks containment.
         """
         # rows: coefficient k and component i over the points (m contiguous), so that every
         # step below runs on rows of m (on (m, 3) arrays numpy's inner loops are 3 long)
@@ -403,6 +418,11 @@ def displacement_at(body: Any, u: ArrayLike, points: ArrayLike) -> FloatArray:
     -------
     ndarray, shape (n, 3) (or (ntime, n, 3), or (3,) for one point)
         Displacement, mm; NaN for points outside the mesh.
+
+    Raises
+    ------
+    ValueError
+        If ``points`` is not (n, 3) or (3,), or ``u`` is not (ndof,) or (ntime, ndof).
 
     Examples
     --------

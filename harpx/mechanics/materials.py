@@ -360,7 +360,25 @@ class NeoHookean(_Uncoupled):
         _check("kappa", self.kappa)
 
     def isochoric_energy(self, F: ArrayLike, fiber: ArrayLike | None = None) -> FloatArray:
-        """Isochoric energy ``C1 (J^{-2/3} I1 - 3)`` in kPa, shape ``(...)``; no fibers used."""
+        """Isochoric energy density ``C1 (J^{-2/3} I1 - 3)``.
+
+        Parameters
+        ----------
+        F : array_like, shape (..., 3, 3)
+            Deformation gradients (dimensionless, ``det F > 0``).
+        fiber : array_like, shape (..., 3), optional
+            Ignored (the law is isotropic).
+
+        Returns
+        -------
+        ndarray, shape (...)
+            ``Wbar`` per unit reference volume (kPa).
+
+        Raises
+        ------
+        ValueError
+            If ``det F <= 0`` somewhere.
+        """
         F = _as_tensor(F)
         J, _ = positive_det_cof(F)
         I1 = np.einsum("...iJ,...iJ->...", F, F)
@@ -490,7 +508,27 @@ class Guccione(_Uncoupled):
         return F, J, cof, R, G, Ct, Q
 
     def isochoric_energy(self, F: ArrayLike, fiber: ArrayLike | None = None) -> FloatArray:
-        """Isochoric energy ``C/2 (exp Q - 1)`` in kPa, shape ``(...)``."""
+        """Isochoric energy density ``C/2 (exp Q - 1)``.
+
+        Parameters
+        ----------
+        F : array_like, shape (..., 3, 3)
+            Deformation gradients (dimensionless, ``det F > 0``).
+        fiber : array_like, shape (..., 3)
+            Reference fiber directions (normalised here), broadcast against the batch of
+            ``F``; required.
+
+        Returns
+        -------
+        ndarray, shape (...)
+            ``Wbar`` per unit reference volume (kPa), over the broadcast batch of ``F`` and
+            ``fiber``.
+
+        Raises
+        ------
+        ValueError
+            If ``det F <= 0`` somewhere, or ``fiber`` is None.
+        """
         F = _as_tensor(F)
         *_, Q = self._local(F, fiber)
         return 0.5 * self.c * np.expm1(Q)

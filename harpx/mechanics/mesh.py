@@ -18,9 +18,8 @@ from collections.abc import Callable
 import numpy as np
 import skfem
 from numpy.typing import ArrayLike, NDArray
-from skfem.io.meshio import HEX_MAPPING
 
-from harpx.mechanics.cells import _orient_tets
+from harpx.mechanics.cells import _orient_tets, vtk_corners
 from harpx.mechanics.meshspec import (
     _VTK_TO_SKFEM,  # noqa: F401  (older code imports it from here)
     MeshSpec,
@@ -78,6 +77,11 @@ def curved_hex_mesh(
     -------
     skfem.MeshHex2
         Same vertices, cells, facets, boundaries and subdomains as ``mesh``.
+
+    Raises
+    ------
+    ValueError
+        If ``centre`` does not return one point (3,) per edge, face or cell.
 
     Examples
     --------
@@ -142,6 +146,11 @@ def box(
     MeshSpec
         Region ``"body"`` (all cells); facets ``left``/``right`` (x = min/max),
         ``front``/``back`` (y = min/max), ``bottom``/``top`` (z = min/max).
+
+    Raises
+    ------
+    ValueError
+        If a length is not positive or a division count is below 1.
 
     Examples
     --------
@@ -276,6 +285,12 @@ def cylinder(
         Regions ``"tissue"`` (inside ``radius``) and, with a wall, ``"wall"``; facets
         ``"outer"`` (r = radius), ``"bottom"``, ``"top"`` (and ``"wall_outer"``).
 
+    Raises
+    ------
+    ValueError
+        If ``radius``, ``height`` or ``wall_thickness`` is not positive, or
+        ``n_circumferential`` is not a multiple of 4.
+
     Examples
     --------
     >>> from harpx.mechanics.mesh import cylinder
@@ -354,6 +369,11 @@ def tube(
     MeshSpec
         Region ``"tissue"``; facets ``"inner"``, ``"outer"``, ``"bottom"``, ``"top"`` and,
         for a sector (angle < 2π), ``"start"`` (θ = 0) and ``"end"`` (θ = angle).
+
+    Raises
+    ------
+    ValueError
+        Unless ``0 < inner_radius < outer_radius``.
 
     Examples
     --------
@@ -468,6 +488,11 @@ def tetrahedralize(spec: MeshSpec) -> MeshSpec:
         :func:`harpx.mechanics.cells.curved_tet_mesh` (or ``Body(..., element="tet10")``)
         for quadratic tetrahedra.
 
+    Raises
+    ------
+    TypeError
+        If ``spec`` is not a hexahedral mesh.
+
     Examples
     --------
     >>> from harpx.mechanics.mesh import box, tetrahedralize
@@ -478,7 +503,7 @@ def tetrahedralize(spec: MeshSpec) -> MeshSpec:
     mesh = spec.mesh
     if not isinstance(mesh, skfem.MeshHex1):
         raise TypeError(f"tetrahedralize needs a hexahedral MeshSpec, got {type(mesh).__name__!r}")
-    cells = mesh.t.T[:, HEX_MAPPING[:8]].astype(np.int64)  # VTK order
+    cells = vtk_corners(mesh)
     points = mesh.p.T
     n_hex = cells.shape[0]
     nv = points.shape[0]

@@ -73,6 +73,8 @@ def hex_mesh(points: NDArray[np.float64], cells_vtk: NDArray[np.int64]) -> skfem
     Returns
     -------
     skfem.MeshHex1
+        The same cells and vertices (mm), vertex ids reordered per cell to scikit-fem's
+        local order; vertex ``i`` of ``points`` is ``mesh.p[:, i]``.
 
     Raises
     ------
@@ -116,6 +118,12 @@ def check_nodes(
         Node ids of each cell (any vertex order).
     nvertex : int, optional
         Expected number of vertices per cell.
+
+    Raises
+    ------
+    ValueError
+        If the nodes are not finite float (npoint, 3), or the cells are not a non-empty integer
+        array whose ids lie in [0, npoint); the message names the nodes or cells.
 
     Examples
     --------
@@ -168,6 +176,11 @@ def check_unused_nodes(npoint: int, cells: NDArray[np.int64]) -> None:
         Number of nodes.
     cells : ndarray of int, shape (ncell, nvertex)
         Valid node ids of each cell.
+
+    Raises
+    ------
+    ValueError
+        If a node is used by no cell; the message lists the first ones.
     """
     unused = np.flatnonzero(np.bincount(np.asarray(cells).ravel(), minlength=npoint) == 0)
     if unused.size:
@@ -213,6 +226,12 @@ def check_hexahedra(points: NDArray[np.float64], cells_vtk: NDArray[np.int64]) -
         Vertex coordinates in mm.
     cells_vtk : ndarray, shape (ncell, 8)
         Vertex ids per cell in VTK order.
+
+    Raises
+    ------
+    ValueError
+        If a cell has a corner Jacobian that is not positive (inverted or degenerate); the
+        message lists the first cells.
     """
     xyz = points[cells_vtk]  # (ncell, 8, 3)
     edges = xyz[:, _CORNER_EDGES] - xyz[:, :, None, :]  # (ncell, 8 corners, 3 edges, 3)
@@ -292,6 +311,8 @@ def labelled_spec(
     Returns
     -------
     MeshSpec
+        A copy of ``mesh`` with ``regions`` as its subdomains and ``boundaries`` as its
+        boundaries, together with the same ``regions``, ``boundaries`` and ``fibers``.
     """
     labelled = skfem.MeshHex1(
         mesh.p,

@@ -149,6 +149,13 @@ def split_loads(loads: Iterable[Any]) -> tuple[list[Any], list[Any]]:
     Returns
     -------
     dirichlet, terms : list
+        The Dirichlet conditions and the residual terms, each in the order given (an
+        object with ``residual_tangent`` is a term even if it also has ``dofs``).
+
+    Raises
+    ------
+    TypeError
+        If an object is neither.
     """
     dirichlet, terms = [], []
     for load in loads:
@@ -479,16 +486,28 @@ def equilibrate(
 
     Parameters
     ----------
-    body, loads
-        As in :func:`solve`.
+    body : Body
+        The model, as in :func:`solve`.
+    loads : iterable
+        Dirichlet conditions and residual terms, as in :func:`solve`.
     u0 : array_like, shape (ndof,), optional
         Starting displacement (mm); zeros by default. Its Dirichlet values need not match:
         the remaining increment is applied through the linearised predictor.
     s : float, default 1.0
         Load factor passed to every load.
-    tol, atol, max_iterations, line_search, linear_solver, raise_on_failure
+    tol : float, default 1e-8
+        Relative tolerance on the free residual norm, as in :func:`solve`.
+    atol : float, optional
+        Absolute tolerance in mN, as in :func:`solve`.
+    max_iterations : int, default 25
+        Newton iterations before giving up (no cut-back here).
+    line_search : bool, default True
+        Safeguarded line search, as in :func:`solve`.
+    linear_solver : str or LinearSolver, default "auto"
         As in :func:`solve`. Pass a :class:`~harpx.mechanics.linsolve.LinearSolver`
         instance to reuse its symbolic analysis across calls.
+    raise_on_failure : bool, default True
+        Raise on failure; otherwise return ``u0`` with ``converged=False``.
 
     Returns
     -------
@@ -586,6 +605,8 @@ def solve(
     Returns
     -------
     SolveResult
+        The displacement at load factor 1 (or, with ``raise_on_failure=False``, the last
+        converged one), with the iteration, cut-back and timing record.
 
     Raises
     ------

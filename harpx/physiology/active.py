@@ -37,6 +37,16 @@ __all__ = [
 def fibred_body(body: object) -> Body:
     """``body`` itself, checked to be a :class:`~harpx.mechanics.body.Body` with fibres.
 
+    Parameters
+    ----------
+    body : object
+        The model to check.
+
+    Returns
+    -------
+    Body
+        ``body``, unchanged.
+
     Raises
     ------
     TypeError
@@ -60,10 +70,26 @@ def fibred_body(body: object) -> Body:
 def region_values(body: Body, t_max: Any) -> dict[str, float]:
     """Activation per region (kPa) from a dict or a DataArray over ``region``; NaN -> 0.
 
+    NaN stands for a region without an estimate (no data) and becomes 0; an infinite level
+    is refused.
+
+    Parameters
+    ----------
+    body : Body
+        The model whose regions (``body.regions``) the names must be.
+    t_max : dict of str to float or xarray.DataArray over ``region``
+        Activation per region, kPa (e.g. ``estimate["t_max"]`` of the activation estimate).
+
+    Returns
+    -------
+    dict of str to float
+        Activation per named region, kPa; NaN becomes 0.
+
     Raises
     ------
     ValueError
-        For a region the body does not have or a DataArray with other dims.
+        For a region the body does not have, an infinite level, or a DataArray with other
+        dims.
     TypeError
         For any other kind of ``t_max``.
     """
@@ -86,12 +112,28 @@ def region_values(body: Body, t_max: Any) -> dict[str, float]:
                 f"t_max names region {name!r}, which is not one of {sorted(body.regions)!r}"
             )
         v = float(value)
-        out[str(name)] = 0.0 if not np.isfinite(v) else v
+        if np.isinf(v):
+            raise ValueError(f"t_max of region {name!r} is {v!r} kPa; expected a finite level")
+        out[str(name)] = 0.0 if np.isnan(v) else v
     return out
 
 
 def with_active_law(body: Body, law: ActiveContraction) -> Body:
-    """The same model with an active fibre law (t_max = 0), leaving ``body`` untouched."""
+    """The same model with an active fibre law (t_max = 0), leaving ``body`` untouched.
+
+    Parameters
+    ----------
+    body : Body
+        The model: its mesh, material, fibres, regions, element, growth, boundaries and
+        volumetric setting are carried over.
+    law : ActiveContraction
+        Active fibre law of the copy.
+
+    Returns
+    -------
+    Body
+        A new body with ``active=law`` and ``t_max = 0`` (kPa) in every cell.
+    """
     return Body(
         body.mesh, body.material, fibers=body.fibers_qp, regions=body.regions,
         element=body.element, active=law, t_max=0.0, growth=body.growth,
@@ -100,7 +142,25 @@ def with_active_law(body: Body, law: ActiveContraction) -> Body:
 
 
 def default_law(body: Body, law: ActiveContraction | None) -> ActiveContraction:
-    """``law``, else the body's active law, else ``ActiveContraction()``; checked."""
+    """``law``, else the body's active law, else ``ActiveContraction()``; checked.
+
+    Parameters
+    ----------
+    body : Body
+        The model whose ``active`` law is the fallback.
+    law : ActiveContraction or None
+        The law asked for; None to take the body's (or the default law).
+
+    Returns
+    -------
+    ActiveContraction
+        The chosen law (an object with ``t_max_for_tension`` and ``activation_factor``).
+
+    Raises
+    ------
+    TypeError
+        If the chosen law lacks ``t_max_for_tension`` or ``activation_factor``.
+    """
     law = (
         law
         if law is not None
@@ -250,6 +310,11 @@ def simulate_history(
     -------
     ndarray, shape (frames, ndof)
         Displacement per frame, mm; each frame continues from the previous one.
+
+    Raises
+    ------
+    ValueError
+        If ``frames`` is below 2, or ``fractions`` is not one fraction per frame starting at 0.
     """
     fibred_body(body)
     law = default_law(body, law)

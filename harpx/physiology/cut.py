@@ -63,7 +63,24 @@ class NodeFixed:
     components: tuple[int, ...]
 
     def dofs(self, body: Body) -> IntArray:
-        """Constrained dof ids (sorted, unique)."""
+        """Constrained dof ids (sorted, unique).
+
+        Parameters
+        ----------
+        body : Body
+            The body whose dof nodes (``body.dof_points``) the points select.
+
+        Returns
+        -------
+        ndarray of int
+            ``3 * node + component`` for each point's nearest dof node and its component,
+            sorted, duplicates removed.
+
+        Raises
+        ------
+        ValueError
+            If the numbers of points and components differ.
+        """
         p = np.asarray(self.points, dtype=np.float64).reshape(-1, 3)
         if len(p) != len(self.components):
             raise ValueError(
@@ -75,7 +92,20 @@ class NodeFixed:
         return np.unique(3 * nodes + np.asarray(self.components, dtype=np.int64))
 
     def values(self, body: Body, s: float) -> FloatArray:
-        """Zeros (mm)."""
+        """Zeros (mm).
+
+        Parameters
+        ----------
+        body : Body
+            The body, as in :meth:`dofs`.
+        s : float
+            Load factor in [0, 1]; the values do not depend on it.
+
+        Returns
+        -------
+        ndarray
+            Zero displacement (mm) for each dof of :meth:`dofs`, in its order.
+        """
         return np.zeros(self.dofs(body).size)
 
 
@@ -191,16 +221,16 @@ def opening_angle(
         ``degrees`` (positive when the ring opens), ``gap`` (mm), ``planar``, the ring
         body and its displacement.
 
-    Warns
-    -----
-    HarpxWarning
-        If the released ring leaves its plane (``planar`` False).
-
     Raises
     ------
     ValueError
         If the body is not hex8, ``cut_angle`` is not a multiple of 90 or the slab is not a
         closed ring.
+
+    Warns
+    -----
+    HarpxWarning
+        If the released ring leaves its plane (``planar`` False).
     """
     if body.element != "hex8":
         raise ValueError(f"opening_angle needs a hex8 body, got element={body.element!r}")

@@ -75,7 +75,23 @@ class GrowthField:
         object.__setattr__(self, "tensors", t)
 
     def tensor(self, fiber: ArrayLike) -> FloatArray:
-        """The stored tensors; ``fiber`` (ncell, nqp, 3) only fixes the expected shape."""
+        """The stored tensors; ``fiber`` only fixes the expected shape.
+
+        Parameters
+        ----------
+        fiber : array_like, shape (ncell, nqp, 3)
+            Reference fibres of the body at its Gauss points; their values are not used.
+
+        Returns
+        -------
+        ndarray, shape (ncell, nqp, 3, 3)
+            The growth tensors :math:`F_g` (dimensionless).
+
+        Raises
+        ------
+        ValueError
+            If ``fiber`` is not on as many cells and points as the tensors.
+        """
         shape = np.shape(fiber)[:-1]
         if tuple(shape) != self.tensors.shape[:2]:
             raise ValueError(

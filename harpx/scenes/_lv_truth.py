@@ -34,7 +34,7 @@ __all__ = ["FEMotion", "Systole", "simulate_systole"]
 class Systole:
     """Quasi-static systolic loading (see the module docstring).
 
-    Attributes
+    Parameters
     ----------
     t_max : float
         Active tension parameter at end systole, kPa (calcium law).
@@ -47,7 +47,19 @@ class Systole:
 
     @staticmethod
     def ejection_profile(frames: int) -> FloatArray:
-        """Fraction of the end-systolic ejected volume at every frame: ``(1 - cos πs)/2``."""
+        """Fraction of the end-systolic ejected volume at every frame: ``(1 - cos πs)/2``.
+
+        Parameters
+        ----------
+        frames : int
+            Number of frames, frame 0 the reference.
+
+        Returns
+        -------
+        ndarray, shape (frames,)
+            Ejected fraction (dimensionless) at ``s = n / (frames - 1)``: 0 at frame 0,
+            1 at the last.
+        """
         s = np.arange(frames) / max(frames - 1, 1)
         return 0.5 * (1.0 - np.cos(np.pi * s))
 
@@ -293,7 +305,23 @@ class FEMotion:
         return self._located[key]
 
     def frame(self, t: float) -> int:
-        """Index of the frame at time ``t`` (ms)."""
+        """Index of the frame at time ``t`` (ms).
+
+        Parameters
+        ----------
+        t : float
+            A frame time of the motion, ms.
+
+        Returns
+        -------
+        int
+            Index into ``times`` (and the rows of ``U``).
+
+        Raises
+        ------
+        ValueError
+            If ``t`` is not one of the frame times.
+        """
         n = int(np.argmin(np.abs(self.times - float(t))))
         if abs(self.times[n] - float(t)) > 1e-6 * max(1.0, float(np.abs(self.times).max())):
             raise ValueError(
@@ -305,7 +333,18 @@ class FEMotion:
         return self.U[n].reshape(-1, 3)[: len(self.body.nodes)]
 
     def displacement(self, points: ArrayLike) -> FloatArray:
-        """Displacement of every frame at reference points, (ntime, n, 3) mm, NaN outside."""
+        """Displacement of every frame at reference points.
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            Reference positions, mm.
+
+        Returns
+        -------
+        ndarray, shape (ntime, n, 3)
+            Displacement, mm; NaN at points outside the reference mesh.
+        """
         cells, xi = self._reference.locate(np.asarray(points, dtype=np.float64))
         out = np.full((self.times.size, len(cells), 3), np.nan)
         inside = cells >= 0
@@ -327,7 +366,21 @@ class FEMotion:
         return out
 
     def inverse(self, x: ArrayLike, t: float) -> FloatArray:
-        """Reference positions (n, 3) mm of the material at spatial points ``x`` (n, 3) mm."""
+        """Reference positions of the material at spatial points.
+
+        Parameters
+        ----------
+        x : array_like, shape (n, 3)
+            Spatial (deformed) positions, mm.
+        t : float
+            A frame time of the motion, ms (:meth:`frame`).
+
+        Returns
+        -------
+        ndarray, shape (n, 3)
+            Reference positions, mm; a point outside the deformed body is sent to
+            ``x + FAR`` (10 m above it along z), where :meth:`density` is 0.
+        """
         n = self.frame(t)
         x = np.asarray(x, dtype=np.float64)
         if n == 0:
@@ -379,7 +432,18 @@ class FEMotion:
         return tracked_dataset(self.body, self.U, grid, known, {"method": "forward simulation"})
 
     def density(self, X: ArrayLike) -> FloatArray:
-        """1 inside the reference mesh, 0 outside (n,)."""
+        """Body indicator at reference points: 1 inside the reference mesh, 0 outside.
+
+        Parameters
+        ----------
+        X : array_like, shape (n, 3)
+            Reference positions, mm (e.g. the output of :meth:`inverse`).
+
+        Returns
+        -------
+        ndarray of float, shape (n,)
+            1.0 inside the mesh, 0.0 outside.
+        """
         if self._last_inverse is not None and self._last_inverse[0] is X:
             return self._last_inverse[1].astype(np.float64)
         cells, _ = self._reference.locate(np.asarray(X, dtype=np.float64))

@@ -438,12 +438,29 @@ class LVScene:
         return self.truth.as_tracked(self.tagged)
 
     def dirichlet(self) -> list[Any]:
-        """Tracking boundary conditions: base held in z and pinned in-plane (as the truth)."""
+        """Tracking boundary conditions: base held in z and pinned in-plane (as the truth).
+
+        Returns
+        -------
+        list
+            ``[Fixed("base", (2,)), NodeFixed(...)]``: :func:`base_conditions` of the
+            scene's geometry.
+        """
         return base_conditions(self.geometry)
 
     def growth(self) -> GrowthField:
-        """The prestretch growth field of the PSR (computed once by
-        :func:`~harpx.physiology.growth.prestretch_growth`)."""
+        """The prestretch growth field of the prestretched reference, computed once.
+
+        The first call runs :func:`~harpx.physiology.growth.prestretch_growth` on the
+        tracking mesh with :meth:`dirichlet` (settings from
+        ``info["prestretch_settings"]``, if any) and stores its report in
+        ``info["prestretch"]``; later calls return the same field.
+
+        Returns
+        -------
+        GrowthField
+            :math:`F_g` (dimensionless) at the Gauss points of a hex8 body on ``mesh``.
+        """
         if self._growth is None:
             self._growth, info = prestretch_growth(
                 self.mesh,
@@ -467,6 +484,13 @@ class LVScene:
         Returns
         -------
         Body
+            hex8 body on ``mesh`` with the passive ``material``; with ``"prestretched"``
+            also the growth field of :meth:`growth`.
+
+        Raises
+        ------
+        ValueError
+            For an unknown reference.
         """
         reference = self.reference if reference is None else reference
         if reference == "stress-free":
@@ -532,6 +556,9 @@ def lv(
     Returns
     -------
     LVScene
+        The CSPAMM images with ``displacement_true``, the tracking mesh and material, the
+        fine forward simulation (``truth``), the geometry, the infarct and the settings
+        and timings (``info``).
 
     Raises
     ------

@@ -30,7 +30,37 @@ Size = Literal["small", "paper"]
 
 @dataclass(frozen=True)
 class PhantomGeometry:
-    """Sizes of one phantom variant (lengths in mm, times in ms)."""
+    """Sizes of one phantom variant (lengths in mm, times in ms).
+
+    Parameters
+    ----------
+    radius : float
+        Radius of the gel cylinder (the container's inner radius), mm.
+    height : float
+        Height of the cylinder, mm; it spans z from ``-height/2`` to ``height/2``.
+    frames : int
+        Number of frames, the first at t = 0 (rest).
+    repetition_time : float
+        Time between frames, ms.
+    slices : int
+        Axial slices (normal to z) of the image stack.
+    slice_spacing : float
+        Slice spacing along z, mm.
+    matrix : int
+        In-plane matrix: ``matrix × matrix`` pixels.
+    pixel : float
+        In-plane pixel size, mm.
+    tag_period : float
+        Tag spacing of the three tags (x, y, z), mm.
+    n_circumferential, n_radial, n_axial : int
+        Cells of the tracking mesh (:func:`~harpx.mechanics.mesh.cylinder`): around the
+        circumference (a multiple of 4), in the rings between the square core and the
+        circle, and along z.
+    angle : float
+        Final rotation of the container, rad.
+    rise_time : float
+        Duration of the container's acceleration ramp, ms.
+    """
 
     radius: float
     height: float
@@ -119,6 +149,14 @@ def phantom(
     Returns
     -------
     Scene
+        The SPAMM or CSPAMM ``tagged`` images (tags x, y, z) with ``displacement_true``,
+        the tracking ``mesh`` (a cylinder of the phantom's size), its neo-Hookean
+        ``material``, the ground-truth ``motion`` and the settings in ``info``.
+
+    Raises
+    ------
+    ValueError
+        If ``size`` is not one of the geometries' names.
     """
     if size not in GEOMETRIES:
         raise ValueError(f"size={size!r}; expected one of {sorted(GEOMETRIES)}")

@@ -123,7 +123,20 @@ class ContractingTube:
         return np.asarray(x - X, dtype=np.float64)
 
     def inverse(self, x: FloatArray, t: float) -> FloatArray:
-        """Reference position X(x, t) in mm of the material point at ``x`` (n, 3) mm."""
+        """Reference position X(x, t) of the material point at ``x``.
+
+        Parameters
+        ----------
+        x : ndarray, shape (n, 3)
+            Spatial (deformed) positions, mm.
+        t : float
+            Time, ms.
+
+        Returns
+        -------
+        ndarray, shape (n, 3)
+            Reference positions, mm (exact for points in the deformed wall).
+        """
         x = np.asarray(x, dtype=np.float64)
         e, tau, a = self._state(t)
         Z = self.bottom + (x[:, 2] - self.bottom) / (1.0 - e)
@@ -136,7 +149,7 @@ class ContractingTube:
 class ShortAxisGeometry:
     """Sizes of one short-axis scene variant (lengths in mm, times in ms, angles in rad).
 
-    Attributes
+    Parameters
     ----------
     inner_radius, outer_radius, length : float
         Reference tube, mm (centred on z = 0 along z).
@@ -273,8 +286,8 @@ def short_axis(size: Size = "paper", *, snr: float | None = 20.0, seed: int = 0)
     Parameters
     ----------
     size : {"paper", "small"}, default "paper"
-        ``"paper"``: an LV-sized ring, 16 frames, 1.17 mm pixels (a few seconds to build);
-        ``"small"``: a smaller ring and 5 frames, for tests (about a second).
+        ``"paper"``: an LV-sized ring, 16 frames, 1.17 mm pixels;
+        ``"small"``: a smaller ring and 5 frames, for tests.
     snr : float or None, default 20
         Signal-to-noise ratio of the CSPAMM images (None: noise free).
     seed : int, default 0
@@ -283,6 +296,9 @@ def short_axis(size: Size = "paper", *, snr: float | None = 20.0, seed: int = 0)
     Returns
     -------
     ShortAxisScene
+        The CSPAMM images (tags x and y) with ``mask``, ``body`` and
+        ``displacement_true``, the tracking tube and its neo-Hookean material, the
+        analytic ``motion``, the boundary conditions (bottom held in z) and ``info``.
 
     Raises
     ------

@@ -63,7 +63,7 @@ ACTIVATIONS: dict[str, float] = {"GG": 2.0, "IL": 1.2, "SL": 1.5, "T": 1.0, "V":
 class TongueGeometry:
     """Sizes of one tongue-scene variant (lengths in mm, times in ms).
 
-    Attributes
+    Parameters
     ----------
     length, width, height : float
         Tongue size (x, y, z), mm.
@@ -242,6 +242,23 @@ class TongueScene(MeshScene):
         The measurement chain for :func:`harpx.inverse.calibration.calibrate_activation`:
         ``self.track(body, self.acquire(body, displacement, seed=seed), **settings)``; pass
         the settings the data were tracked with.
+
+        Parameters
+        ----------
+        body : Body
+            Model whose dofs ``displacement`` refers to; it is also the tracking model.
+        displacement : ndarray, shape (ntime, ndof)
+            Displacement per frame (frame 0 at rest), mm, as in :meth:`acquire`.
+        seed : int, default 1
+            Noise seed of the images (use one different from the scene's).
+        **settings
+            Tracking settings passed to :func:`harpx.tracking.track.track`, as in
+            :meth:`track`.
+
+        Returns
+        -------
+        xarray.Dataset
+            ``tracked/1`` of the imaged motion.
         """
         return self.track(body, self.acquire(body, displacement, seed=seed), **settings)
 
@@ -250,6 +267,19 @@ class TongueScene(MeshScene):
 
         The fine ground-truth displacement is interpolated at ``body``'s dof nodes: the
         stretch a perfect tracker would report on that model.
+
+        Parameters
+        ----------
+        body : Body
+            Model with fibres over the scene's tongue (e.g. the tracking model); its dof
+            nodes just outside the fine mesh take the displacement of the nearest node
+            inside.
+
+        Returns
+        -------
+        xarray.DataArray, shape (time, cell)
+            Fibre stretch of each cell of ``body`` (dimensionless) at the scene's frame
+            times (ms).
         """
         values, inside = interpolate_displacement(
             self.truth_body, self.truth_displacement, body.dof_points
@@ -266,7 +296,22 @@ class TongueScene(MeshScene):
         )
 
     def true_stretch_by_muscle(self, body: Body, time: int = -1) -> dict[str, float]:
-        """Volume-weighted mean true fibre stretch of each muscle on ``body``'s cells."""
+        """Volume-weighted mean true fibre stretch of each muscle on ``body``'s cells.
+
+        Parameters
+        ----------
+        body : Body
+            Model with fibres whose regions are the muscles, as in
+            :meth:`true_fiber_stretch`.
+        time : int, default -1
+            Frame index (the last, full activation, by default).
+
+        Returns
+        -------
+        dict of str to float
+            Mean fibre stretch (dimensionless) per region of ``body``, weighted by the
+            reference cell volumes.
+        """
         lam = self.true_fiber_stretch(body).isel(time=time).values
         w = body.cell_volume
         return {
@@ -463,9 +508,9 @@ def tongue(
     Parameters
     ----------
     size : {"paper", "small"}, default "paper"
-        ``"paper"``: ground truth on a 2x refined mesh (2240 hex20 cells, ~1 min);
-        ``"small"``: ground truth refined 2x along the length only (560 hex20 cells, a few
-        seconds). Both image the paper's protocol (10 coronal + 8 sagittal CSPAMM slices,
+        ``"paper"``: ground truth on a 2x refined mesh (2240 hex20 cells);
+        ``"small"``: ground truth refined 2x along the length only (560 hex20 cells).
+        Both image the paper's protocol (10 coronal + 8 sagittal CSPAMM slices,
         1.9 mm pixels) and track with the paper's 280-cell hex20 model.
     snr : float or None, default 20
         Signal-to-noise ratio of the CSPAMM images (None: noise free).
@@ -478,6 +523,9 @@ def tongue(
     Returns
     -------
     TongueScene
+        The CSPAMM images with ``displacement_true``, the 280-cell tracking mesh and its
+        neo-Hookean material, the active law, the true ``t_max`` per muscle (kPa), the
+        boundary conditions, the ground-truth model and its displacement, and ``info``.
 
     Raises
     ------

@@ -195,8 +195,12 @@ def splat(
     ----------
     values : ndarray of complex, shape (n,)
         Values to spread.
-    positions, origin, spacing, shape
-        The points (z, y, x, mm) and the grid, as for :func:`splat_operator`.
+    positions : ndarray, shape (n, 3)
+        Positions (z, y, x), mm, as for :func:`splat_operator`.
+    origin, spacing : ndarray, shape (3,)
+        First voxel centre and voxel spacing (z, y, x), mm.
+    shape : (int, int, int)
+        Grid size (z, y, x).
 
     Returns
     -------
@@ -528,7 +532,22 @@ def blur_correction(
 
 
 def deblurred(phase: xr.Dataset, correction: np.ndarray) -> xr.Dataset:
-    """``phase`` with ``correction`` (rad, as from :func:`blur_correction`) removed, wrapped."""
+    """``phase`` with ``correction`` (rad, as from :func:`blur_correction`) removed, wrapped.
+
+    Parameters
+    ----------
+    phase : xarray.Dataset
+        ``phase/1`` images.
+    correction : ndarray, shape (tag, time, z, y, x)
+        Phase to subtract, rad, as from :func:`blur_correction`; voxels where it is 0 keep
+        their phase unchanged.
+
+    Returns
+    -------
+    xarray.Dataset
+        A copy of ``phase`` whose ``phase`` variable (tag, time, z, y, x) is
+        ``W(phase − correction)`` where the correction is non-zero, rad.
+    """
     values = np.asarray(phase["phase"].transpose("tag", "time", *GRID_DIMS).values)
     corrected = values.copy()
     for n in range(values.shape[1]):  # frame by frame: temporaries of one frame only
@@ -586,8 +605,14 @@ def lazily_deblurred(
 
     Parameters
     ----------
-    phase, body, U, model
-        As for :func:`blur_correction`.
+    phase : xarray.Dataset
+        ``phase/1`` images, as for :func:`blur_correction`.
+    body : Body
+        The tracked body (reference configuration), mm.
+    U : ndarray, shape (ntime, ndof)
+        Tracked displacement per frame, mm.
+    model : {"slice-profile", "in-plane"}, default "slice-profile"
+        Forward model, as for :func:`blur_correction`.
 
     Returns
     -------

@@ -41,7 +41,6 @@ relative penalty therefore serves stiffer or softer materials and other tag spac
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -55,6 +54,7 @@ from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.imaging.sample import PhaseSampler, wrap
 from harpx.mechanics.assembly import sparsity
 from harpx.schema import GRID_DIMS, grid_step
+from harpx.tracking.constraint_points import ConstraintState, constraint_quadrature, epsilon_of
 from harpx.tracking.noise import epsilon_floor, noise_floor, reference_residual
 from harpx.tracking.observability import Observability, observability
 
@@ -74,7 +74,19 @@ _BLOCK_FLOATS = 8_000_000
 
 
 def shear_modulus(body: Body) -> float:
-    """Small-strain shear modulus μ (kPa) of the body's material, from its tangent at F = I."""
+    """Small-strain shear modulus μ (kPa) of the body's material, from its tangent at F = I.
+
+    Parameters
+    ----------
+    body : Body
+        The finite-element body; only its ``material`` is used (a fibre material is
+        evaluated with the fibre along x).
+
+    Returns
+    -------
+    float
+        μ, the component A_xyxy of the isochoric tangent at F = I, kPa.
+    """
     material = body.material
     fiber = None
     if getattr(material, "needs_fibers", False):
@@ -95,127 +107,6 @@ WINDOW_PERIODS = 2.0
 _MAGNITUDE_MEMO = 4
 
 
-def constraint_quadrature(body: Body, spacing: float) -> tuple[FloatArray, FloatArray]:
-    """Tensor Gauss rule whose points are at most about ``spacing`` mm apart in every cell.
-
-    The number of points along each reference direction of the hexahedron is set by the
-    longest cell edge along that direction, so elongated cells (e.g. the circumferential
-    cells of an O-grid) get more points only where they need them.
-
-    Parameters
-    ----------
-    body : Body
-        The finite-element body (hexahedral mesh, mm).
-    spacing : float
-        Largest allowed distance between neighbouring sample points, mm (a voxel).
-
-    Returns
-    -------
-    points : ndarray, shape (3, nq)
-        Reference coordinates in [0, 1]³ (in the unit tetrahedron for tetrahedral meshes).
-    weights : ndarray, shape (nq,)
-        Weights summing to the reference cell's volume (1, or 1/6 for tetrahedra).
-
-    Notes
-    -----
-    Tetrahedra get the centroids of a regular subdivision into ``m³`` congruent
-    tetrahedra, equal weights (exact for linear integrands), ``m`` set by the longest cell
-    edge so that neighbouring points are at most about ``spacing`` apart.
-    """
-    mesh = body.mesh
-    if isinstance(mesh, skfem.MeshTet1):
-        return _tet_quadrature(mesh, spacing)
-    ref = skfem.ElementHex1().doflocs  # (8, 3) reference coordinates of the local vertices
-    rules = []
-    for j in range(3):
-        diff = np.abs(ref[:, None, :] - ref[None, :, :])
-        other = np.delete(diff, j, axis=2).sum(axis=2)
-        a, b = np.nonzero(
-            (diff[:, :, j] == 1) & (other == 0) & (np.arange(8)[:, None] < np.arange(8))
-        )
-        edges = mesh.p[:, mesh.t[a]] - mesh.p[:, mesh.t[b]]  # (3, 4 edges, ncell)
-        longest = float(np.linalg.norm(edges, axis=0).max())
-        # n Gauss points split an edge of length L into gaps of at most about L / n
-        n = max(1, int(np.ceil(longest / spacing)))
-        x, w = np.polynomial.legendre.leggauss(n)
-        rules.append((0.5 * (x + 1.0), 0.5 * w))
-    grids = np.meshgrid(*(r[0] for r in rules), indexing="ij")
-    weights = np.einsum("i,j,k->ijk", *(r[1] for r in rules)).ravel()
-    return np.stack([g.ravel() for g in grids]), weights
-
-
-def _tet_quadrature(mesh: skfem.MeshTet1, spacing: float) -> tuple[FloatArray, FloatArray]:
-    """Centroids of the regular subdivision of the unit tetrahedron into ``m³`` tetrahedra.
-
-    The unit tetrahedron is the image of the Kuhn simplex ``1 >= a >= b >= c >= 0`` under
-    ``x = a - b, y = b - c, z = c``; the Freudenthal triangulation of the ``m³`` sub-cubes
-    of the unit cube puts ``m³`` congruent simplices in the Kuhn simplex. Their centroids
-    are about half a sub-edge apart, so ``m = ceil(longest edge / (1.5 spacing))``.
-    """
-    p, t = mesh.p, mesh.t
-    longest = max(
-        float(np.linalg.norm(p[:, t[i]] - p[:, t[j]], axis=0).max())
-        for i in range(4)
-        for j in range(i + 1, 4)
-    )
-    m = max(1, int(np.ceil(longest / (1.5 * spacing))))
-    i, j, k = (g.ravel() for g in np.meshgrid(*(np.arange(m),) * 3, indexing="ij"))
-    corner = np.stack([i, j, k], axis=1)
-    perms = np.array([[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]])
-    # offset of the centroid of the simplex s_p0 >= s_p1 >= s_p2 in its sub-cube
-    offset = np.zeros((6, 3))
-    np.put_along_axis(offset, perms, np.array([[0.75, 0.5, 0.25]]), axis=1)
-    c = (corner[:, None, :] + offset[None]).reshape(-1, 3) / m  # (a, b, c) of all simplices
-    keep = (c[:, 0] >= c[:, 1]) & (c[:, 1] >= c[:, 2])  # simplices inside the Kuhn simplex
-    a_, b_, c_ = c[keep].T
-    points = np.stack([a_ - b_, b_ - c_, c_])
-    return points, np.full(points.shape[1], 1.0 / (6.0 * points.shape[1]))
-
-
-@dataclass
-class ConstraintState:
-    """Phase mismatch of every constraint point at one displacement.
-
-    Attributes
-    ----------
-    residual : ndarray, shape (nq, ntag)
-        Wrapped phase mismatch W(φ(x, t) − φ0(X)), rad (0 where not valid).
-    gradient : ndarray, shape (nq, ntag, 3)
-        Spatial phase gradient ∇φ at the current positions, rad/mm (0 where not valid).
-    weight : ndarray, shape (nq,)
-        Quadrature weight of points with data for at least one tag, mm³ (0 elsewhere).
-    tag_valid : ndarray of bool, shape (nq, ntag)
-        Which tags have data at each point (inside that tag's mask and field of view, in
-        the reference and the current frame).
-    robust_weight : ndarray, shape (nq, ntag), optional
-        Weight :math:`w(r) = 1/(1 + (r/r_0)^2)` of each residual in the penalty force and
-        tangent (:attr:`PhaseConstraint.robust_scale`); None: 1 everywhere (quadratic).
-    """
-
-    residual: FloatArray
-    gradient: FloatArray
-    weight: FloatArray
-    tag_valid: np.ndarray
-    robust_weight: FloatArray | None = None
-
-    def penalty_weight(self) -> FloatArray | float:
-        """Factor of λ per (point, tag) in the force and the tangent (1 when quadratic)."""
-        return 1.0 if self.robust_weight is None else self.robust_weight
-
-    def epsilon(self) -> float:
-        """Tracking residual ε: weighted mean of ``|W(φ − φ0)|`` over valid points and tags, rad."""
-        return _epsilon(self.weight, self.tag_valid, self.residual)
-
-
-def _epsilon(weight: FloatArray, tag_valid: np.ndarray, residual: FloatArray) -> float:
-    """Weighted mean of |residual| over the valid (point, tag) pairs (NaN if none)."""
-    w = weight[:, None] * tag_valid
-    total = w.sum()
-    if total <= 0:
-        return float("nan")
-    return float((w * np.abs(residual)).sum() / total)
-
-
 def _harmonic_noise(phase: xr.Dataset) -> FloatArray | None:
     """The images' ``harmonic_noise`` per tag, or None where absent or not finite."""
     if "harmonic_noise" not in phase.variables:
@@ -233,6 +124,13 @@ class PhaseConstraint:
         The finite-element body in its reference configuration (frame 0), mm.
     phase : xarray.Dataset
         A ``phase/1`` dataset.
+    intorder : int, optional
+        Isotropic Gauss order of the constraint quadrature. Default: a tensor rule with
+        points at most one acquired voxel apart (:func:`constraint_quadrature`).
+    spline_order : {1, 3}, default 1
+        Interpolation of the demodulated harmonic images between voxels. The demodulated
+        image varies on the scale of the strain, not of the tags, so trilinear
+        interpolation is as accurate as cubic for tracking, at a fraction of the cost.
     robust_scale : float, optional
         Residual scale :math:`r_0` (rad) of a Cauchy (Lorentzian) loss on each point's
         phase mismatch: the penalty energy :math:`\tfrac12 \lambda r^2` becomes
@@ -242,13 +140,6 @@ class PhaseConstraint:
         A point whose phase sits in a neighbouring tag's basin (:math:`|r|` near π) then
         pulls with a fraction :math:`(r_0/\pi)^2` of its quadratic force, so a high penalty
         cannot drag the body across a wrap. None (the paper's formulation): quadratic.
-    spline_order : {1, 3}, default 1
-        Interpolation of the demodulated harmonic images between voxels. The demodulated
-        image varies on the scale of the strain, not of the tags, so trilinear
-        interpolation is as accurate as cubic for tracking, at a fraction of the cost.
-    intorder : int, optional
-        Isotropic Gauss order of the constraint quadrature. Default: a tensor rule with
-        points at most one acquired voxel apart (:func:`constraint_quadrature`).
 
     Attributes
     ----------
@@ -344,7 +235,14 @@ class PhaseConstraint:
 
     # ------------------------------------------------------------------ set-up
     def penalty_scale(self) -> float:
-        """Absolute penalty (kPa/rad²) that corresponds to a relative penalty of 1."""
+        """Absolute penalty (kPa/rad²) that corresponds to a relative penalty of 1.
+
+        Returns
+        -------
+        float
+            μ / (k h)², with μ the shear modulus, k the root-mean-square tag wavenumber and
+            h the mean element size (module notes), kPa/rad².
+        """
         return self.shear_modulus / (self.wavenumber * self.element_size) ** 2
 
     def observe(self, fixed_dofs: np.ndarray) -> Observability:
@@ -353,6 +251,16 @@ class PhaseConstraint:
         From here on the phase force acts through each point's seen projector, and
         :attr:`observability` lists the rigid-body modes that neither the tags nor the
         Dirichlet dofs ``fixed_dofs`` hold.
+
+        Parameters
+        ----------
+        fixed_dofs : array_like of int, shape (nfixed,)
+            Indices of the displacement dofs held by Dirichlet conditions.
+
+        Returns
+        -------
+        Observability
+            The same object, stored as :attr:`observability`.
         """
         self.observability = observability(
             self.body,
@@ -378,6 +286,17 @@ class PhaseConstraint:
         See :mod:`harpx.tracking.noise`: the phase noise of both frames where the images
         carry ``harmonic_noise``; otherwise the affine-fit residual of the reference frame
         (alone in frame 0), grown by the tags' fading.
+
+        Parameters
+        ----------
+        u : ndarray, shape (ndof,)
+            Displacement, mm (where the current frame's harmonic magnitudes are sampled;
+            unused in frame 0 or before :meth:`set_frame`).
+
+        Returns
+        -------
+        float
+            Expected ε of the phase noise alone, rad.
         """
         if self.harmonic_noise is not None and self._reference_point_magnitude is not None:
             if self.frame == 0 or self._sampler is None:
@@ -413,6 +332,13 @@ class PhaseConstraint:
         Used by the blur correction (:mod:`harpx.tracking.blur`), which leaves the reference
         frame as it is: the reference samples, the noise floor and the observability
         worked out from it stay valid, so the set-up is not repeated.
+
+        Parameters
+        ----------
+        phase : xarray.Dataset
+            A ``phase/1`` dataset on the same grid, with the same tags and frame count and
+            the same frame 0 (to 1e-5 rad); the current frame must be set again
+            (:meth:`set_frame`).
 
         Raises
         ------
@@ -454,11 +380,16 @@ class PhaseConstraint:
     def set_frame(self, time_index: int, near: FloatArray | None = None) -> None:
         """Target the phase images of frame ``time_index`` (prepares them once).
 
-        ``near`` (ndof,) mm: a displacement the frame's solves start close to. The images are
-        then prepared only in the box its points occupy, widened by :data:`WINDOW_PERIODS`
-        tag periods on every side; should a point leave that box later, they are prepared on
-        the whole grid (the box bounds the work, never what can be sampled). None: the whole
-        grid.
+        Parameters
+        ----------
+        time_index : int
+            Index of the frame along ``time``.
+        near : ndarray, shape (ndof,), optional
+            A displacement the frame's solves start close to, mm. The images are then
+            prepared only in the box its points occupy, widened by :data:`WINDOW_PERIODS`
+            tag periods on every side; should a point leave that box later, they are
+            prepared on the whole grid (the box bounds the work, never what can be
+            sampled). None: the whole grid.
         """
         region = None
         if near is not None:
@@ -486,14 +417,37 @@ class PhaseConstraint:
         return sampler
 
     def current_points(self, u: FloatArray) -> FloatArray:
-        """Current positions x = X + u(X) of the constraint points, mm."""
+        """Current positions x = X + u(X) of the constraint points.
+
+        Parameters
+        ----------
+        u : ndarray, shape (ndof,)
+            Displacement, mm.
+
+        Returns
+        -------
+        ndarray, shape (nq, 3)
+            Positions (x, y, z), mm, in the order of :attr:`points`.
+        """
         ue = u[self._cell_dofs]  # (ncell, nb, 3)
         disp = np.matmul(self.shape_values, ue)
         return self.points + disp.reshape(-1, 3)
 
     # ------------------------------------------------------------------ evaluation
     def state(self, u: FloatArray) -> ConstraintState:
-        """Phase mismatch, gradients and weights at displacement ``u`` (ndof,) mm."""
+        """Phase mismatch, gradients and weights at displacement ``u``.
+
+        Parameters
+        ----------
+        u : ndarray, shape (ndof,)
+            Displacement, mm.
+
+        Returns
+        -------
+        ConstraintState
+            The state of every constraint point in the current frame (:meth:`set_frame`),
+            phase gradients projected onto the seen directions once :meth:`observe` ran.
+        """
         points = self.current_points(u)
         phi, grad, valid = self._frame_sampler(points).sample(points, per_tag=True)
         ok = valid & self.reference_valid  # (nq, ntag)
@@ -510,14 +464,25 @@ class PhaseConstraint:
         return ConstraintState(residual, grad, self.volume * ok.any(axis=1), ok, robust)
 
     def epsilon_at(self, u: FloatArray) -> float:
-        """Tracking residual ε at displacement ``u`` (phase only, no gradients), rad."""
+        """Tracking residual ε at displacement ``u`` (phase only, no gradients).
+
+        Parameters
+        ----------
+        u : ndarray, shape (ndof,)
+            Displacement, mm.
+
+        Returns
+        -------
+        float
+            ε in the current frame, rad (NaN if no point has data).
+        """
         points = self.current_points(u)
         sampler = self._frame_sampler(points)
         phi, magnitude, valid = sampler.phase_and_magnitude(points)
         seen = (np.array(u, dtype=np.float64), sampler, magnitude, np.all(valid, axis=1))
         self._magnitudes = [*self._magnitudes, seen][-_MAGNITUDE_MEMO:]
         ok = valid & self.reference_valid
-        return _epsilon(self.volume, ok, np.where(ok, wrap(phi - self.reference_phase), 0.0))
+        return epsilon_of(self.volume, ok, np.where(ok, wrap(phi - self.reference_phase), 0.0))
 
     def residual_tangent(
         self, body: Body, u: FloatArray, s: float = 1.0
@@ -544,7 +509,20 @@ class PhaseConstraint:
         return self.assemble(st, s)
 
     def force(self, st: ConstraintState, s: float = 1.0) -> FloatArray:
-        """Residual contribution (paper eq. 5) from an evaluated state, mN (no tangent)."""
+        """Residual contribution (paper eq. 5) from an evaluated state (no tangent).
+
+        Parameters
+        ----------
+        st : ConstraintState
+            State from :meth:`state`.
+        s : float, default 1
+            Load factor (scales the penalty and multipliers).
+
+        Returns
+        -------
+        ndarray, shape (ndof,)
+            Residual contribution, mN.
+        """
         N = self.shape_values  # (c, q, a)
         ncell, npc, nb = N.shape
         drive = s * self.penalty * st.penalty_weight() * st.residual
@@ -556,7 +534,22 @@ class PhaseConstraint:
         return np.bincount(self._cell_dofs.ravel(), weights=fe.ravel(), minlength=ndof)  # type: ignore[return-value]
 
     def assemble(self, st: ConstraintState, s: float = 1.0) -> tuple[FloatArray, sparse.csr_matrix]:
-        """Residual and tangent from an evaluated :class:`ConstraintState`."""
+        """Residual and tangent from an evaluated :class:`ConstraintState`.
+
+        Parameters
+        ----------
+        st : ConstraintState
+            State from :meth:`state`.
+        s : float, default 1
+            Load factor (scales the penalty and multipliers).
+
+        Returns
+        -------
+        r : ndarray, shape (ndof,)
+            Residual contribution, mN.
+        K : scipy.sparse.csr_matrix
+            Gauss–Newton tangent on the body's stiffness pattern, mN/mm.
+        """
         N = self.shape_values  # (c, q, a)
         ncell, npc, nb = N.shape
         r = self.force(st, s)
@@ -588,7 +581,19 @@ class PhaseConstraint:
         return r, pat.matrix(data)
 
     def update_multipliers(self, st: ConstraintState) -> float:
-        """Augmented-Lagrangian update Λ ← Λ + λ r; returns the relative change of Λ."""
+        """Augmented-Lagrangian update Λ ← Λ + λ r of :attr:`multipliers`.
+
+        Parameters
+        ----------
+        st : ConstraintState
+            State from :meth:`state` (r is 0 where a tag has no data).
+
+        Returns
+        -------
+        float
+            Relative change ‖ΔΛ‖/‖Λ‖ of the updated multipliers (dimensionless; 0 if they
+            are all 0).
+        """
         step = self.penalty * st.residual * st.tag_valid
         new = self.multipliers + step
         norm = float(np.linalg.norm(new))
@@ -598,7 +603,18 @@ class PhaseConstraint:
 
     def epsilon_cell(self, st: ConstraintState) -> FloatArray:
         """Per-cell tracking residual: weighted mean ``|W(φ − φ0)|`` over the cell's points and
-        their valid tags, rad (NaN for cells without data)."""
+        their valid tags.
+
+        Parameters
+        ----------
+        st : ConstraintState
+            State from :meth:`state`.
+
+        Returns
+        -------
+        ndarray, shape (ncell,)
+            ε of each cell, rad (NaN for cells without data).
+        """
         ncell, npc = self.shape_values.shape[:2]
         w = (st.weight[:, None] * st.tag_valid).reshape(ncell, -1)
         e = np.abs(st.residual).reshape(ncell, -1)

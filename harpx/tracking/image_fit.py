@@ -215,16 +215,16 @@ def check_coverage(
         Volume fraction of the body outside the field of view or every tag's mask, in
         [0, 1] (for the result's attributes).
 
+    Raises
+    ------
+    ValueError
+        If the arrays do not match in length or ``points`` is not (n, 3).
+
     Warns
     -----
     HarpxWarning
         If that fraction is above ``threshold``; the message gives the fractions outside the
         field of view and outside the masks, and the fix.
-
-    Raises
-    ------
-    ValueError
-        If the arrays do not match in length or ``points`` is not (n, 3).
     """
     pts = np.asarray(points, dtype=np.float64)
     weight = np.asarray(volume, dtype=np.float64).ravel()

@@ -146,6 +146,9 @@ def epsilon_floor(
     Returns
     -------
     float
+        ``reference`` grown by each tag's fading ``reference_magnitude / magnitude`` (held
+        in [1, :data:`MAX_FADING`]), averaged with the weights ``share`` over the tags with
+        a finite reference residual and a positive share, rad; NaN if there is no such tag.
 
     Examples
     --------

@@ -132,7 +132,8 @@ class Observability:
         Rigid-body modes that neither the tags nor a Dirichlet condition hold (m = 0 to 6),
         mass-orthonormal, mm per unit amplitude.
     mode_weights : ndarray, shape (ndof,)
-        Lumped nodal volumes that weigh the mode amplitudes, mm³.
+        Lumped nodal volumes as fractions of the body's volume (summing to 1 over the nodes,
+        repeated for each node's three dofs) that weigh the mode amplitudes, dimensionless.
     pinned_dofs : ndarray of int, shape (m,)
         One dof per unseen mode held in each linear solve (its value restored afterwards
         by the mode shift), so that the solve is never singular.
@@ -157,7 +158,19 @@ class Observability:
     unseen_axes: FloatArray
 
     def remove_unseen(self, u: FloatArray) -> FloatArray:
-        """``u`` with the amplitude of every unseen rigid mode set to zero, mm."""
+        """``u`` with the amplitude of every unseen rigid mode set to zero.
+
+        Parameters
+        ----------
+        u : ndarray, shape (ndof,)
+            Displacement, mm.
+
+        Returns
+        -------
+        ndarray, shape (ndof,)
+            The displacement without its unseen rigid motion, mm: a new array, or ``u``
+            itself when there is no unseen mode.
+        """
         if not self.unseen_modes.shape[0]:
             return u
         amplitude = self.unseen_amplitude(u)
@@ -165,7 +178,18 @@ class Observability:
         return u - np.einsum("m,md->d", amplitude, self.unseen_modes)
 
     def unseen_amplitude(self, u: FloatArray) -> FloatArray:
-        """Amplitudes of the unseen rigid modes in ``u`` (mass-weighted mean, mm)."""
+        """Amplitudes of the unseen rigid modes in ``u``.
+
+        Parameters
+        ----------
+        u : ndarray, shape (ndof,)
+            Displacement, mm.
+
+        Returns
+        -------
+        ndarray, shape (m,)
+            Mass-weighted amplitude of each of :attr:`unseen_modes` in ``u``, mm.
+        """
         out: FloatArray = np.einsum("md,d->m", self.unseen_modes, self.mode_weights * u)
         return out
 
@@ -175,6 +199,18 @@ def describe_direction(v: FloatArray, unnamed: str = "") -> str:
 
     The sign is chosen so that the largest component is positive; the axis name is given
     when ``v`` lies within 0.999 of a coordinate axis, else ``unnamed`` (nothing if empty).
+
+    Parameters
+    ----------
+    v : ndarray, shape (3,)
+        Unit vector (x, y, z components).
+    unnamed : str, default ""
+        Name to give a direction that is not a coordinate axis.
+
+    Returns
+    -------
+    str
+        The name (if any) followed by the components to two significant digits.
 
     Examples
     --------
@@ -231,6 +267,8 @@ def observability(
     Returns
     -------
     Observability
+        The seen projectors and ranks of the points and cells, and the unseen rigid-body
+        modes (mass-orthonormal, with a pinned dof each) and axes of the body.
     """
     ndof = int(body.ndof)
     ncell, npc, nb = shape_values.shape

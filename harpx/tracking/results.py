@@ -22,7 +22,18 @@ __all__ = [
 
 
 def grid_points(ds: xr.Dataset) -> FloatArray:
-    """Voxel-centre positions (nz·ny·nx, 3) in mm, columns (x, y, z), C order over (z, y, x)."""
+    """Voxel-centre positions of a grid, one row per voxel.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Dataset with coordinates ``z``, ``y``, ``x`` (mm).
+
+    Returns
+    -------
+    ndarray, shape (nz * ny * nx, 3)
+        Positions in mm, columns (x, y, z), rows in C order over (z, y, x).
+    """
     z, y, x = (np.asarray(ds[d], dtype=float) for d in ("z", "y", "x"))
     Z, Y, X = np.meshgrid(z, y, x, indexing="ij")
     return np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
@@ -100,9 +111,10 @@ def tracked_dataset(
 
     Parameters
     ----------
-    body, U
-        The tracked body and its displacement per frame, as for
-        :func:`displacement_on_grid`.
+    body : Body
+        The tracked body, as for :func:`displacement_on_grid`.
+    U : ndarray, shape (ntime, ndof)
+        Displacements per frame, mm, as for :func:`displacement_on_grid`.
     phase : xarray.Dataset
         The ``phase/1`` dataset that was tracked (for time and grid coordinates).
     diagnostics : mapping of str to ndarray or (dims, ndarray)

@@ -386,6 +386,19 @@ class TrackingSettings:
         The one way the accessor, :func:`~harpx.tracking.track.track`, the batch runner
         and the CLI turn user input into settings.
 
+        Parameters
+        ----------
+        settings : TrackingSettings, optional
+            Settings to start from; None (default): ``TrackingSettings()``.
+        **overrides
+            Settings to replace, by field name (e.g. ``epsilon=0.1``); each is validated as
+            in the constructor.
+
+        Returns
+        -------
+        TrackingSettings
+            ``settings`` itself when there are no overrides, otherwise a new object.
+
         Raises
         ------
         TypeError
@@ -429,7 +442,18 @@ class TrackingSettings:
         return 1 if self.epsilon is None else 0
 
     def target(self, floor: float) -> float:
-        """Tracking residual to reach in a frame whose noise floor is ``floor`` rad."""
+        """Tracking residual to reach in a frame whose noise floor is ``floor``.
+
+        Parameters
+        ----------
+        floor : float
+            The frame's estimated phase-noise floor of ε (:mod:`harpx.tracking.noise`), rad.
+
+        Returns
+        -------
+        float
+            ``epsilon`` if given, else ``max(epsilon_min, epsilon_factor * floor)``, rad.
+        """
         if self.epsilon is not None:
             return float(self.epsilon)
         return float(max(self.epsilon_min, self.epsilon_factor * floor))
@@ -439,6 +463,16 @@ class TrackingSettings:
 
         ``plateau_factor`` times the frame's target for the default target; the target
         itself when the user gave ``epsilon`` (a plateau above it is then always a miss).
+
+        Parameters
+        ----------
+        floor : float
+            The frame's estimated phase-noise floor of ε, rad, as in :meth:`target`.
+
+        Returns
+        -------
+        float
+            Highest accepted ε, rad.
 
         Examples
         --------
@@ -452,7 +486,15 @@ class TrackingSettings:
         return float(self.plateau_factor * self.target(floor))
 
     def as_attrs(self) -> dict[str, Any]:
-        """The settings as NetCDF-safe attributes (None written as -1 or "auto")."""
+        """The settings as NetCDF-safe attributes.
+
+        Returns
+        -------
+        dict of str to object
+            One ``setting_<name>`` entry per field, the :class:`SolverTuning` fields as
+            ``setting_tuning_<name>``; None is written as ``"auto"`` or ``"none"`` (``-1``
+            for ``intorder``), booleans as 0 or 1 and tuples as lists.
+        """
         out: dict[str, Any] = {}
         items = asdict(self)
         tuning = items.pop("tuning")

@@ -32,7 +32,19 @@ SEEN_TOLERANCE = 1e-6
 
 
 def grid_spacing(phase: xr.Dataset) -> FloatArray:
-    """Voxel spacing (z, y, x) of the phase grid, mm (1 along a single-voxel axis)."""
+    """Voxel spacing (z, y, x) of the phase grid.
+
+    Parameters
+    ----------
+    phase : xarray.Dataset
+        ``phase/1`` images (or any dataset with ``z``, ``y``, ``x`` coordinates, mm).
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Mean coordinate step along z, y, x (:func:`harpx.schema.grid_step`), mm; 1 along an
+        axis with fewer than two voxels.
+    """
     return np.array([grid_step(phase, d) or 1.0 for d in GRID_DIMS])
 
 

@@ -81,12 +81,50 @@ def _slope(residual: FloatArray, scale: float | None) -> FloatArray | None:
 
 
 def setting(tracked: xr.Dataset, name: str, default: Any) -> Any:
+    """A tracking setting as the result records it (``setting_<name>`` attribute).
+
+    Parameters
+    ----------
+    tracked : xarray.Dataset
+        A ``tracked/1`` result of :func:`harpx.tracking.track.track`.
+    name : str
+        Field name of :class:`~harpx.tracking.settings.TrackingSettings`.
+    default : object
+        Returned when the result does not record the setting.
+
+    Returns
+    -------
+    object
+        The recorded value (a numpy scalar as its Python value), else ``default``.
+    """
     value = tracked.attrs.get(f"setting_{name}", default)
     return value.item() if isinstance(value, np.generic) else value
 
 
 def mechanical_tangent(body: Any, u: FloatArray, terms: Sequence[Any]) -> tuple[Any, FloatArray]:
-    """Consistent internal tangent plus term tangents, and the matching force, at ``u``."""
+    """Consistent internal tangent plus term tangents, and the matching force, at ``u``.
+
+    Parameters
+    ----------
+    body : Body
+        The body.
+    u : ndarray, shape (ndof,)
+        Displacement, mm.
+    terms : sequence of ResidualTerm
+        Further residual terms (``residual_tangent(body, u, s)``), taken at load factor 1.
+
+    Returns
+    -------
+    K : scipy.sparse.csr_matrix, shape (ndof, ndof)
+        Consistent tangent of the internal force plus the terms' tangents, mN/mm.
+    r : ndarray, shape (ndof,)
+        Internal force plus the terms' residuals, mN.
+
+    Raises
+    ------
+    ValueError
+        If ``u`` inverts cells of the body.
+    """
     internal = internal_forces(body, u)
     if internal.r is None or internal.K is None:
         raise ValueError(
@@ -122,7 +160,42 @@ def _check_inputs(tracked: xr.Dataset, body: Any) -> None:
 
 @dataclass
 class Problem:
-    """The tracker's problem rebuilt from a result (what every frame's solve needs)."""
+    """The tracker's problem rebuilt from a result (what every frame's solve needs).
+
+    Built by :func:`rebuild`.
+
+    Attributes
+    ----------
+    body : Body
+        The tracked body.
+    dirichlet, terms : sequence
+        The Dirichlet conditions and residual terms given to the tracker.
+    constraint : PhaseConstraint
+        The rebuilt constraint, with the observability applied; with the blur correction it
+        holds the deblurred images.
+    raw : xarray.Dataset
+        The ``phase/1`` dataset as given (before any blur correction).
+    U : ndarray, shape (ntime, ndof)
+        Tracked displacement, mm.
+    penalty : ndarray, shape (ntime,)
+        Absolute final penalty of each frame, kPa/rad².
+    robust_scale : float or None
+        Cauchy scale of the constraint, rad; None: quadratic.
+    increment : bool
+        Whether the tracker used ``regularization="increment"``.
+    tolerance : float
+        The tracker's Gauss–Newton tolerance, mm.
+    free : ndarray of int, shape (nfree,)
+        Dofs solved for: neither held by a Dirichlet condition nor pinned for an unseen
+        rigid mode.
+    correction : ndarray, shape (tag, time, z, y, x), optional
+        Blur correction of ``U`` (:func:`~harpx.tracking.blur.blur_correction`), rad; None
+        without blur correction.
+    linear_solver : str
+        The linear solver method the tracker used.
+    max_iterations : int
+        The tracker's Gauss–Newton iterations per solve.
+    """
 
     body: Any
     dirichlet: Sequence[Any]
@@ -140,7 +213,19 @@ class Problem:
     max_iterations: int = 20
 
     def remove_unseen(self, du: FloatArray) -> FloatArray:
-        """Rows of ``du`` (k, ndof) with the unseen rigid modes removed, as the tracker does."""
+        """Rows of ``du`` with the unseen rigid modes removed, as the tracker does.
+
+        Parameters
+        ----------
+        du : ndarray, shape (k, ndof)
+            Displacement changes, mm.
+
+        Returns
+        -------
+        ndarray, shape (k, ndof)
+            ``du`` without the unseen rigid modes' amplitudes, mm (``du`` itself when no
+            mode is unseen).
+        """
         seen = self.constraint.observability
         if seen is None or not seen.unseen_modes.shape[0]:
             return du
@@ -152,7 +237,32 @@ def rebuild(
     tracked: xr.Dataset, body: Any, phase: xr.Dataset, dirichlet: Sequence[Any],
     terms: Sequence[Any],
 ) -> Problem:  # fmt: skip
-    """The constraint, held dofs and penalties the tracker ended with (checked)."""
+    """The constraint, held dofs and penalties the tracker ended with (checked).
+
+    Parameters
+    ----------
+    tracked : xarray.Dataset
+        ``tracked/1`` result of the penalty method, with ``dof_displacement``.
+    body : Body
+        The body that was tracked.
+    phase : xarray.Dataset
+        The ``phase/1`` dataset that was tracked.
+    dirichlet, terms : sequence
+        The Dirichlet conditions and residual terms given to the tracker.
+
+    Returns
+    -------
+    Problem
+        The rebuilt problem; with blur-correction passes, the correction of the final motion
+        is computed and the constraint reads the deblurred images.
+
+    Raises
+    ------
+    ValueError
+        If ``tracked`` is not a penalty-method result with this body, or the Dirichlet
+        conditions differ from the tracked ones (held dofs moved, or another number of
+        unseen rigid modes).
+    """
     _check_inputs(tracked, body)
     U = np.asarray(tracked["dof_displacement"].transpose("time", "dof").values, dtype=np.float64)
     intorder = int(setting(tracked, "intorder", -1))
@@ -228,8 +338,30 @@ def _frame_system(problem: Problem, n: int) -> _Frame:
 def sample_response(
     problem: Problem, noise: ImageNoise, samples: int, seed: int | None
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    r"""Sampled displacement changes (sample, time, dof), the mean :math:`|\delta r|` per
-    frame and the Newton step of each frame's rebuilt state."""
+    r"""Sampled displacement changes, the mean :math:`|\delta r|` per frame and the Newton
+    step of each frame's rebuilt state (module notes).
+
+    Parameters
+    ----------
+    problem : Problem
+        The rebuilt problem (:func:`rebuild`).
+    noise : ImageNoise
+        The noise of the images behind ``problem.raw``.
+    samples : int
+        Noise samples M.
+    seed : int or None
+        Seed of the noise samples (None: fresh entropy).
+
+    Returns
+    -------
+    dU : ndarray, shape (samples, ntime, ndof)
+        Displacement change of each sample, mm (0 in frame 0), blur correction included.
+    noise_residual : ndarray, shape (ntime,)
+        Mean over the samples of :math:`|\delta r|`, weighted as ε, rad (NaN in frame 0).
+    step : ndarray, shape (ntime,)
+        Largest nodal change a Newton step would make at each frame's rebuilt state, mm (0
+        in frame 0).
+    """
     constraint, raw, U = problem.constraint, problem.raw, problem.U
     rng = np.random.default_rng(seed)
     order = constraint.spline_order

@@ -84,7 +84,22 @@ class ImageNoise:
     white_level: FloatArray
 
     def sample(self, rng: np.random.Generator, count: int) -> NDArray[np.float32]:
-        """``count`` independent image-noise fields per tag, (ntag, count, nz, ny, nx), float32."""
+        """``count`` independent image-noise fields per tag.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+            Source of the standard normal samples.
+        count : int
+            Fields to draw per tag.
+
+        Returns
+        -------
+        ndarray of float32, shape (ntag, count, nz, ny, nx)
+            Zero-mean Gaussian noise on the acquired grid, image units: white within each
+            plane, covariance ``L L^T`` (:attr:`factors`) across the planes along the tag's
+            slice axis, 0 outside the tag's :attr:`mask`.
+        """
         shape = (self.z.size, self.y.size, self.x.size)
         out = np.empty((len(self.factors), count, *shape), dtype=np.float32)
         for t, L in enumerate(self.factors):  # ≤ 3 tags
@@ -96,7 +111,20 @@ class ImageNoise:
         return out
 
     def describe(self, tags: Sequence[str]) -> str:
-        """One line per tag: how its noise was modelled (for the result's attributes)."""
+        """How each tag's noise was modelled, as text for the result's attributes.
+
+        Parameters
+        ----------
+        tags : sequence of str
+            Tag names, one per tag in the order of :attr:`factors`.
+
+        Returns
+        -------
+        str
+            One entry per tag, separated by ``"; "``: the tag name, whether the covariance
+            across the planes was measured (and on which pixels) or assumed independent, and
+            the median plane level relative to :attr:`white_level`.
+        """
         parts = []
         for t, (tag, std) in enumerate(zip(tags, self.plane_std(), strict=True)):
             axis = GRID_DIMS[int(self.slice_axis[t])]
@@ -113,7 +141,14 @@ class ImageNoise:
         return "; ".join(parts)
 
     def plane_std(self) -> tuple[FloatArray, ...]:
-        """Noise standard deviation of every plane along each tag's slice axis, image units."""
+        """Noise standard deviation of every plane along each tag's slice axis.
+
+        Returns
+        -------
+        tuple of ndarray
+            Per tag, shape (nplane,): the square root of the diagonal of ``L L^T``, image
+            units.
+        """
         return tuple(np.sqrt(np.einsum("jk,jk->j", L, L)) for L in self.factors)
 
 
@@ -198,6 +233,8 @@ def image_noise(phase: xr.Dataset, tagged: xr.Dataset | None = None) -> ImageNoi
     Returns
     -------
     ImageNoise
+        The noise of each tag's images on the acquired grid (that of ``tagged`` if given),
+        with the covariance between planes measured or assumed.
 
     Raises
     ------

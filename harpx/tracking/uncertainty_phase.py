@@ -29,8 +29,34 @@ __all__ = ["frame_harmonic", "harmonic_fields", "perturbed_phases"]
 def harmonic_fields(
     noise: ImageNoise, phase: xr.Dataset, rng: np.random.Generator, count: int
 ) -> np.ndarray:
-    """Complex harmonic noise (tag, count, z, y, x) on the phase grid: image noise through
-    the phase extraction the data went through."""
+    """Complex harmonic noise on the phase grid: image noise through the phase extraction
+    the data went through.
+
+    Parameters
+    ----------
+    noise : ImageNoise
+        The noise of the images behind ``phase``
+        (:func:`~harpx.tracking.uncertainty_noise.image_noise`).
+    phase : xarray.Dataset
+        The ``phase/1`` dataset: its tags, grid and extraction parameters (``sequence``,
+        ``upsample``, ``radius``).
+    rng : numpy.random.Generator
+        Source of the noise samples.
+    count : int
+        Noise fields to draw per tag.
+
+    Returns
+    -------
+    ndarray of complex64, shape (ntag, count, nz, ny, nx)
+        Harmonic noise h of each tag on the grid of ``phase``, in the units of its
+        ``magnitude``.
+
+    Raises
+    ------
+    ValueError
+        If the noise's grid, extracted with the phase's ``upsample``, is not the grid of
+        ``phase``.
+    """
     params = PhaseParameters.from_dataset(phase)
     direction = np.asarray(phase["tag_direction"].transpose("tag", "axis").values, dtype=float)
     ds = tagged_dataset(
@@ -72,7 +98,20 @@ def _complex(magnitude: np.ndarray, angle: np.ndarray) -> np.ndarray:
 
 
 def frame_harmonic(phase: xr.Dataset, n: int) -> np.ndarray:
-    """The complex harmonic image of frame ``n`` (tag, z, y, x)."""
+    """The complex harmonic image of frame ``n``.
+
+    Parameters
+    ----------
+    phase : xarray.Dataset
+        A ``phase/1`` dataset (its ``magnitude`` and ``phase``).
+    n : int
+        Index of the frame along ``time``.
+
+    Returns
+    -------
+    ndarray of complex64, shape (ntag, nz, ny, nx)
+        ``magnitude · exp(i phase)`` of the frame.
+    """
     frame = phase.isel(time=n)
     dims = ("tag", *GRID_DIMS)
     return _complex(frame["magnitude"].transpose(*dims).values,
@@ -83,11 +122,31 @@ def perturbed_phases(
     phase: xr.Dataset, harmonic: np.ndarray, fields: np.ndarray, points: FloatArray,
     baseline: FloatArray, order: int,
 ) -> FloatArray:  # fmt: skip
-    """Phase change W(arg(H + h) − arg H) at ``points`` for each noise field, (sample, n,
-    ntag), sampled as the tracker samples (0 where the perturbed image is not valid).
+    """Phase change W(arg(H + h) − arg H) at ``points`` for each noise field, sampled as the
+    tracker samples.
 
     The samples are stacked as further tags of one image, so that one sampler locates the
     points once for all of them.
+
+    Parameters
+    ----------
+    phase : xarray.Dataset
+        The ``phase/1`` dataset ``harmonic`` comes from (its tags, grid and ``mask``).
+    harmonic : ndarray of complex, shape (ntag, nz, ny, nx)
+        Harmonic image H of one frame (:func:`frame_harmonic`).
+    fields : ndarray of complex, shape (ntag, count, nz, ny, nx)
+        Harmonic noise h (:func:`harmonic_fields`), in the units of ``harmonic``.
+    points : ndarray, shape (n, 3)
+        Positions (x, y, z) at which to sample, mm.
+    baseline : ndarray, shape (n, ntag)
+        arg H at ``points``, rad, as the tracker's sampler gives it.
+    order : int
+        Spline order of the sampler (:class:`~harpx.imaging.sample.PhaseSampler`).
+
+    Returns
+    -------
+    ndarray, shape (count, n, ntag)
+        Phase change of each noise field, rad (0 where the perturbed image is not valid).
     """
     ntag, count = fields.shape[:2]
     H = (harmonic[:, None] + fields).swapaxes(0, 1).reshape(count * ntag, 1, *fields.shape[2:])

@@ -90,7 +90,17 @@ def cells_across_wall(body: Any, depth: FloatArray | None = None) -> float:
     """About how many cells the wall is thick: 1 over the median transmural depth that a cell
     spans (its corners' largest minus smallest :func:`transmural_depth`).
 
-    ``depth``: the body's :func:`transmural_depth`, if already computed.
+    Parameters
+    ----------
+    body : Body
+        As for :func:`transmural_depth`.
+    depth : ndarray, shape (n_dof_nodes,), optional
+        The body's :func:`transmural_depth`, if already computed.
+
+    Returns
+    -------
+    float
+        Cells across the wall (dimensionless); inf if the median cell spans no depth.
 
     Raises
     ------
@@ -141,9 +151,21 @@ def wall_smoother(body: Any, length: float, depth: FloatArray | None = None) -> 
 
 
 def smooth_along_wall(body: Any, U: FloatArray, smoother: sparse.csr_matrix) -> FloatArray:
-    """The displacements ``U`` (time, ndof) mm averaged by ``smoother`` (:func:`wall_smoother`).
+    """The displacements ``U`` averaged along the wall by ``smoother``.
 
-    Returns a new array of the same shape; ``U`` is not changed.
+    Parameters
+    ----------
+    body : Body
+        The body ``U`` belongs to (its ``node_dofs`` order the dofs by node).
+    U : ndarray, shape (ntime, ndof)
+        Displacement per frame, mm.
+    smoother : scipy.sparse.csr_matrix, shape (n_dof_nodes, n_dof_nodes)
+        Averaging over the dof nodes, as from :func:`wall_smoother`.
+
+    Returns
+    -------
+    ndarray, shape (ntime, ndof)
+        The averaged displacements, mm, in a new array; ``U`` is not changed.
     """
     nodes = np.asarray(U)[:, body.node_dofs]  # (time, node, 3)
     ntime, nnode, _ = nodes.shape

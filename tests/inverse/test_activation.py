@@ -18,7 +18,7 @@ from harpx.mechanics.fiber_laws import ActiveContraction
 from harpx.mechanics.loads import Fixed
 from harpx.mechanics.materials import NeoHookean
 from harpx.mechanics.mesh import box
-from harpx.physiology.active import simulate_activation, simulate_history
+from harpx.physiology.active import region_values, simulate_activation, simulate_history
 from harpx.plotting import plot_stretch_agreement
 
 MATERIAL = NeoHookean(c1=1.0, kappa=120.0)
@@ -201,6 +201,10 @@ def test_bad_inputs_are_named(two_muscles):
         estimate_activation(tracked.drop_vars(["displacement", "points"]), body)
     with pytest.raises(ValueError, match="region 'C'"):
         resimulate(body, {"C": 1.0}, dirichlet=bcs)
+    # NaN is a region without an estimate (rest); an infinite level is refused, by name
+    assert region_values(body, {"A": np.nan, "B": 0.4}) == {"A": 0.0, "B": 0.4}
+    with pytest.raises(ValueError, match="t_max of region 'A' is inf kPa"):
+        resimulate(body, {"A": np.inf, "B": 0.4}, dirichlet=bcs)
     with pytest.raises(ValueError, match="active law"):
         simulate_activation(body, 1.0)
     with pytest.raises(ValueError, match="frames=1"):
