@@ -129,18 +129,19 @@ def test_both_references_track_the_truth(tracked):
     for reference, (_, result, error) in tracked.items():
         assert result.target_reached.all(), (reference, result.epsilon.values)
         assert np.all(result.epsilon.values[1:] <= EPSILON)
-        # measured (seed 0, frames 1-4, the tracker's defaults): SFR 0.59 mm mean (p95
-        # 1.28), PSR 0.61 mm (p95 1.26) at ε = 0.2 rad; HARP's edge bias in the thin
+        # measured (seed 0, frames 1-4, the tracker's defaults): SFR 0.583 mm mean (p95
+        # 1.40), PSR 0.606 mm (p95 1.35) at ε = 0.2 rad; HARP's edge bias in the thin
         # wall and the 11 mm slices already put 0.14 rad of residual on the *true* motion.
-        # 0.8 / 1.7 mm leave ~25 % margin for changes in the solver's path; a tag jump would
-        # add errors near 8 mm
-        assert float(error.mean_all) < 0.8, (reference, float(error.mean_all))
-        assert float(error.p95_all) < 1.7, (reference, float(error.p95_all))
-        # the worst voxels (measured 4.1-4.5 mm; 1.7 % of voxels above 2 mm at end systole) sit
-        # at the apical cap, which the truth twists most and which has no short-axis data,
-        # and along the base ring next to the pins; a tag jump would reach 8 mm
-        assert float(error.max_all) < 6.0, (reference, float(error.max_all))
-        assert float(error.coverage) > 0.9
+        # Bounds: 1.2 × the larger measured value (run-to-run spread ~2e-3 mm); a tag jump
+        # would add errors near 8 mm
+        assert float(error.mean_all) < 1.2 * 0.606, (reference, float(error.mean_all))
+        assert float(error.p95_all) < 1.2 * 1.40, (reference, float(error.p95_all))
+        # the worst voxels (measured 4.31-4.32 mm) sit at the apical cap, which the truth
+        # twists most and which has no short-axis data, and along the base ring next to the
+        # pins; a tag jump would reach 8 mm
+        assert float(error.max_all) < 1.2 * 4.32, (reference, float(error.max_all))
+        # the mesh covers 98.2 % of the truth's tissue voxels (measured)
+        assert float(error.coverage) > 0.97, (reference, float(error.coverage))
 
 
 def test_prestretched_reference_needs_a_larger_penalty(tracked):
