@@ -114,11 +114,11 @@ def test_fe_tracking_finds_the_infarct_and_its_ecc(truth, fe):
     # -0.061 there, -0.093 at most elsewhere)
     least = np.sort(np.argsort(np.abs(ecc))[: len(INFARCT)] + 1)
     assert least.tolist() == list(INFARCT), ecc.round(3)
-    # per-segment peak Ecc within 0.01 on average: measured mean |error| 0.0049 (max 0.013
-    # at the basal segments next to the pins); bound at measured x 1.2
+    # per-segment peak Ecc within 0.01 on average: measured mean |error| 0.0030 (max 0.0157,
+    # in the apical septal infarct segment 14); bounds at measured x 1.2
     error = np.abs(ecc - true)
-    assert error.mean() < 1.2 * 0.0049, error.round(4)
-    assert error.max() < 0.02, error.round(4)
+    assert error.mean() < 1.2 * 0.0030, error.round(4)
+    assert error.max() < 1.2 * 0.0157, error.round(4)
     # wall thickening within 10 % (issue 23): mean |error| of the peak radial strain
     # measured 8.5 % of the mean true peak Err (31.8 % with the library's defaults, radius
     # 0.5 and one pass; HARP 36.9 %); the bound is the goal, 1.2 x measured would be 10.2 %

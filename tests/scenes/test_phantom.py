@@ -59,8 +59,9 @@ def test_fe_error_is_sub_voxel_without_tag_jumps(fe, scene):
     # 0.569 mm p95, bounded 20 % above so that a lost gain shows
     assert float(err.mean_all) < 0.24, err["mean"].values
     assert float(err.p95_all) < 0.68, err.p95.values
-    # a tag jump would leave errors of about a tag period (6 mm) somewhere
-    assert float(err.max_all) < 3.0, err["max"].values
+    # worst voxel measured 1.48 mm (bound 1.2 x); a tag jump would leave errors of about a
+    # tag period (6 mm) somewhere
+    assert float(err.max_all) < 1.2 * 1.48, err["max"].values
 
 
 def test_harp_is_worse_at_the_edges_and_beyond_half_a_period(fe, harp, scene):
