@@ -246,6 +246,22 @@ def open_dataset(
     HarpxWarning
         If the archive declares a newer ``harpx_schema`` version than this harpx reads
         (e.g. ``"tracked/2"``): upgrade harpx.
+
+    Examples
+    --------
+    A dataset with a boolean variable and list and bool attributes, written with
+    :func:`to_netcdf` into a temporary directory and read back with their types:
+
+    >>> import pathlib, tempfile
+    >>> from harpx.io.netcdf import open_dataset, to_netcdf
+    >>> ds = xr.Dataset({"mask": ("x", [True, False, True])},
+    ...                 attrs={"upsample_factors": [1, 2, 2], "flipped": False})
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     back = open_dataset(to_netcdf(ds, pathlib.Path(tmp) / "a.nc"))
+    >>> str(back["mask"].dtype), back.attrs["upsample_factors"], back.attrs["flipped"]
+    ('bool', [1, 2, 2], False)
+    >>> back.identical(ds)
+    True
     """
     _check_path(path)
     _check_chunks(chunks)
@@ -275,7 +291,11 @@ def open_dataset(
             with ds:
                 _check_size(ds, path, max_bytes)
                 ds = ds.load()
+        opened = ds
         ds = _decode(ds)
+        # decoding drops and assigns variables, which returns a dataset without the file's
+        # closer: give it back, so that close() (or a with block) releases a lazy file
+        ds.set_close(opened.close)
     except ArchiveError:
         raise
     except Exception as exc:

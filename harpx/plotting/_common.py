@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import inspect
+import textwrap
 import warnings
 from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
@@ -77,7 +79,9 @@ def _map_doc(
         tail = _MAP_DOC_TAIL.format(kind=kind, names=names)
         if slices:
             tail = tail.rstrip() + "\n" + _SLICE_DOC_TAIL
-        doc = func.__doc__.rstrip()
+        doc = _indented(func.__doc__).rstrip()
+        # the plot's own Examples stay last (numpydoc order), after the shared sections
+        doc, examples_header, examples = doc.partition("\n\n    Examples\n    --------\n")
         if slice_params:
             tail = _SLICE_PARAM_DOC + tail
             header = "\n    Parameters\n    ----------\n"
@@ -86,10 +90,24 @@ def _map_doc(
                 f"    ds : xarray.Dataset\n        ``{kind}/1`` dataset with {', '.join(quoted)}.\n"
             )
             doc = doc.replace(header, header + ds, 1)
-        func.__doc__ = doc + tail
+        doc += tail
+        if examples:
+            doc = doc.rstrip() + examples_header + examples + "\n    "
+        func.__doc__ = doc
         return func
 
     return decorate
+
+
+def _indented(doc: str) -> str:
+    """``doc`` with every line after the first indented by four spaces, as in the source.
+
+    Python 3.13 strips the common indentation of docstrings at compile time, 3.11 and 3.12
+    keep it; the shared sections are written indented, so the plot's text is brought to the
+    same form first.
+    """
+    first, _, rest = inspect.cleandoc(doc).partition("\n")
+    return first + "\n" + textwrap.indent(rest, "    ", lambda line: bool(line.strip())) + "\n"
 
 
 def _require(ds: xr.Dataset, kind: str, variables: Sequence[str], plot: str) -> None:

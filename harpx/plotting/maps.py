@@ -85,11 +85,26 @@ def phase_map(
     mask : {"tissue"} or xarray.DataArray or None, default "tissue"
         Where to show the phase. ``"tissue"``: pixels whose harmonic ``magnitude`` exceeds
         :data:`TISSUE_EDGE` times the median magnitude of the pixels above the noise level
-        (:data:`TISSUE_NOISE_FACTOR` times the tag's ``harmonic_noise``; without it
-        :data:`NOISE_FRACTION` of the slice's 99th percentile of ``magnitude``), and the
+        (:data:`TISSUE_NOISE_FACTOR` times the tag's ``harmonic_noise``; without a finite
+        one :data:`NOISE_FRACTION` of the slice's 99th percentile of ``magnitude``), and the
         noise level itself, within the acquisition's ``mask`` where the dataset has one.
         A boolean DataArray on the grid (``z, y, x`` or ``y, x``, true inside) gives the
         mask; None shows every pixel. Pixels outside are NaN (blank).
+
+    Examples
+    --------
+    The harmonic phase of a still, tagged block (one tag along x), on its middle slice:
+
+    >>> import matplotlib.pyplot as plt
+    >>> from harpx.imaging.harp import extract_phase
+    >>> from harpx.imaging.synth import synthesize_tagged
+    >>> tagged = synthesize_tagged(
+    ...     lambda X, t: 0 * X, shape=(2, 32, 32), spacing=(2.0, 1.5, 1.5), times=[0.0],
+    ...     tags=("x",), snr=20.0, oversample=1, rng=0)
+    >>> ax = phase_map(extract_phase(tagged))
+    >>> ax.get_title(), ax.collections[0].get_clim()
+    ('tag x, t = 0 ms, z = 1 mm', (-3.141592653589793, 3.141592653589793))
+    >>> plt.close(ax.figure)
     """
     plot = "phase_map (ds.harp.plot.phase)"
     _require(ds, "phase", ["phase"], plot)
@@ -122,9 +137,10 @@ def _tissue(ds: xr.Dataset, da: xr.DataArray, tag: Any, mask: Any) -> xr.DataArr
     if "magnitude" in ds:
         magnitude = ds["magnitude"].sel(tag=tag).sel(where)
         m = np.asarray(magnitude.values, dtype=np.float64)
-        if "harmonic_noise" in ds:
-            noise = TISSUE_NOISE_FACTOR * float(ds["harmonic_noise"].sel(tag=tag))
-        else:
+        sigma = float(ds["harmonic_noise"].sel(tag=tag)) if "harmonic_noise" in ds else np.nan
+        if np.isfinite(sigma):
+            noise = TISSUE_NOISE_FACTOR * sigma
+        else:  # no estimate (extract_phase gives NaN for images too small to measure it)
             noise = NOISE_FRACTION * float(np.nanpercentile(m, 99.0))
         above = m[m > noise]
         level = max(noise, TISSUE_EDGE * float(np.median(above))) if above.size else noise

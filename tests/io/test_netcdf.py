@@ -133,6 +133,30 @@ def test_open_with_chunks_is_lazy(tmp_path: Path, rng: np.random.Generator) -> N
         lazy.close()
 
 
+def _open_descriptors(path: Path) -> int:
+    """How many of this process's file descriptors point at ``path`` (Linux /proc)."""
+    count = 0
+    for fd in os.listdir("/proc/self/fd"):
+        with contextlib.suppress(OSError):
+            count += os.readlink(f"/proc/self/fd/{fd}") == str(path.resolve())
+    return count
+
+
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="needs /proc/self/fd")
+def test_closing_a_lazy_archive_releases_its_file(tmp_path: Path, rng: np.random.Generator) -> None:
+    # decoding (dropping the CF helpers harpx added, restoring strings) returns a new dataset;
+    # it must keep the file's closer, or close() and a with block leave the file open
+    path = to_netcdf(tagged_like(rng), tmp_path / "a.nc")
+    lazy = open_dataset(path, chunks={})
+    float(lazy.image.sum())
+    assert _open_descriptors(path) == 1
+    lazy.close()
+    assert _open_descriptors(path) == 0
+    with open_dataset(path, chunks={}) as again:
+        float(again.image.sum())
+    assert _open_descriptors(path) == 0
+
+
 def test_invalid_dataset_raises_before_any_file(tmp_path: Path) -> None:
     ds = make_tagged()
     ds["image"][0, 0, 0, 0, 0] = np.nan
