@@ -89,6 +89,12 @@ class VentricleTemplate:
         reads it from the template). Stored in [0, 360). None when unknown (no right
         ventricle in the segmentation and no angle given).
 
+    Raises
+    ------
+    ValueError
+        If ``rotation`` is not a proper rotation (orthonormal, det +1) or ``anterior`` is
+        not a finite angle.
+
     Examples
     --------
     >>> from harpx.anatomy.ventricle import VentricleGeometry

@@ -190,6 +190,11 @@ class Pattern:
         -------
         ndarray of int64
             Positions into ``data``, same shape as ``rows``.
+
+        Raises
+        ------
+        ValueError
+            If a pair is not in the pattern.
         """
         rows = np.asarray(rows, dtype=np.int64)
         cols = np.asarray(cols, dtype=np.int64)

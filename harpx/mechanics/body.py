@@ -5,16 +5,13 @@ everything the vectorised assembly (:mod:`harpx.mechanics.assembly`) needs: refe
 gradients of the shape functions at every quadrature point, quadrature weights,
 element-to-dof maps, per-point fibre directions, active-stress levels and growth tensors.
 
-Elements (``ELEMENTS``): ``hex8`` (trilinear, 2x2x2 Gauss), ``hex20`` (serendipity,
-3x3x3 Gauss), ``tet4`` (linear tetrahedron, 1 point) and ``tet10`` (quadratic tetrahedron,
-14-point rule of degree 5 with positive weights). A ``skfem.MeshTet2`` carries curved
-(isoparametric) tetrahedra: its edge nodes may lie on a curved surface. A ``skfem.MeshHex2``
-(27-node triquadratic geometry, :func:`~harpx.mechanics.mesh.curved_hex_mesh`; ``tube`` and
-``ventricle`` with ``curved=True``) carries curved hexahedra for hex20: the displacement is
-the 20-node serendipity field on the curved cells (its dofs are the vertices and the edge
-nodes; the face and cell geometry nodes carry no dofs). Point location
-(:func:`~harpx.mechanics.locate.locate`, ``Body.displacement_at``, tracking) handles
-straight hexahedra only and refuses curved ones.
+Elements (``ELEMENTS``): ``hex8``, ``hex20``, ``tet4`` and ``tet10`` (the ``element``
+parameter of :class:`Body`). A ``skfem.MeshHex2`` (27-node triquadratic geometry,
+:func:`~harpx.mechanics.mesh.curved_hex_mesh`) carries curved hexahedra for hex20: the
+displacement is the 20-node serendipity field on the curved cells (its dofs are the
+vertices and the edge nodes; the face and cell geometry nodes carry no dofs). Point
+location (:func:`~harpx.mechanics.locate.locate`, ``Body.displacement_at``, tracking)
+handles straight hexahedra only and refuses curved ones.
 
 Degrees of freedom: scalar dof ``n`` of the scalar element (mesh vertices first, then, for
 hex20 and tet10, one node per mesh edge) carries the displacement components ``3n, 3n+1, 3n+2``
@@ -41,10 +38,12 @@ from harpx.mechanics import kinematics
 from harpx.mechanics.body_inputs import (
     check_fibers_given,
     check_vertices,
+    facet_ids,
     growth_tensors,
     named_sets,
     quadrature_fibers,
     resolve_mesh,
+    t_max_per_cell,
 )
 from harpx.mechanics.cells import (
     ELEMENTS,  # noqa: F401  (older code imports it from here)
@@ -159,6 +158,16 @@ class Body:
         Quality report of a mesh made from a segmentation
         (:func:`~harpx.anatomy.segmentation.body_from_segmentation`), else None.
 
+    Raises
+    ------
+    TypeError
+        If ``mesh`` is not a supported mesh (for a path or a :class:`meshio.Mesh` the
+        message says how to read it).
+    ValueError
+        If ``element`` or ``volumetric`` does not fit the mesh; ``fibers``, ``regions`` or
+        ``boundaries`` have the wrong shape or ids; a fibre material, active contraction or
+        growth has no fibres; or ``t_max`` is given without ``active``.
+
     Examples
     --------
     >>> from harpx.mechanics.body import Body
@@ -272,20 +281,15 @@ class Body:
         ----------
         t_max : float, dict of str to float, or array_like of shape (ncell,)
             Activation in kPa: uniform, per region (other cells 0), or per cell.
+
+        Raises
+        ------
+        ValueError
+            If the body has no active law, or a region name is not one of the body's.
         """
         if self.active is None:
             raise ValueError("this body has no active contraction law; pass active=... to Body")
-        if isinstance(t_max, Mapping):
-            values = np.zeros(self.ncell)
-            for name, value in t_max.items():
-                if name not in self.regions:
-                    raise ValueError(
-                        f"t_max names region {name!r}, which is not one of {sorted(self.regions)!r}"
-                    )
-                values[self.regions[name]] = float(value)
-        else:
-            values = np.broadcast_to(np.asarray(t_max, dtype=np.float64), (self.ncell,)).copy()
-        self.t_max = values
+        self.t_max = t_max_per_cell(t_max, self.regions, self.ncell)
 
     def set_growth(self, growth: Any) -> None:
         """Set the growth (``F = Fe Fg``), or remove it with ``None``.
@@ -297,6 +301,12 @@ class Body:
             :class:`~harpx.mechanics.fiber_laws.FiberGrowth`,
             :class:`~harpx.physiology.growth.GrowthField`), or one fibre stretch θ per cell
             (``Fg = I + (θ - 1) f0 ⊗ f0``, dimensionless, > 0).
+
+        Raises
+        ------
+        ValueError
+            As :func:`~harpx.mechanics.body_inputs.growth_tensors`: no fibres, or a stretch
+            array that is not ``ncell`` positive values.
 
         Notes
         -----
@@ -336,7 +346,8 @@ class Body:
         ndarray, shape (ncell, ...)
             ``q`` averaged over each cell, weighted by the reference volume ``dV``.
         """
-        return self._cell_average(q)
+        w = self.dV / self.cell_volume[:, None]
+        return np.einsum("eq,eq...->e...", w, q)
 
     def cached(self, key: str, build: Callable[[], _T]) -> _T:
         """Derived data kept with the body (sparsity pattern, pressure space), built once.
@@ -407,6 +418,11 @@ class Body:
         -------
         ndarray of int
             Sorted dof ids.
+
+        Raises
+        ------
+        KeyError, ValueError
+            As :meth:`facets`; ValueError also for ``components`` outside (0, 1, 2).
         """
         facets = self.facets(name)
         sd = np.unique(self.scalar_basis.get_dofs(facets=facets).all())
@@ -436,18 +452,7 @@ class Body:
         ValueError
             If the ids are not a 1-D array of valid facet indices.
         """
-        if isinstance(name, str):
-            if name not in self.boundaries:
-                raise KeyError(
-                    f"no boundary named {name!r}; this body has {sorted(self.boundaries)!r}"
-                )
-            return self.boundaries[name]
-        ids = np.asarray(name, dtype=np.int64)
-        if ids.ndim != 1 or (
-            ids.size and (ids.min() < 0 or ids.max() >= self.mesh.facets.shape[1])
-        ):
-            raise ValueError("facet ids must be a 1-D array of valid mesh facet indices")
-        return ids
+        return facet_ids(self.boundaries, int(self.mesh.facets.shape[1]), name)
 
     def element_displacement(self, u: ArrayLike) -> FloatArray:
         """Displacement of each cell's dof nodes.
@@ -519,10 +524,6 @@ class Body:
 
         return displacement_at(self, u, points)
 
-    def _cell_average(self, q: FloatArray) -> FloatArray:
-        w = self.dV / self.cell_volume[:, None]
-        return np.einsum("eq,eq...->e...", w, q)
-
     def green_strain(self, u: ArrayLike) -> FloatArray:
         """Volume-averaged Green--Lagrange strain per cell.
 
@@ -536,7 +537,7 @@ class Body:
         ndarray, shape (ncell, 3, 3)
             ``E = (F^T F - I) / 2`` averaged over each cell (dimensionless).
         """
-        return self._cell_average(kinematics.green_strain(self.deformation_gradient(u)))
+        return self.cell_average(kinematics.green_strain(self.deformation_gradient(u)))
 
     def fiber_stretch(self, u: ArrayLike) -> FloatArray:
         """Volume-averaged fibre stretch ``|F f0|`` per cell.
@@ -559,7 +560,7 @@ class Body:
         if self.fibers_qp is None:
             raise ValueError("fiber_stretch needs 'fibers'; pass fibers=... to Body")
         lam = kinematics.fiber_stretch(self.deformation_gradient(u), self.fibers_qp)
-        return self._cell_average(lam)
+        return self.cell_average(lam)
 
     def interpolation_operator(
         self, intorder: int

@@ -37,8 +37,10 @@ from harpx.mechanics.cells import (
 from harpx.mechanics.meshspec import MeshSpec, check_nodes, check_unused_nodes, coincident_nodes
 
 __all__ = [
+    "t_max_per_cell",
     "check_fibers_given",
     "check_vertices",
+    "facet_ids",
     "growth_tensors",
     "named_sets",
     "quadrature_fibers",
@@ -357,3 +359,72 @@ def growth_tensors(growth: Any, fibers_qp: FloatArray | None, ncell: int, nqp: i
             f"({ncell},) positive values, or a FiberGrowth"
         )
     return kinematics.growth_tensor(fibers, theta[:, None])
+
+
+def facet_ids(boundaries: Mapping[str, IntArray], nfacet: int, name: str | ArrayLike) -> IntArray:
+    """Facet ids of a named boundary, or given facet ids checked.
+
+    Parameters
+    ----------
+    boundaries : dict of str to ndarray of int
+        The body's named facet sets.
+    nfacet : int
+        Number of facets of the mesh (columns of ``mesh.facets``).
+    name : str or array_like of int
+        A boundary name, or facet ids.
+
+    Returns
+    -------
+    ndarray of int, shape (n,)
+        The facet ids.
+
+    Raises
+    ------
+    KeyError
+        If ``name`` is a string that names no boundary (the message lists them).
+    ValueError
+        If the ids are not a 1-D array of indices in [0, nfacet).
+    """
+    if isinstance(name, str):
+        if name not in boundaries:
+            raise KeyError(f"no boundary named {name!r}; this body has {sorted(boundaries)!r}")
+        return boundaries[name]
+    ids = np.asarray(name, dtype=np.int64)
+    if ids.ndim != 1 or (ids.size and (ids.min() < 0 or ids.max() >= nfacet)):
+        raise ValueError("facet ids must be a 1-D array of valid mesh facet indices")
+    return ids
+
+
+def t_max_per_cell(values: float | Mapping[str, float] | ArrayLike, regions: Mapping[str, IntArray],
+                ncell: int) -> FloatArray:  # fmt: skip
+    """One value per cell from a uniform value, values per region, or values per cell.
+
+    Parameters
+    ----------
+    values : float, dict of str to float, or array_like of shape (ncell,)
+        Uniform, per named region (cells outside every named region get 0), or per cell.
+    regions : dict of str to ndarray of int
+        The body's named cell sets.
+    ncell : int
+        Number of cells.
+
+    Returns
+    -------
+    ndarray, shape (ncell,)
+        The values per cell (a new array).
+
+    Raises
+    ------
+    ValueError
+        If a region name is not one of ``regions`` (the message lists them).
+    """
+    if not isinstance(values, Mapping):
+        return np.broadcast_to(np.asarray(values, dtype=np.float64), (ncell,)).copy()
+    out = np.zeros(ncell)
+    for name, value in values.items():
+        if name not in regions:
+            raise ValueError(
+                f"t_max names region {name!r}, which is not one of {sorted(regions)!r}"
+            )
+        out[regions[name]] = float(value)
+    return out

@@ -254,6 +254,13 @@ class LinearSolver:
         reports for the factorisation and its substitutions (a factorisation's operations
         taken as ``_FACTOR_SPEEDUP`` times as fast); ``reuse_iterations`` before the first
         analysis or where PARDISO reports no counts.
+
+    Raises
+    ------
+    ValueError
+        If ``method`` is unknown or not installed (the message says what to install), or
+        ``reuse``, ``reuse_measure``, ``reuse_iterations``, ``threads`` or ``factors`` is
+        out of range (``factors="single"`` also needs ``reuse``).
     """
 
     def __init__(

@@ -52,6 +52,11 @@ class GrowthField:
     tensors : ndarray, shape (ncell, nqp, 3, 3)
         Growth tensors :math:`F_g` (dimensionless, ``det > 0``) at the body's Gauss points.
 
+    Raises
+    ------
+    ValueError
+        If ``tensors`` is not (ncell, nqp, 3, 3) or a determinant is not positive.
+
     Examples
     --------
     >>> from harpx.mechanics import Body, NeoHookean, box

@@ -157,6 +157,11 @@ class PhaseConstraint:
         Current penalty λ, kPa/rad² (absolute).
     multipliers : ndarray, shape (nq, ntag)
         Augmented-Lagrangian multipliers Λ, kPa/rad.
+
+    Raises
+    ------
+    ValueError
+        If ``robust_scale`` is not a positive number.
     """
 
     def __init__(
