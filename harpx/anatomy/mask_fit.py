@@ -465,6 +465,29 @@ def fit_ventricle_to_mask(
     VentricleFitWarning
         For each warned entry of ``flags`` (residual, axis, apex extrapolated, base out of
         view, empty segments in view, open slices, implausible septal arc).
+
+    Examples
+    --------
+    A binary mask of a truncated ellipsoidal ventricle (endocardial radii 12 and 30 mm,
+    epicardial 18 and 36 mm, long axis along z) on a 2 mm grid that shows the apex. The
+    short radii come back to a small fraction of a voxel; the long radii and the base
+    plane to within a voxel along the axis, where a binary mask cannot place the base
+    more finely:
+
+    >>> from harpx.anatomy.mask_fit import fit_ventricle_to_mask
+    >>> from harpx.anatomy.ventricle import VentricleGeometry
+    >>> truth = VentricleGeometry(inner=(12.0, 30.0), outer=(18.0, 36.0), truncation=6.0)
+    >>> xy, z = np.arange(-24.0, 24.5, 2.0), np.arange(-40.0, 7.0, 2.0)
+    >>> Z, Y, X = np.meshgrid(z, xy, xy, indexing="ij")
+    >>> inside = truth.inside(np.stack([X, Y, Z], -1).reshape(-1, 3))  # apex at z = -36
+    >>> mask = xr.DataArray(inside.reshape(Z.shape), dims=("z", "y", "x"),
+    ...                     coords={"z": z, "y": xy, "x": xy})
+    >>> fit = fit_ventricle_to_mask(mask)
+    >>> g = fit.template.geometry
+    >>> np.round([*g.inner, *g.outer]).tolist(), round(float(fit.template.axis[2]), 3)
+    ([12.0, 29.0, 18.0, 35.0], 1.0)
+    >>> bool(fit.rms < 1.0), sorted(fit.flags), int(np.count_nonzero(fit.segment_voxels))
+    (True, ['anterior_unknown'], 17)
     """
     _check_options(slice_axis, base_side, rv, anterior)
     hint = _axis_hint(axis)

@@ -486,6 +486,28 @@ def body_from_segmentation(
     Body
         hex8 (or hex20) body; the quality report is checked (no inverted cell) and kept
         as ``body.mesh_quality``.
+
+    Examples
+    --------
+    A spherical shell (label 1, radii 5 and 8 mm) around a cavity (label 2) on a 1 mm grid;
+    the shell is meshed with 2 mm hex20 cells (``element`` goes to the Body) and the
+    cavity only names the facets facing it:
+
+    >>> from harpx.anatomy.segmentation import body_from_segmentation
+    >>> from harpx.mechanics.materials import NeoHookean
+    >>> c = np.arange(-10.0, 10.5, 1.0)
+    >>> Z, Y, X = np.meshgrid(c, c, c, indexing="ij")
+    >>> r = np.sqrt(X**2 + Y**2 + Z**2)
+    >>> labels = xr.DataArray(np.where(r < 5.0, 2, np.where(r < 8.0, 1, 0)),
+    ...                       dims=("z", "y", "x"), coords={"z": c, "y": c, "x": c})
+    >>> body = body_from_segmentation(
+    ...     labels, NeoHookean(c1=1.0, kappa=100.0), element_size=2.0, mesh_labels=[1],
+    ...     names={1: "wall", 2: "cavity"}, element="hex20")
+    >>> body.element, sorted(body.regions), sorted(body.boundaries), body.mesh_quality.inverted
+    ('hex20', ['wall'], ['cavity', 'exterior'], 0)
+    >>> shell = 4.0 / 3.0 * np.pi * (8.0**3 - 5.0**3)  # mm³
+    >>> bool(abs(body.cell_volume.sum() / shell - 1.0) < 0.05)
+    True
     """
     from harpx.mechanics.body import Body
 

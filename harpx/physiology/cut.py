@@ -231,6 +231,25 @@ def opening_angle(
     -----
     HarpxWarning
         If the released ring leaves its plane (``planar`` False).
+
+    Examples
+    --------
+    A tube of 2 × 24 × 1 hexahedra with circumferential fibres, grown uniformly to 0.95
+    along them: the stress-free shape is a sector of 0.95 × 360°, so the cut ring opens by
+    (1 - 0.95) × 360°:
+
+    >>> from harpx.mechanics.body import Body
+    >>> from harpx.mechanics.materials import NeoHookean
+    >>> from harpx.mechanics.mesh import tube
+    >>> spec = tube(20.0, 26.0, 4.0, n_radial=2, n_circumferential=24, n_axial=1)
+    >>> centre = spec.mesh.p[:, spec.mesh.t].mean(axis=1)  # (3, cell), mm
+    >>> theta = np.arctan2(centre[1], centre[0])
+    >>> fibers = np.column_stack([-np.sin(theta), np.cos(theta), 0.0 * theta])
+    >>> body = Body(spec, NeoHookean(c1=1.0, kappa=100.0), fibers=fibers,
+    ...             growth=np.full(theta.size, 0.95))
+    >>> result = opening_angle(body, slab=(0.0, 4.0))
+    >>> round(result.degrees), result.planar
+    (18, True)
     """
     if body.element != "hex8":
         raise ValueError(f"opening_angle needs a hex8 body, got element={body.element!r}")

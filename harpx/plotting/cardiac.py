@@ -181,6 +181,22 @@ def bullseye(
     ------
     ValueError
         If there are not 17 values, the dataset lacks ``variable``, or a frame is needed.
+
+    Examples
+    --------
+    Sixteen segment strains from -0.20 to -0.05 and no value for the apex (17):
+
+    >>> import matplotlib.pyplot as plt
+    >>> from harpx.plotting.cardiac import bullseye
+    >>> fig = bullseye([*np.linspace(-0.20, -0.05, 16), np.nan], title="peak strain")
+    >>> ax = fig.axes[0]
+    >>> len(ax.patches), ax.patches[0].get_gid()
+    (17, 'aha-1')
+    >>> [t.get_text() for t in ax.texts][:4]  # segment number, then its value in %
+    ['1', '−20.0', '2', '−19.0']
+    >>> ax.texts[-1].get_text(), fig.axes[1].get_ylabel()  # caption, colour bar
+    ('blank: no data', 'value (%)')
+    >>> plt.close(fig)
     """
     da, quantity, when = _select(values, variable, component, time)
     source: Any = None

@@ -157,6 +157,20 @@ def phantom(
     ------
     ValueError
         If ``size`` is not one of the geometries' names.
+
+    Examples
+    --------
+    The small scene without noise: its images, its tracking mesh and the largest true
+    displacement of each frame, in tag periods:
+
+    >>> from harpx.scenes.phantom import phantom
+    >>> scene = phantom("small", snr=None)
+    >>> dict(scene.tagged["image"].sizes), scene.mesh.mesh.nelements, sorted(scene.mesh.boundaries)
+    ({'tag': 3, 'time': 5, 'z': 7, 'y': 48, 'x': 48}, 432, ['bottom', 'outer', 'top'])
+    >>> u = scene.tagged["displacement_true"]  # (time, axis, z, y, x) mm, NaN outside the gel
+    >>> reach = ((u**2).sum("axis") ** 0.5).max(["z", "y", "x"])
+    >>> (reach / scene.info["geometry"].tag_period).round(1).values.tolist()
+    [0.0, 0.6, 1.2, 1.2, 1.2]
     """
     if size not in GEOMETRIES:
         raise ValueError(f"size={size!r}; expected one of {sorted(GEOMETRIES)}")
