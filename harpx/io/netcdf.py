@@ -293,9 +293,11 @@ def open_dataset(
                 ds = ds.load()
         opened = ds
         ds = _decode(ds)
-        # decoding drops and assigns variables, which returns a dataset without the file's
-        # closer: give it back, so that close() (or a with block) releases a lazy file
-        ds.set_close(opened.close)
+        if ds is not opened:
+            # decoding dropped or assigned variables, which returns a dataset without the
+            # file's closer: give it back, so that close() (or a with block) releases a lazy
+            # file
+            ds.set_close(opened.close)
     except ArchiveError:
         raise
     except Exception as exc:

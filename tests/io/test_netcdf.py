@@ -155,6 +155,13 @@ def test_closing_a_lazy_archive_releases_its_file(tmp_path: Path, rng: np.random
     with open_dataset(path, chunks={}) as again:
         float(again.image.sum())
     assert _open_descriptors(path) == 0
+    # a file written elsewhere has nothing to decode: the dataset is the opened one
+    plain = tmp_path / "plain.nc"
+    xr.Dataset({"a": ("x", np.arange(3.0))}).to_netcdf(plain)
+    other = open_dataset(plain, chunks={})
+    assert _open_descriptors(plain) == 1
+    other.close()
+    assert _open_descriptors(plain) == 0
 
 
 def test_invalid_dataset_raises_before_any_file(tmp_path: Path) -> None:
