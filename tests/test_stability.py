@@ -109,10 +109,13 @@ def test_nearly_incompressible_model_tracks_like_a_moderate_one(small_phantom):
             out.epsilon.values,
         )
         errors[ratio] = mean_error(out, scene.tagged)
-    # the issue's criterion: κ/C1 = 1e5 within 10 % of κ/C1 = 1e2 (measured 0.199 vs
-    # 0.197 mm; with the consistent pressure stiffness in the Gauss–Newton tangent it was
-    # 3.0 mm: the tangent turned indefinite after the first step and the model diverged)
-    assert abs(errors[1e5] - errors[1e2]) <= 0.1 * errors[1e2], errors
+    # the issue's criterion: κ/C1 = 1e5 within 10 % of κ/C1 = 1e2. Measured 0.1544 vs
+    # 0.1542 mm, 0.15 % apart (the same to the last digit over repeated runs, with 1 or 2
+    # MKL threads); bounded at 1.2 × each. With the consistent pressure stiffness in the
+    # Gauss–Newton tangent it was 3.0 mm: the tangent turned indefinite after the first
+    # step and the model diverged
+    assert errors[1e2] < 0.185, errors
+    assert abs(errors[1e5] - errors[1e2]) <= 0.0018 * errors[1e2], errors
 
 
 # ----------------------------------------------------------------------------- large motion
@@ -140,10 +143,10 @@ def test_fe_holds_three_quarter_period_steps_where_harp_jumps(make, carrier):
     # noise-free images: the issue asks for 0.5 mm (a third of a voxel); FE measured 0.071 mm
     # (rotation) and 0.0019 mm (translation), bounded 20-30 % above so that a regression
     # shows; HARP starts each point from its last position and lands a tag (8 mm) away
-    # wherever the step exceeds half a period (measured 3.5 and 8.1 mm mean), bounded below
-    # by the issue's 2 mm
+    # wherever the step exceeds half a period (measured 3.48 and 8.14 mm mean), bounded
+    # below at measured / 1.2 (the issue asks for more than 2 mm)
     assert fe < {"mechanics + slower centre": 0.085, "predictor": 0.0025}[carrier], (carrier, fe)
-    assert harp > 2.0, (carrier, harp)
+    assert harp > {"mechanics + slower centre": 2.9, "predictor": 6.8}[carrier], (carrier, harp)
 
 
 def test_uniform_translation_needs_the_predictor():
@@ -155,8 +158,9 @@ def test_uniform_translation_needs_the_predictor():
     without = mean_error(unpredicted, scene.tagged)
     # wrapped phase cannot tell +0.75 from −0.25 period and a rigid translation costs the
     # mechanics nothing either way: without the predictor the model jumps a tag like HARP
-    # (measured 6.3 mm), so the predictor, not the mechanics, carries the uniform case
-    assert without > 2.0, without
+    # (measured 5.98 mm; bounded at measured / 1.2), so the predictor, not the mechanics,
+    # carries the uniform case
+    assert without > 5.0, without
 
 
 def test_ramped_translation_keeps_its_steady_motion_through_a_phase_tie():
@@ -168,7 +172,7 @@ def test_ramped_translation_keeps_its_steady_motion_through_a_phase_tie():
     # (5 %) better
     scene = translation(0.75, ramp=2, margin=0.0)
     phase = extract_phase(scene.tagged)
-    with deadline(60.0):  # measured ~2 s
+    with deadline(60.0):  # measured 0.2-0.6 s
         out = track(phase, scene.body())
     assert out.target_reached.all(), out.epsilon.values
     # noise-free images: measured 0.0020 mm mean against the truth, where a jump costs 8 mm
@@ -255,11 +259,11 @@ def test_epsilon_does_not_rise_with_a_pinned_penalty():
     ],
 )
 def test_extreme_cases_end_in_a_finite_result(make, kwargs):
-    # measured: every case tracks to a result (max ε 0.006, 0.0002, 0.048, 0.049 rad) without
+    # measured: every case tracks to a result (max ε 0.005, 0.0001, 0.020, 0.089 rad) without
     # a warning; harpx warnings are errors in the tests, so a missed target fails here too
     scene = make()
     phase = extract_phase(scene.tagged)
-    with deadline(60.0):  # measured ≤ 9 s; a hang fails here instead of stalling the suite
+    with deadline(60.0):  # measured < 1 s; a hang fails here instead of stalling the suite
         out = track(phase, scene.body(), **kwargs)
     # no NaN anywhere in what the user reads
     for name in ("displacement", "epsilon", "penalty", "green_strain"):

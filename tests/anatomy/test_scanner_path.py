@@ -104,9 +104,10 @@ def test_the_mesh_covers_the_imaged_slab(run):
     z = run["segmented"].spec.mesh.p[2]
     # the labels of a slice stand for its whole slab; the mesh follows their smoothed
     # boundary on 6 mm cubes, so it may stand out of the slab by part of a cube (measured
-    # -70.26 .. 10.83 mm) but never stops short at the outer slice centres (-65 .. 5 mm)
-    assert SLAB[0] - 2.0 < z.min() < SLAB[0] + 0.5
-    assert SLAB[1] - 0.5 < z.max() < SLAB[1] + 2.0
+    # -70.26 .. 10.84 mm; bounded at 1.2 × that) but never stops short at the outer slice
+    # centres (-65 .. 5 mm)
+    assert SLAB[0] - 0.31 < z.min() < SLAB[0] + 0.5
+    assert SLAB[1] - 0.5 < z.max() < SLAB[1] + 1.0
     quality = run["segmented"].quality
     assert quality.inverted == 0 and quality.min_scaled_jacobian >= 0.2
 
@@ -121,12 +122,13 @@ def test_the_template_names_the_segments_of_the_scene(run):
     )
     # every cell of the tracking mesh is named as the scene's exact template names it,
     # except where the fitted thirds' borders (the extrapolated apex: c_endo measured
-    # 69.2 mm for 70) cut a cell differently; measured 98.3 % of the cells agree
+    # 69.1 mm for 70) cut a cell differently; measured 98.3 % of the cells agree (10 of 580
+    # differ; bounded at 12)
     body = run["body"]
     centres = body.nodes[body.cells[:, :8]].mean(axis=1)
     ours = run["strain"].aha_segment.values
     theirs = aha_segments(centres, scene.template(), anterior=ANTERIOR)
-    assert np.mean(ours == theirs) > 0.95
+    assert np.mean(ours == theirs) > 0.978
     # the short-axis stack shows segments 1-16; 17 (the apical cap) is empty, NaN and named
     assert set(np.unique(ours)) == set(IN_VIEW)
     assert np.isnan(run["strain"].peak_strain.sel(segment=17)).all()
@@ -139,16 +141,16 @@ def test_tracked_peak_ecc_per_segment_is_the_truth(run):
     error = np.abs(_ecc(run["strain"]) - _ecc(run["truth"]))
     # in-plane tags see Ecc directly; what remains is the mesh of 10 mm label plates, the
     # fitted (not the exact) segments and, in the apical ring, a wall the short-axis slices
-    # cut obliquely (measured: mean 0.0092, largest 0.033 in segment 15 apical inferior,
-    # against true peaks of -0.03 .. -0.14)
-    assert error.mean() < 0.012
-    assert error.max() < 0.04
+    # cut obliquely (measured: mean 0.0079, largest 0.023 in segment 14 apical septal,
+    # against true peaks of -0.02 .. -0.14; the same to 1e-7 over repeated runs)
+    assert error.mean() < 0.0095
+    assert error.max() < 0.027
 
 
 def test_the_infarct_contracts_least_and_the_bullseye_shows_it(run):
     ecc = _ecc(run["strain"])
     infarct = np.isin(IN_VIEW, INFARCT)
-    # measured: infarct -0.034 .. -0.066, elsewhere -0.084 .. -0.124
+    # measured: infarct -0.027 .. -0.063, elsewhere -0.073 .. -0.127
     assert ecc[infarct].min() > ecc[~infarct].max()
     fig = bullseye(run["strain"])
     ax = fig.axes[0]

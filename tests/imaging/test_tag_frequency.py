@@ -47,8 +47,8 @@ def test_the_measured_frequency_is_the_images_tag_frequency(scene):
     measured = phase["tag_frequency_measured"]
     assert measured.attrs["units"] == "1/mm"
     # x and y: measured 1.0011 and 1.0013 × the truth at SNR 20 (0.9999 and 1.0006 at SNR
-    # 5), whatever the label
-    np.testing.assert_allclose(measured.sel(tag=["x", "y"]).values, TRUE, rtol=0.002)
+    # 5), whatever the label; bounded at 1.2 × the larger
+    np.testing.assert_allclose(measured.sel(tag=["x", "y"]).values, TRUE, rtol=0.0016)
     # z: the slab holds 1.75 tag periods (< MIN_PERIODS): its peak cannot be resolved
     assert np.isnan(measured.sel(tag="z").item())
 
@@ -56,31 +56,33 @@ def test_the_measured_frequency_is_the_images_tag_frequency(scene):
 def test_tissue_up_to_the_edges_of_the_field_of_view_is_measured_exactly():
     # a tag pattern filling a field of view of 5.6 tag periods (not a whole number): the
     # phase there is bent (its mean step reads 3.7 % low), the windowed spectrum is not
-    # (measured within 0.03 % over 4.3 ... 15 periods)
+    # (measured 0.025 % here, within 0.028 % over 4.3 ... 15 periods)
     tagged = synthesize_tagged(
         lambda X, t: 0 * X, shape=(3, 26, 26), spacing=(4.0, 1.5, 1.5), times=[0.0],
         tags=("x",), tag_period=7.0, snr=None, oversample=1,
     )  # fmt: skip
-    np.testing.assert_allclose(measure_tag_frequency(tagged), 1 / 7.0, rtol=0.001)
+    np.testing.assert_allclose(measure_tag_frequency(tagged), 1 / 7.0, rtol=3e-4)
 
 
-def test_oblique_tags_are_measured_in_their_plane():
+def test_oblique_tags_are_measured_in_their_plane(rng):
     s = 1 / np.sqrt(2)
     tagged = synthesize_tagged(
         lambda X, t: 0 * X, shape=(4, 64, 64), spacing=(4.0, 1.5, 1.5), times=[0.0],
-        tags=((s, s, 0.0), (s, -s, 0.0)), tag_period=7.0, snr=20, oversample=1,
+        tags=((s, s, 0.0), (s, -s, 0.0)), tag_period=7.0, snr=20, oversample=1, rng=rng,
     )  # fmt: skip
-    # a grid's two tags at ±45°: each finds its own peak (measured 1.0001 × the truth)
-    np.testing.assert_allclose(measure_tag_frequency(tagged), 1 / 7.0, rtol=0.001)
+    # a grid's two tags at ±45°: each finds its own peak (measured 1.00013 × the truth
+    # without noise, 1.00012 ± 0.00005 over 40 noise realisations, at most 1.00022: 3e-4
+    # is 1.35 × the largest)
+    np.testing.assert_allclose(measure_tag_frequency(tagged), 1 / 7.0, rtol=3e-4)
 
 
 def test_a_tag_period_ten_percent_off_is_warned_about_and_flagged(scene):
     wrong = relabelled(scene.tagged, 1 / 1.1)  # 6.6 mm stated for 6 mm tags
     with pytest.warns(HarpxWarning, match=r"tag 'x' shows its tags at 0\.166\d cycles/mm"):
         phase = extract_phase(wrong)
-    # the images' frequency, not the label's
+    # the images' frequency, not the label's (measured 1.0011 and 1.0013 × the truth)
     np.testing.assert_allclose(
-        phase["tag_frequency_measured"].sel(tag=["x", "y"]).values, TRUE, rtol=0.002
+        phase["tag_frequency_measured"].sel(tag=["x", "y"]).values, TRUE, rtol=0.0016
     )
     assert tags_off_frequency(phase) == ["x", "y"]
     with pytest.warns(HarpxWarning, match=r"tag\(s\) \['x', 'y'\] have images whose tags miss"):

@@ -49,18 +49,18 @@ def test_tag_phase_at_frame_0_matches_the_tag_frequency():
         f = float(phase.tag_frequency.sel(tag=tag))
         residual = wrap(phase.phase.values[j, 0] - 2.0 * np.pi * f * coord)[body]
         # the phase ramp of the images has the tag frequency: a relative error df/f would
-        # tilt the residual by 2π df per mm (measured 0.08 %; 0.5 % is 0.085 rad at the
-        # outer wall, below the edge spread)
+        # tilt the residual by 2π df per mm (measured 0.092 % on either tag)
         slope = np.polyfit(coord[body], residual, 1)[0]
-        assert abs(slope / (2.0 * np.pi * f)) < 5e-3, (tag, slope)
-        # CSPAMM cosine tags have no phase offset (measured 3e-14 rad: symmetric ring)
+        assert abs(slope / (2.0 * np.pi * f)) < 1.1e-3, (tag, slope)
+        # CSPAMM cosine tags have no phase offset (measured 2e-9 and 6e-9 rad, the images'
+        # float32 round-off: symmetric ring; round-off differs between machines, so 1e-6)
         offset = np.angle(np.mean(np.exp(1j * residual)))
-        assert abs(offset) < 1e-3, (tag, offset)
+        assert abs(offset) < 1e-6, (tag, offset)
         # noise-free: what is left is the band-pass filter's blur at the edges of a 7 mm
-        # wall (measured median 0.05, p95 0.16 rad; one tag period is 2π rad = 7 mm)
+        # wall (measured median 0.052, p95 0.162 rad; one tag period is 2π rad = 7 mm)
         spread = np.abs(residual)
-        assert np.median(spread) < 0.1, (tag, np.median(spread))
-        assert np.percentile(spread, 95) < 0.3, (tag, np.percentile(spread, 95))
+        assert np.median(spread) < 0.063, (tag, np.median(spread))
+        assert np.percentile(spread, 95) < 0.195, (tag, np.percentile(spread, 95))
 
 
 def test_truth_contracts_twists_and_shortens_towards_the_held_bottom(scene):
@@ -148,26 +148,26 @@ def test_in_plane_tags_only_track_no_worse_than_harp_and_say_what_they_cannot_se
     assert (fe.epsilon.values[1:] <= fe.epsilon_target.values[1:]).all(), fe.epsilon.values
     assert not fe.plateau.values.any() and fe.target_reached.all()
     # the blur-correction pass starts every frame from the first pass's result at the top of
-    # the penalty ramp: measured 52 then 21 Gauss–Newton iterations
+    # the penalty ramp: measured 34 then 13 Gauss–Newton iterations (the same on every run)
     first, second = fe.attrs["iterations_per_pass"]
-    assert second <= 0.6 * first, (first, second)
+    assert second <= 0.46 * first, (first, second)
     assert second == int(fe.iterations.sum())
     harp = track_harp(phase, points=scene.tagged)
     ours, theirs = scene.error_split(fe), scene.error_split(harp)
     without = scene.error_split(plain)
-    # in-plane, on the same images with the tracker's defaults: measured FE 0.155 / 0.405 mm
-    # (mean / p95) against 0.196 / 0.529 without the blur correction and HARP 0.198 / 0.542.
+    # in-plane, on the same images with the tracker's defaults: measured FE 0.154 / 0.397 mm
+    # (mean / p95) against 0.196 / 0.530 without the blur correction and HARP 0.198 / 0.542.
     # FE without the correction is level with HARP, so the correction is what wins: it must
     # keep ≥ 15 % of its 21 % gain, and the error stay within 15 % of the measured value
     assert float(ours.in_plane_mean_all) < 0.85 * float(without.in_plane_mean_all)
     assert float(ours.in_plane_p95_all) < 0.85 * float(without.in_plane_p95_all)
-    assert float(ours.in_plane_mean_all) < 1.15 * 0.155
-    assert float(ours.in_plane_p95_all) < 1.15 * 0.405
+    assert float(ours.in_plane_mean_all) < 1.15 * 0.154
+    assert float(ours.in_plane_p95_all) < 1.15 * 0.397
     assert float(ours.in_plane_mean_all) < float(theirs.in_plane_mean_all)
     # through-plane the motion is the model's, inferred from the wall's thickening: HARP
     # reports none, so its drift is the truth's mean shortening (up to 1.47 mm); measured FE
-    # at most 0.90 mm, and 1.72 without the blur correction (which under-reports thickening)
+    # at most 0.92 mm, and 1.73 without the blur correction (which under-reports thickening)
     drift, none = np.abs(ours.drift.values).max(), np.abs(theirs.drift.values).max()
-    assert drift < 1.15 * 0.90, (ours.drift.values, theirs.drift.values)
+    assert drift < 1.12 * 0.92, (ours.drift.values, theirs.drift.values)
     assert drift < 0.65 * np.abs(without.drift.values).max()
     assert drift < 0.7 * none

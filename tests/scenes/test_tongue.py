@@ -71,13 +71,13 @@ def test_images_follow_the_schema_and_the_tongue_moves_a_few_mm(scene):
 
 def test_tracking_reaches_epsilon_with_sub_voxel_error(scene, tracked):
     # the activation chain's target: twice the images' phase-noise floor (never below
-    # 0.03 rad); measured floors 0.019-0.022 rad (SNR 20 CSPAMM), ε 0.036-0.039 rad, every
+    # 0.03 rad); measured floors 0.020-0.022 rad (SNR 20 CSPAMM), ε 0.036-0.039 rad, every
     # frame below its target itself (no plateau allowance used)
     assert tracked.target_reached.all(), tracked.epsilon.values
     eps, target = tracked.epsilon.values[1:], tracked.epsilon_target.values[1:]
     floor = tracked.epsilon_floor.values[1:]
     np.testing.assert_allclose(target, np.maximum(2.0 * floor, 0.03))
-    assert np.all(floor > 0.01) and np.all(floor < 0.03), floor
+    assert np.all(floor > 0.017) and np.all(floor < 0.026), floor
     assert np.all(eps <= target) and not tracked.plateau.values.any(), eps
     # the tracked grid is the acquired grid, up to round-off in its coordinates: use the
     # tagged coordinates so that xarray aligns every voxel
@@ -95,16 +95,18 @@ def test_activation_estimate_per_muscle_is_within_15_percent(scene, estimates):
     direct, corrected, calibrated = estimates
     truth = np.array([scene.t_max[m] for m in calibrated.region.values])
     rel = calibrated.t_max.values / truth - 1.0
-    # issue 5 must-show: every muscle within 15 %; measured -8 % (SL) to -1 % (GG, T, V)
-    assert np.all(np.abs(rel) <= 0.15), dict(
+    # issue 5 must-show: every muscle within 15 %; measured -3 % (SL) to +11 % (V), bounded
+    # at 1.2 × the largest
+    assert np.all(np.abs(rel) <= 0.133), dict(
         zip(calibrated.region.values, rel.round(3), strict=True)
     )
-    # the steps are what the docs say: the paper's local estimate is biased low (by ~50 %),
-    # the equilibrium correction removes part of it, the calibration the rest
-    assert np.all(direct.t_max.values < 0.8 * truth), direct.t_max.values
+    # the steps are what the docs say: the paper's local estimate is biased low (measured
+    # 0.23-0.50 of the truth), the equilibrium correction removes part of it (0.63-0.78),
+    # the calibration the rest (chain transfer measured 0.57-0.80)
+    assert np.all(direct.t_max.values < 0.6 * truth), direct.t_max.values
     assert np.all(corrected.t_max.values > direct.t_max.values)
     assert np.all(
-        (calibrated.chain_transfer.values > 0.4) & (calibrated.chain_transfer.values < 1.0)
+        (calibrated.chain_transfer.values > 0.47) & (calibrated.chain_transfer.values < 0.96)
     )
 
 
@@ -113,10 +115,10 @@ def test_resimulation_agrees_with_the_true_fibre_stretch(scene, body, tracked, e
     sim = resimulate(body, calibrated.t_max, dirichlet=list(scene.dirichlet), tracked=tracked)
     truth = scene.true_stretch_by_muscle(body)
     diff = sim.stretch_simulated.values - np.array([truth[m] for m in sim.region.values])
-    # mean fibre stretch per muscle: measured |diff| <= 0.004
-    assert np.all(np.abs(diff) < 0.01), diff
-    # element by element the re-simulation follows the tracked pattern (measured r = 0.88)
-    assert float(sim.correlation_all) > 0.7
+    # mean fibre stretch per muscle: measured |diff| <= 0.0057 (V)
+    assert np.all(np.abs(diff) < 0.0069), diff
+    # element by element the re-simulation follows the tracked pattern (measured r = 0.885)
+    assert float(sim.correlation_all) > 0.74
     # tracking smooths the shortening: the tracked stretch is closer to 1 than the truth
     assert np.all(sim.stretch_tracked.values > np.array([truth[m] for m in sim.region.values]))
 

@@ -60,9 +60,11 @@ def test_time_split_accounts_for_the_whole_run(tracked):
              if k not in ("time_first_pass", "time_correction_pass", "time_total")}  # fmt: skip
     assert set(parts) >= {"time_sampling", "time_assembly", "time_solve", "time_prefilter"}
     # the per-frame wall times cover set-up and frames; phase validation and output lie
-    # outside them. Timer reads between the parts cost microseconds: 2 % + 10 ms of slack
+    # outside them. What the parts leave out (Python between the timers) measured 0.7-1.1 %
+    # of the run on an idle machine and 2.3 % on an oversubscribed one (Python 3.11 and
+    # 3.13 alike): 3 % + 10 ms of slack
     total = float(tracked.wall_time.sum()) + parts["time_phase"] + parts["time_output"]
-    assert abs(sum(parts.values()) - total) <= 0.02 * total + 0.01, (parts, total)
+    assert abs(sum(parts.values()) - total) <= 0.03 * total + 0.01, (parts, total)
     # the stages add up to the whole call (the same slack)
     staged = sum(times[k] for k in STAGES)
     assert abs(times["time_total"] - staged) <= 0.02 * staged + 0.01, times
