@@ -224,14 +224,9 @@ def refine(
 
     Parameters
     ----------
-    apply : callable
-        ``apply(v) -> K v``, the product with the matrix, shape (n,) to (n,).
-    precondition : callable
-        ``precondition(r) -> M⁻¹ r``, the solve with the held factorisation.
-    b : ndarray, shape (n,)
-        Right-hand side.
-    stop : Stop
-        Stopping rule for ``b``; its ``limit`` bounds the steps, ``iterations`` records them.
+    apply, precondition, b, stop : see :func:`cg`
+        As for :func:`cg`; the ``limit`` of ``stop`` bounds the refinement steps, and its
+        ``iterations`` records them.
 
     Returns
     -------
@@ -260,14 +255,9 @@ def bicgstab(
 
     Parameters
     ----------
-    apply : callable
-        ``apply(v) -> K v``, the product with the matrix, shape (n,) to (n,).
-    precondition : callable
-        ``precondition(r) -> M⁻¹ r``, the solve with the held factorisation.
-    b : ndarray, shape (n,)
-        Right-hand side.
-    stop : Stop
-        Stopping rule for ``b``; its ``iterations`` is set to the iterations run.
+    apply, precondition, b, stop : see :func:`cg`
+        The matrix product, the held factorisation's solve, the right-hand side and the
+        stopping rule, as for :func:`cg`.
 
     Returns
     -------
