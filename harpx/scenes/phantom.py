@@ -3,7 +3,8 @@
 A Sylgard-like cylinder (neo-Hookean, C1 = 1.0 kPa, κ = 120 kPa) sits in a container whose
 base receives a sudden rotational acceleration; it is imaged like the paper's phantom
 (13 frames, TR 18 ms, 13 axial slices, 160 × 160 pixels of 1.5 mm, SPAMM, three tag
-directions). The ground truth is an analytic, volume-preserving lagged rotation
+directions; the z tag, which axial slices cannot see, is acquired in coronal slices normal
+to y on the same grid). The ground truth is an analytic, volume-preserving lagged rotation
 (:class:`harpx.scenes._motion.RotationalImpact`) that the finite-element model does not
 share: its surface is traction free in reality, its edge moves more than a tag period, and
 near the wall one frame moves more than half a tag period.
