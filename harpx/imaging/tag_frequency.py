@@ -19,10 +19,12 @@ bent there, so its steps would not do. The frequency is the peak's distance from
 origin: the tag frequency in the tag's plane (paper eq. 1, the undeformed pattern
 :math:`\cos(2\pi f\,d\cdot X)` of the first frame).
 
-Along an axis whose field of view holds fewer than :data:`MIN_PERIODS` tag periods the peak
-sits within a few bins of the origin, so a tag that varies along such an axis is not
-measured (NaN); nor is one whose largest value in the search disk lies on its rim (no peak
-there: no tag pattern near the stated frequency).
+Along an axis where the tissue spans fewer than :data:`MIN_PERIODS` tag periods the peak
+is too broad to place within :data:`FREQUENCY_TOLERANCE`, so a tag that varies along such
+an axis is not measured (NaN). The tissue's span is where the slices' summed signal
+power, averaged over one tag period, exceeds :data:`SUPPORT_LEVEL` of its largest value;
+it is at most the field of view. Nor is a tag measured whose largest value in the search
+disk lies on its rim (no peak there: no tag pattern near the stated frequency).
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ __all__ = [
     "MIN_PERIODS",
     "PAD",
     "SEARCH",
+    "SUPPORT_LEVEL",
     "measure_tag_frequency",
     "tag_frequency_flag",
     "tag_frequency_mismatch",
@@ -52,9 +55,11 @@ __all__ = [
 #: Relative difference between the measured and the stated tag frequency above which
 #: :func:`tag_frequency_mismatch` reports it
 FREQUENCY_TOLERANCE = 0.02
-#: Tag periods the field of view must hold along an axis that carries the tag's wave
-#: (direction component >= 0.1) for the frequency to be measured
+#: Tag periods the tissue must span along an axis that carries the tag's wave (direction
+#: component >= 0.1) for the frequency to be measured
 MIN_PERIODS = 4.0
+#: Fraction of the largest period-averaged signal power that marks tissue along an axis
+SUPPORT_LEVEL = 0.1
 #: Zero padding of each slice before its Fourier transform (finer spectral sampling)
 PAD = 2
 #: Radius of the disk around the stated frequency vector searched for the tag peak, as a
@@ -89,20 +94,34 @@ def _parabola(log_power: np.ndarray) -> float:
     return 0.0 if curvature >= 0 else float(0.5 * (left - right) / curvature)
 
 
+def _tissue_span(values: np.ndarray, axis: int, step: float, frequency: float) -> float:
+    """Extent (mm) along in-plane ``axis`` (1 or 2) of where the slices ``values`` have
+    signal: their power summed over the slices and the other axis, averaged over one tag
+    period, above :data:`SUPPORT_LEVEL` of its largest value."""
+    power = (values**2).sum(axis=(0, 3 - axis))
+    width = max(1, int(round(1.0 / (frequency * step))))
+    smooth = np.convolve(power, np.ones(width) / width, mode="same")
+    if not smooth.max() > 0.0:
+        return 0.0
+    above = np.flatnonzero(smooth > SUPPORT_LEVEL * smooth.max())
+    return float(above[-1] - above[0] + 1) * step
+
+
 def _measure_one(tagged: xr.Dataset, tag: int, time_index: int) -> float:
     """Tag frequency of one tag in its plane from the images' spectral peak (cycles/mm)."""
     values, plane = _plane(tagged, tag, time_index)
+    if values.shape[0] == 0:
+        return np.nan
     direction = np.asarray(tagged["tag_direction"].isel(tag=tag).values, dtype=np.float64)
     frequency = float(np.asarray(tagged["tag_frequency"].values).ravel()[tag])
     steps = [grid_step(tagged, d) for d in plane]
     stated = np.array([frequency * direction[AXES.index(d)] for d in plane])
-    for n, step, component in zip(values.shape[1:], steps, stated, strict=True):
+    for axis, step, component in zip((1, 2), steps, stated, strict=True):
         if abs(component) >= 0.1 * frequency and (
-            step is None or n * abs(step) * abs(component) < MIN_PERIODS
+            step is None
+            or _tissue_span(values, axis, abs(step), frequency) * abs(component) < MIN_PERIODS
         ):
-            return np.nan  # the wave runs along an axis too short to resolve its peak
-    if values.shape[0] == 0:
-        return np.nan
+            return np.nan  # the wave spans too few periods of tissue to resolve its peak
     values = values - values.mean(axis=(1, 2), keepdims=True)
     values *= np.hanning(values.shape[1])[:, None] * np.hanning(values.shape[2])[None, :]
     shape = [PAD * n for n in values.shape[1:]]
@@ -141,9 +160,8 @@ def measure_tag_frequency(tagged: xr.Dataset, time_index: int = 0) -> FloatArray
     numpy.ndarray, shape (tag,)
         In cycles/mm, in each tag's acquisition plane (compare with the stated frequency
         projected on the plane, as :func:`tags_off_frequency` does). NaN where it cannot be
-        measured: no slice inside the mask, fewer than :data:`MIN_PERIODS` tag periods in
-        the field of view along an axis the wave runs along, or no peak inside the searched
-        disk.
+        measured: no slice inside the mask, tissue spanning fewer than :data:`MIN_PERIODS`
+        tag periods along an axis the wave runs along, or no peak inside the searched disk.
 
     Examples
     --------
