@@ -166,7 +166,7 @@ class Body:
     ValueError
         If ``element`` or ``volumetric`` does not fit the mesh; ``fibers``, ``regions`` or
         ``boundaries`` have the wrong shape or ids; a fibre material, active contraction or
-        growth has no fibres; or ``t_max`` is given without ``active``.
+        growth that needs fibres has none; or ``t_max`` is given without ``active``.
 
     Examples
     --------

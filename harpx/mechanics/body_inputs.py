@@ -41,6 +41,7 @@ __all__ = [
     "check_fibers_given",
     "check_vertices",
     "facet_ids",
+    "growth_needs_fibers",
     "growth_tensors",
     "named_sets",
     "quadrature_fibers",
@@ -307,7 +308,7 @@ def check_fibers_given(material: Any, active: Any, growth: Any, fibers_qp: Any) 
     for what, needed in (
         (f"material {type(material).__name__}", needs),
         ("active contraction", active is not None),
-        ("fibre growth", growth is not None),
+        ("fibre growth", growth is not None and growth_needs_fibers(growth)),
     ):
         if needed and fibers_qp is None:
             raise ValueError(
@@ -338,12 +339,12 @@ def growth_tensors(growth: Any, fibers_qp: FloatArray | None, ncell: int, nqp: i
     Raises
     ------
     ValueError
-        If there are no fibres (unless ``growth`` has ``tensors``, a field that needs
-        none), or the stretch array is not ``ncell`` positive values.
+        If there are no fibres and the growth needs them (:func:`growth_needs_fibers`), or
+        the stretch array is not ``ncell`` positive values.
     """
     fibers = fibers_qp
     if fibers is None:
-        if not hasattr(growth, "tensors"):
+        if growth_needs_fibers(growth):
             raise ValueError(
                 "fibre growth needs 'fibers' but none were given; pass fibers=(ncell, 3) "
                 "unit vectors (or use a mesh builder that provides them)"
@@ -428,3 +429,21 @@ def t_max_per_cell(values: float | Mapping[str, float] | ArrayLike, regions: Map
             )
         out[regions[name]] = float(value)
     return out
+
+
+def growth_needs_fibers(growth: Any) -> bool:
+    """Whether a growth needs the body's fibres.
+
+    Parameters
+    ----------
+    growth : object or array_like
+        A growth law or field (its ``needs_fibers`` says; a tensor field such as
+        :class:`~harpx.physiology.growth.GrowthField` needs none), or one fibre stretch
+        per cell (needs them).
+
+    Returns
+    -------
+    bool
+        True unless ``growth`` declares ``needs_fibers = False``.
+    """
+    return bool(getattr(growth, "needs_fibers", True))

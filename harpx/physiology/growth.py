@@ -62,14 +62,14 @@ class GrowthField:
     >>> from harpx.mechanics import Body, NeoHookean, box
     >>> from harpx.physiology.growth import GrowthField
     >>> Fg = np.broadcast_to(np.diag([1.1, 1.0, 1.0]), (1, 8, 3, 3))
-    >>> body = Body(box(divisions=(1, 1, 1)), NeoHookean(1.0, 100.0),
-    ...             fibers=[[1.0, 0.0, 0.0]], growth=GrowthField(Fg))
+    >>> body = Body(box(divisions=(1, 1, 1)), NeoHookean(1.0, 100.0), growth=GrowthField(Fg))
     >>> round(float(body.growth_jacobian[0]), 12)
     1.1
     """
 
     tensors: FloatArray
-    needs_fibers: ClassVar[bool] = True
+    #: a tensor per point: the body's fibres are not used
+    needs_fibers: ClassVar[bool] = False
 
     def __post_init__(self) -> None:
         t = np.ascontiguousarray(np.asarray(self.tensors, dtype=np.float64))

@@ -135,6 +135,26 @@ def test_fibers_regions_active_growth():
         Body(spec, MAT).fiber_stretch(u)
 
 
+def test_a_growth_tensor_field_needs_no_fibres_but_fibre_growth_does():
+    # a tensor per Gauss point uses no fibre; the same field was refused by the constructor
+    # ("fibre growth needs 'fibers'") while Body.set_growth accepted it
+    from harpx.mechanics.fiber_laws import FiberGrowth
+    from harpx.physiology.growth import GrowthField
+
+    spec = box((2.0, 1.0, 1.0), (2, 1, 1))
+    Fg = np.broadcast_to(np.diag([1.1, 1.0, 1.0]), (2, 8, 3, 3))
+    body = Body(spec, MAT, growth=GrowthField(Fg))
+    np.testing.assert_allclose(body.growth_jacobian, [1.1, 1.1], rtol=1e-14)
+    plain = Body(spec, MAT)
+    plain.set_growth(GrowthField(Fg))
+    np.testing.assert_array_equal(plain.growth_tensor, body.growth_tensor)
+    for growth in (FiberGrowth(1.1), np.full(2, 1.1)):
+        with pytest.raises(ValueError, match="fibre growth needs 'fibers'"):
+            Body(spec, MAT, growth=growth)
+        with pytest.raises(ValueError, match="fibre growth needs 'fibers'"):
+            plain.set_growth(growth)
+
+
 @pytest.mark.parametrize("element", ["hex8", "hex20"])
 def test_meshio_round_trip(tmp_path, element):
     spec = cylinder(1.0, 2.0, n_radial=1, n_circumferential=8, n_axial=2, wall_thickness=0.2)
