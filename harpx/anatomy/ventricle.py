@@ -524,7 +524,7 @@ def ventricle(
         position in the apical O-grid disc, mapped through
         :meth:`VentricleGeometry.surface_points`. So the nodes of the endocardial and
         epicardial faces lie on the ellipsoids and those of the base on its plane, and
-        the cells no longer cut the curved walls with flat faces. The vertices are those
+        the cells do not cut the curved walls with flat faces. The vertices are those
         of the straight mesh. Point location and tracking do not take curved cells (they
         raise ``NotImplementedError``).
 
