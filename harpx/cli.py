@@ -413,7 +413,6 @@ def _refuse_overwriting_input(output: str, inputs: Sequence[str]) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``harpx`` command."""
     from harpx import __version__
-    from harpx.datasets import DATASETS
 
     fmt = _HelpFormatter
     parser = argparse.ArgumentParser(
@@ -422,6 +421,19 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"harpx {__version__}")
     parser.add_argument("--debug", action="store_true", help="print full tracebacks on errors")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    _add_demo(sub, fmt)
+    _add_scene(sub, fmt)
+    _add_phase(sub, fmt)
+    _add_track(sub, fmt)
+    _add_dicom(sub, fmt)
+    _add_report(sub, fmt)
+    return parser
+
+
+def _add_demo(sub: Any, fmt: type[argparse.HelpFormatter]) -> None:
+    """The ``harpx demo`` subcommand: the synthetic brain phantom end to end."""
+    from harpx.imaging.phase_parameters import DEFAULT_UPSAMPLE
 
     demo = sub.add_parser(
         "demo", help="track the synthetic brain phantom end to end", formatter_class=fmt
@@ -434,8 +446,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="scene size: paper (13 frames of 13 × 160² voxels, 4320 cells: a minute or two) "
         "or small (5 frames of 7 × 48² voxels, 432 cells: seconds)",
     )
-    from harpx.imaging.phase_parameters import DEFAULT_RADIUS, DEFAULT_UPSAMPLE
-
     demo.add_argument(
         "--upsample",
         type=int,
@@ -453,6 +463,11 @@ def build_parser() -> argparse.ArgumentParser:
     _progress_option(demo)
     demo.set_defaults(func=_demo)
 
+
+def _add_scene(sub: Any, fmt: type[argparse.HelpFormatter]) -> None:
+    """The ``harpx scene`` subcommand: a synthetic scene's archive and mesh."""
+    from harpx.datasets import DATASETS
+
     scn = sub.add_parser(
         "scene",
         help="write a synthetic scene's tagged archive and tracking mesh",
@@ -465,6 +480,11 @@ def build_parser() -> argparse.ArgumentParser:
     scn.add_argument("--output", default="harpx-scene", help="output folder")
     _progress_option(scn)
     scn.set_defaults(func=_scene)
+
+
+def _add_phase(sub: Any, fmt: type[argparse.HelpFormatter]) -> None:
+    """The ``harpx phase`` subcommand: harmonic phase of a tagged archive."""
+    from harpx.imaging.phase_parameters import DEFAULT_RADIUS, DEFAULT_UPSAMPLE
 
     phase = sub.add_parser("phase", help="harmonic phase of a tagged archive", formatter_class=fmt)
     phase.add_argument("input", help="tagged/1 archive")
@@ -483,6 +503,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     phase.set_defaults(func=_phase)
 
+
+def _add_track(sub: Any, fmt: type[argparse.HelpFormatter]) -> None:
+    """The ``harpx track`` subcommand: track a mesh through an archive."""
     trk = sub.add_parser(
         "track", help="track a mesh through a phase or tagged archive", formatter_class=fmt
     )
@@ -504,6 +527,9 @@ def build_parser() -> argparse.ArgumentParser:
     _progress_option(trk)
     trk.set_defaults(func=_track)
 
+
+def _add_dicom(sub: Any, fmt: type[argparse.HelpFormatter]) -> None:
+    """The ``harpx dicom`` subcommand: tagged cine DICOM series to a tagged archive."""
     dcm = sub.add_parser(
         "dicom", help="tagged cine DICOM series -> tagged archive", formatter_class=fmt
     )
@@ -527,12 +553,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     dcm.set_defaults(func=_dicom)
 
+
+def _add_report(sub: Any, fmt: type[argparse.HelpFormatter]) -> None:
+    """The ``harpx report`` subcommand: summary of a tracked archive."""
     rep = sub.add_parser("report", help="summarise a tracked archive", formatter_class=fmt)
     rep.add_argument("archive", help="tracked/1 archive")
     rep.add_argument("--truth", help="tagged archive with displacement_true")
     rep.add_argument("--figure", help="write a displacement map of the last frame (PNG)")
     rep.set_defaults(func=_report)
-    return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
