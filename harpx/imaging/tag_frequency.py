@@ -20,8 +20,9 @@ origin: the tag frequency in the tag's plane (paper eq. 1, the undeformed patter
 :math:`\cos(2\pi f\,d\cdot X)` of the first frame).
 
 Along an axis where the tissue spans fewer than :data:`MIN_PERIODS` tag periods the peak
-is too broad to place within :data:`FREQUENCY_TOLERANCE`, so a tag that varies along such
-an axis is not measured (NaN). The tissue's span is where the slices' summed signal
+is too broad to place within :data:`FREQUENCY_TOLERANCE` (benchmarks/tag_frequency_span.py
+measures it on discs of tissue), so a tag that varies along such an axis is not measured
+(NaN). The tissue's span is where the slices' summed signal
 power, averaged over one tag period, exceeds :data:`SUPPORT_LEVEL` of its largest value;
 it is at most the field of view. Nor is a tag measured whose largest value in the search
 disk lies on its rim (no peak there: no tag pattern near the stated frequency).
