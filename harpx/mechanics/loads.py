@@ -35,7 +35,7 @@ so traces of the cell gradients are exact. The tangent is not symmetric (followe
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
@@ -48,6 +48,7 @@ from harpx._typing import FloatArray, IntArray
 from harpx.errors import HarpxError
 from harpx.mechanics import kinematics
 from harpx.mechanics.assembly import sparsity
+from harpx.mechanics.linsolve import rigid_body_modes
 
 if TYPE_CHECKING:
     from harpx.mechanics.body import Body
@@ -60,6 +61,8 @@ __all__ = [
     "Prescribed",
     "Pressure",
     "ResidualTerm",
+    "free_rigid_motions",
+    "split_loads",
 ]
 
 _EPS = np.zeros((3, 3, 3))
@@ -455,3 +458,60 @@ class BodyForce:
             dtype=np.float64,
         )
         return r, None
+
+
+def split_loads(loads: Iterable[Any]) -> tuple[list[Any], list[Any]]:
+    """Split a loads list into Dirichlet conditions and residual terms.
+
+    Parameters
+    ----------
+    loads : iterable
+        Objects with ``dofs``/``values`` (Dirichlet) or ``residual_tangent`` (terms).
+
+    Returns
+    -------
+    dirichlet, terms : list
+        The Dirichlet conditions and the residual terms, each in the order given (an
+        object with ``residual_tangent`` is a term even if it also has ``dofs``).
+
+    Raises
+    ------
+    TypeError
+        If an object is neither.
+    """
+    dirichlet, terms = [], []
+    for load in loads:
+        if hasattr(load, "residual_tangent"):
+            terms.append(load)
+        elif hasattr(load, "dofs") and hasattr(load, "values"):
+            dirichlet.append(load)
+        else:
+            raise TypeError(
+                f"load {load!r} is neither a Dirichlet condition (dofs/values) nor a residual "
+                "term (residual_tangent(body, u, s)); see harpx.mechanics.loads"
+            )
+    return dirichlet, terms
+
+
+def free_rigid_motions(body: Body, dofs: ArrayLike) -> int:
+    """How many of the six rigid-body motions the fixed ``dofs`` leave free.
+
+    Parameters
+    ----------
+    body : Body
+        The body.
+    dofs : array_like of int
+        The dofs held by Dirichlet conditions.
+
+    Returns
+    -------
+    int
+        6 minus the rank of the rigid-body modes restricted to ``dofs`` (0: the body is held;
+        6: nothing holds it). Without a residual term that holds the body, a free motion
+        makes the tangent singular.
+    """
+    modes = rigid_body_modes(body.dof_points)
+    extent = float(np.ptp(body.dof_points, axis=0).max())
+    modes[:, 3:] /= max(extent, np.finfo(float).tiny)  # rotations on the translations' scale
+    held = modes[np.asarray(dofs, dtype=np.int64)]
+    return 6 - (int(np.linalg.matrix_rank(held)) if held.size else 0)

@@ -83,6 +83,7 @@ from harpx._typing import FloatArray, IntArray
 from harpx.errors import ConvergenceError, ElementInversionError
 from harpx.mechanics.assembly import Pattern, internal_forces, linearised_jacobian, sparsity
 from harpx.mechanics.linsolve import LinearSolver, rigid_body_modes
+from harpx.mechanics.loads import BodyForce, Pressure, free_rigid_motions, split_loads
 
 if TYPE_CHECKING:
     from harpx.mechanics.body import Body
@@ -136,39 +137,6 @@ class SolveResult:
     load_factors: list[float] = field(default_factory=list)
     line_search_steps: int = 0
     message: str = ""
-
-
-def split_loads(loads: Iterable[Any]) -> tuple[list[Any], list[Any]]:
-    """Split a loads list into Dirichlet conditions and residual terms.
-
-    Parameters
-    ----------
-    loads : iterable
-        Objects with ``dofs``/``values`` (Dirichlet) or ``residual_tangent`` (terms).
-
-    Returns
-    -------
-    dirichlet, terms : list
-        The Dirichlet conditions and the residual terms, each in the order given (an
-        object with ``residual_tangent`` is a term even if it also has ``dofs``).
-
-    Raises
-    ------
-    TypeError
-        If an object is neither.
-    """
-    dirichlet, terms = [], []
-    for load in loads:
-        if hasattr(load, "residual_tangent"):
-            terms.append(load)
-        elif hasattr(load, "dofs") and hasattr(load, "values"):
-            dirichlet.append(load)
-        else:
-            raise TypeError(
-                f"load {load!r} is neither a Dirichlet condition (dofs/values) nor a residual "
-                "term (residual_tangent(body, u, s)); see harpx.mechanics.loads"
-            )
-    return dirichlet, terms
 
 
 @dataclass
@@ -245,6 +213,18 @@ class _Newton:
         self.zero_mask = np.nonzero(is_d[pat.row_of_entry] | is_d[pat.indices])[0]
         self.diag_D = pat.diagonal[self.D]
         self._sym_cache: dict[int, bool] = {}
+
+    def unheld_note(self) -> str:
+        """For a failure message: the rigid-body motions nothing holds, when no term can."""
+        if any(not isinstance(term, (BodyForce, Pressure)) for term in self.terms):
+            return ""  # another term (e.g. the phase constraint) may hold the body
+        free = free_rigid_motions(self.body, self.D)
+        return (
+            f"; the Dirichlet conditions leave {free} of the 6 rigid-body motions free, so the "
+            "tangent is singular: hold the body (e.g. Fixed on a boundary)"
+            if free
+            else ""
+        )
 
     def boundary_values(self, s: float) -> FloatArray:
         """Prescribed values on ``self.D`` at load factor ``s`` (later conditions win)."""
@@ -451,20 +431,22 @@ def _check_u0(body: Body, u0: ArrayLike | None) -> FloatArray:
     return u.copy()
 
 
-def _failure(reason: str, cells: IntArray, s: float, history: list[float], tries: int) -> Exception:
+def _failure(
+    reason: str, cells: IntArray, s: float, history: list[float], tries: int, note: str
+) -> Exception:
     if reason == "inverted":
         shown = ", ".join(str(c) for c in cells[:12]) + (" ..." if len(cells) > 12 else "")
         return ElementInversionError(
             f"cells [{shown}] ({len(cells)} in all) invert (det F <= 0) at load factor "
             f"s={s:.6g} after {tries} step cut-back(s); reduce the load, use more steps "
-            "or refine the mesh there",
+            f"or refine the mesh there{note}",
             cells,
             history,
         )
     return ConvergenceError(
         f"Newton failed ({reason}) at load factor s={s:.6g} after {tries} step cut-back(s); "
         f"residual history {[f'{h:.3e}' for h in history]}; use more steps, check the "
-        "loads and boundary conditions",
+        f"loads and boundary conditions{note}",
         history,
     )
 
@@ -536,7 +518,7 @@ def equilibrate(
     )
     nt.count_into(res)
     if not out.ok:
-        err = _failure(out.reason, out.cells, float(s), out.history, 0)
+        err = _failure(out.reason, out.cells, float(s), out.history, 0, nt.unheld_note())
         if raise_on_failure:
             raise err
         res.message = str(err)
@@ -682,9 +664,11 @@ def _ramp(
         # count forever (the load factor would creep towards the limit point)
         if consecutive > max_cutbacks or 0.5 * ds < nominal * 0.5**max_cutbacks:
             if inverted is not None:  # an inversion in this failure chain is the root cause
-                err = _failure("inverted", inverted[0], inverted[1], inverted[2], res.cutbacks)
+                err = _failure("inverted", *inverted, res.cutbacks, nt.unheld_note())
             else:
-                err = _failure(out.reason, out.cells, s, out.history, res.cutbacks)
+                err = _failure(
+                    out.reason, out.cells, s, out.history, res.cutbacks, nt.unheld_note()
+                )
             res.u, res.min_jacobian, res.message = u, min_j, str(err)
             nt.count_into(res)
             if raise_on_failure:

@@ -502,3 +502,20 @@ def test_bad_inputs():
         solve(body, [Fixed("left")], u0=np.zeros(3))
     with pytest.raises(ValueError, match="components"):
         Fixed("left", (0, 0))
+
+
+def test_a_body_nothing_holds_is_named_when_newton_fails():
+    # without a Dirichlet condition the tangent is singular along the rigid-body motions:
+    # the failure used to advise "reduce the load, use more steps or refine the mesh"
+    from harpx.mechanics.loads import free_rigid_motions
+
+    body = Body(box((2.0, 1.0, 1.0), (4, 2, 2)), NeoHookean(c1=1.0, kappa=100.0))
+    with pytest.raises(
+        (ConvergenceError, ElementInversionError), match="leave 6 of the 6 rigid-body motions"
+    ):
+        solve(body, [BodyForce((0.0, 0.0, -0.1))], steps=2)
+    assert free_rigid_motions(body, Fixed("bottom").dofs(body)) == 0
+    # z held on the bottom face: x, y translations and the turn about z stay free
+    assert free_rigid_motions(body, Fixed("bottom", components=(2,)).dofs(body)) == 3
+    # one node held in all three components: the three rotations about it stay free
+    assert free_rigid_motions(body, [0, 1, 2]) == 3
