@@ -334,28 +334,9 @@ class _Newton:
                 )
             if it > 2 and rn > 1e8 * max(scale, self.atol):
                 return _Outcome(False, u, history, it, "diverged", min_jacobian=asm.min_jacobian)
-            # linear system with Dirichlet elimination on the fixed pattern
-            data = asm.data
-            K = self.pattern.matrix(data)
-            rhs = -RF
-            if pending:
-                rhs -= K @ dg
-            rhs[self.D] = 0.0
-            diag = np.abs(data[self.pattern.diagonal])
-            dscale = float(diag[~self.is_d].mean()) if np.any(~self.is_d) else 1.0
-            data[self.zero_mask] = 0.0
-            data[self.diag_D] = dscale if dscale > 0 else 1.0
-            t0 = time.perf_counter()
-            nullspace = None
-            if self.solver.method == "amg-cg":
-                nullspace = rigid_body_modes(body.dof_points + u.reshape(-1, 3))
-            x = self.solver.solve(K, rhs, symmetric=asm.symmetric, near_nullspace=nullspace)
-            self.time_solve += time.perf_counter() - t0
-            self.iterations += 1
-            if not np.all(np.isfinite(x)):
+            step = self._step(asm, u, RF, dg, pending)
+            if step is None:
                 return _Outcome(False, u, history, it + 1, "nan", min_jacobian=asm.min_jacobian)
-            step = x
-            step[self.D] = dg[self.D]
             # line search on the energy slope σ(α) = δu·R_F(u + α δu) (residual-only, so it
             # also serves non-conservative terms), switched on once ‖R_F‖ has grown twice in a
             # row; inverted or NaN trials always halve α
@@ -368,45 +349,82 @@ class _Newton:
                 # diverging, or no progress: give up early, the caller halves the increment
                 reason = "diverged" if growth >= 4 else "stalled"
                 return _Outcome(False, u, history, it, reason, min_jacobian=asm.min_jacobian)
-            alpha = 1.0
-            slope0 = dot_one_thread(step, RF)
-            # dilatation carried to u + α δu: J(u) + α cof F(u) : Grad δu at the Gauss points
-            lin = linearised_jacobian(body, u, step) if self.carry_dilatation else None
-            last_bad = asm.inverted
-            accepted = None
-            fallback = None
-            for _ in range(self.max_backtracks + 1):
-                ut = u + alpha * step
-                trial = self.assemble(ut, s, None if lin is None else lin[0] + alpha * lin[1])
-                if trial.R is None or not np.all(np.isfinite(trial.R)):
-                    if trial.R is None:
-                        last_bad = trial.inverted
-                    if pending:
-                        # the prescribed increment cannot be applied in one linearised step:
-                        # fail fast, the caller halves the load increment
-                        break
-                    alpha *= 0.5
-                    self.line_search_steps += 1
-                    continue
-                fallback = (ut, trial)
-                if pending or not damping or slope0 >= 0.0:
-                    accepted = fallback
-                    break
-                tf = trial.R.copy()
-                tf[self.D] = 0.0
-                slope = dot_one_thread(step, tf)
-                if slope <= 0.0 or abs(slope) <= self.ls_ratio * abs(slope0):
-                    accepted = fallback
-                    break
-                # overshoot (the energy rises again before α): secant zero of σ, safeguarded
-                alpha *= float(np.clip(slope0 / (slope0 - slope), 0.1, 0.9))
-                self.line_search_steps += 1
-            if accepted is None:
-                accepted = fallback
+            accepted, last_bad = self._line_search(u, s, step, RF, asm, pending, damping)
             if accepted is None:
                 return _Outcome(False, u, history, it + 1, "inverted", last_bad, asm.min_jacobian)
             u, asm = accepted
         raise AssertionError("unreachable")  # pragma: no cover
+
+    def _step(
+        self, asm: _Assembled, u: FloatArray, RF: FloatArray, dg: FloatArray, pending: bool
+    ) -> FloatArray | None:
+        """Newton step: Dirichlet elimination on the fixed pattern (module notes); None if NaN."""
+        data = asm.data
+        assert data is not None
+        K = self.pattern.matrix(data)
+        rhs = -RF
+        if pending:
+            rhs -= K @ dg
+        rhs[self.D] = 0.0
+        diag = np.abs(data[self.pattern.diagonal])
+        dscale = float(diag[~self.is_d].mean()) if np.any(~self.is_d) else 1.0
+        data[self.zero_mask] = 0.0
+        data[self.diag_D] = dscale if dscale > 0 else 1.0
+        t0 = time.perf_counter()
+        nullspace = None
+        if self.solver.method == "amg-cg":
+            nullspace = rigid_body_modes(self.body.dof_points + u.reshape(-1, 3))
+        x = self.solver.solve(K, rhs, symmetric=asm.symmetric, near_nullspace=nullspace)
+        self.time_solve += time.perf_counter() - t0
+        self.iterations += 1
+        if not np.all(np.isfinite(x)):
+            return None
+        x[self.D] = dg[self.D]
+        return x
+
+    def _line_search(
+        self,
+        u: FloatArray,
+        s: float,
+        step: FloatArray,
+        RF: FloatArray,
+        asm: _Assembled,
+        pending: bool,
+        damping: bool,
+    ) -> tuple[tuple[FloatArray, _Assembled] | None, IntArray]:
+        """The accepted ``(u + α step, its assembly)`` (module notes) or None, and the cells
+        of the last inverted trial."""
+        alpha = 1.0
+        slope0 = dot_one_thread(step, RF)
+        # dilatation carried to u + α δu: J(u) + α cof F(u) : Grad δu at the Gauss points
+        lin = linearised_jacobian(self.body, u, step) if self.carry_dilatation else None
+        last_bad = asm.inverted
+        fallback = None
+        for _ in range(self.max_backtracks + 1):
+            ut = u + alpha * step
+            trial = self.assemble(ut, s, None if lin is None else lin[0] + alpha * lin[1])
+            if trial.R is None or not np.all(np.isfinite(trial.R)):
+                if trial.R is None:
+                    last_bad = trial.inverted
+                if pending:
+                    # the prescribed increment cannot be applied in one linearised step:
+                    # fail fast, the caller halves the load increment
+                    break
+                alpha *= 0.5
+                self.line_search_steps += 1
+                continue
+            fallback = (ut, trial)
+            if pending or not damping or slope0 >= 0.0:
+                return fallback, last_bad
+            tf = trial.R.copy()
+            tf[self.D] = 0.0
+            slope = dot_one_thread(step, tf)
+            if slope <= 0.0 or abs(slope) <= self.ls_ratio * abs(slope0):
+                return fallback, last_bad
+            # overshoot (the energy rises again before α): secant zero of σ, safeguarded
+            alpha *= float(np.clip(slope0 / (slope0 - slope), 0.1, 0.9))
+            self.line_search_steps += 1
+        return fallback, last_bad
 
 
 def _activation_target(body: Body, t_max: Any) -> FloatArray | None:
