@@ -113,9 +113,8 @@ class PhaseSampler:
     tag wave vector's component along it (the phase gradient component there is 0).
 
     Precision: the spline coefficients keep the data's precision, float32 for float32
-    ``phase`` and ``magnitude`` (the :func:`~harpx.imaging.harp.extract_phase` default):
-    samples then agree with float64 data's within 2e-5 rad, far below any tracking tolerance,
-    at half the memory traffic. Phase and gradient are returned in float64 either way.
+    ``phase`` and ``magnitude`` (the :func:`~harpx.imaging.harp.extract_phase` default), at
+    half the memory traffic; phase and gradient are returned in float64 either way.
 
     Cost: one spline prefilter per tag at construction; per point ``(order+1)**d`` taps
     shared by all tags (``d`` grid axes with more than one sample); timings in
@@ -170,26 +169,7 @@ class PhaseSampler:
         phase = _floating(frame["phase"].transpose("tag", *GRID_DIMS).values)
         magnitude = _floating(frame["magnitude"].transpose("tag", *GRID_DIMS).values)
         grid = [np.asarray(phase_ds[d].values, np.float64) for d in GRID_DIMS]
-        shape = phase.shape[1:]
-        # grid axes (0=z, 1=y, 2=x) that vary; the others are invariant (single slice)
-        self._active = [a for a in range(3) if shape[a] > 1]
-        if not self._active:
-            raise SchemaError("the phase grid has a single voxel; cannot interpolate")
-        self._origin = np.array([grid[a][0] for a in self._active])
-        self._spacing = np.array(
-            [(grid[a][-1] - grid[a][0]) / (shape[a] - 1) for a in self._active]
-        )
-        self._shape = np.array([shape[a] for a in self._active])
-        # point columns (x, y, z) of the active grid axes
-        self._columns = np.array([AXES.index(GRID_DIMS[a]) for a in self._active])
-        #: Names of the axes along which the field varies, in point-column names.
-        self.active_axes: tuple[str, ...] = tuple(GRID_DIMS[a] for a in self._active)
-        self._k_active = self.wavevectors[:, self._columns]  # (ntag, d)
-        # remodulation uses the slice position along invariant axes
-        self._fixed = np.zeros(3)
-        for a in range(3):
-            if a not in self._active:
-                self._fixed[AXES.index(GRID_DIMS[a])] = grid[a][0]
+        self._set_grid(grid, phase.shape[1:])
         # the prepared window [lo, hi) of voxel indices along the active axes
         margin = _REGION_MARGIN[_tap_dtype(phase, magnitude)] if order == 3 else 0
         self._lo, self._hi = self._window(region, margin)
@@ -210,8 +190,7 @@ class PhaseSampler:
         ]
         carrier = terms[0] + terms[1] + terms[2]
         squeeze = tuple(a + 1 for a in range(3) if a not in self._active)
-        ntag = len(self.tags)
-        self._ntag = ntag
+        self._ntag = len(self.tags)
         # Extend D by odd reflection (2 D[0] - D[k]), which keeps value and slope continuous
         # at the border, before prefiltering: the spline's own mirror boundary (a slope
         # discontinuity) then sits `edge` voxels outside the field of view, where its error
@@ -221,24 +200,46 @@ class PhaseSampler:
         self._before = np.where(self._lo == 0, edge, 0)
         self._after = np.where(self._hi == self._shape, edge, 0)
         buffer = reuse._release() if reuse is not None else None
+        data = phase[window], magnitude[window]
         if order == 1:
             # trilinear taps need no prefilter: write cos/sin of the demodulated phase
             # straight into the padded tap array (no complex temporaries, one pass per tag)
-            padded = _demodulated_taps(phase[window], magnitude[window], carrier, squeeze, buffer)
+            padded = _demodulated_taps(*data, carrier, squeeze, buffer)
         else:
-            padded = _cubic_taps(
-                phase[window],
-                magnitude[window],
-                carrier,
-                squeeze,
-                self._before,
-                self._after,
-                buffer,
-            )
+            padded = _cubic_taps(*data, carrier, squeeze, self._before, self._after, buffer)
         self._padded: NDArray[np.floating] | None = padded
         self._padded_dtype = padded.dtype
         self._buffer: NDArray[np.floating] | None = padded if padded.base is None else padded.base
 
+        self._set_validity(phase_ds, magnitude, magnitude_floor)
+
+    def _set_grid(self, grid: list[NDArray[np.float64]], shape: tuple[int, ...]) -> None:
+        """The grid's geometry: the axes along which it varies, their origin and spacing."""
+        # grid axes (0=z, 1=y, 2=x) that vary; the others are invariant (single slice)
+        self._active = [a for a in range(3) if shape[a] > 1]
+        if not self._active:
+            raise SchemaError("the phase grid has a single voxel; cannot interpolate")
+        self._origin = np.array([grid[a][0] for a in self._active])
+        self._spacing = np.array(
+            [(grid[a][-1] - grid[a][0]) / (shape[a] - 1) for a in self._active]
+        )
+        self._shape = np.array([shape[a] for a in self._active])
+        # point columns (x, y, z) of the active grid axes
+        self._columns = np.array([AXES.index(GRID_DIMS[a]) for a in self._active])
+        #: Names of the axes along which the field varies, in point-column names.
+        self.active_axes: tuple[str, ...] = tuple(GRID_DIMS[a] for a in self._active)
+        self._k_active = self.wavevectors[:, self._columns]  # (ntag, d)
+        # remodulation uses the slice position along invariant axes
+        self._fixed = np.zeros(3)
+        for a in range(3):
+            if a not in self._active:
+                self._fixed[AXES.index(GRID_DIMS[a])] = grid[a][0]
+
+    def _set_validity(
+        self, phase_ds: xr.Dataset, magnitude: NDArray[np.floating], magnitude_floor: float
+    ) -> None:
+        """What makes a point valid: the tags' masks, the reference support, the floors."""
+        squeeze = tuple(a + 1 for a in range(3) if a not in self._active)
         mask = None
         if "mask" in phase_ds.variables:
             mask = np.asarray(phase_ds["mask"].transpose("tag", *GRID_DIMS).values, bool)
@@ -251,8 +252,8 @@ class PhaseSampler:
             support = np.asarray(phase_ds["body"].transpose(*GRID_DIMS).values) >= 0.5
             support = support.squeeze(axis=tuple(a - 1 for a in squeeze)) if squeeze else support
         self._support = support
-        self._floor = np.zeros(ntag)
-        for t in range(ntag):
+        self._floor = np.zeros(self._ntag)
+        for t in range(self._ntag):
             mag = magnitude[t].squeeze(axis=tuple(a - 1 for a in squeeze))
             inside = mask[t] if mask is not None and mask[t].any() else None
             self._floor[t] = magnitude_floor * percentile_99(mag, inside)
