@@ -506,19 +506,15 @@ class Body:
     def displacement_at(self, u: ArrayLike, points: ArrayLike) -> FloatArray:
         """Displacement (mm) at arbitrary reference points (mm), NaN outside the mesh.
 
-        See :func:`harpx.mechanics.locate.displacement_at`.
-
         Parameters
         ----------
-        u : array_like, shape (ndof,) or (ntime, ndof)
-            Displacement dofs, mm.
-        points : array_like, shape (n, 3) or (3,)
-            Reference positions, mm.
+        u, points : see :func:`harpx.mechanics.locate.displacement_at`
+            Displacement dofs (one frame or several) and reference positions, mm.
 
         Returns
         -------
-        ndarray, shape (n, 3) (or (ntime, n, 3), or (3,) for one point)
-            Displacement, mm; NaN for points outside the mesh.
+        ndarray
+            As :func:`harpx.mechanics.locate.displacement_at` returns it.
         """
         from harpx.mechanics.locate import displacement_at
 

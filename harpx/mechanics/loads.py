@@ -370,12 +370,8 @@ class Pressure:
 
         Parameters
         ----------
-        body : Body
-            The body being solved.
-        u : ndarray, shape (ndof,)
-            Current displacement dofs, mm.
-        s : float
-            Load factor in [0, 1] (dimensionless).
+        body, u, s : see :meth:`ResidualTerm.residual_tangent`
+            The body, the current displacement dofs (mm) and the load factor.
 
         Returns
         -------
@@ -429,12 +425,8 @@ class BodyForce:
 
         Parameters
         ----------
-        body : Body
-            The body being solved.
-        u : ndarray, shape (ndof,)
-            Current displacement dofs, mm (not used: a dead load).
-        s : float
-            Load factor in [0, 1] (dimensionless).
+        body, u, s : see :meth:`ResidualTerm.residual_tangent`
+            The body, the displacement dofs (not used: a dead load) and the load factor.
 
         Returns
         -------
