@@ -417,10 +417,17 @@ def t_max_per_cell(values: float | Mapping[str, float] | ArrayLike, regions: Map
     Raises
     ------
     ValueError
-        If a region name is not one of ``regions`` (the message lists them).
+        If a region name is not one of ``regions`` (the message lists them), or an array
+        is neither one value nor one per cell.
     """
     if not isinstance(values, Mapping):
-        return np.broadcast_to(np.asarray(values, dtype=np.float64), (ncell,)).copy()
+        array = np.asarray(values, dtype=np.float64)
+        if array.shape not in ((), (1,), (ncell,)):
+            raise ValueError(
+                f"t_max has shape {array.shape!r}; expected one value (kPa), a dict of "
+                f"region -> kPa, or one value per cell ({ncell},)"
+            )
+        return np.broadcast_to(array, (ncell,)).copy()
     out = np.zeros(ncell)
     for name, value in values.items():
         if name not in regions:

@@ -122,6 +122,11 @@ def test_fibers_regions_active_growth():
     np.testing.assert_allclose(body.t_max, [5.0, 0.0])
     with pytest.raises(ValueError, match="region 'c'"):
         body.set_t_max({"c": 1.0})
+    with pytest.raises(ValueError, match=r"t_max has shape \(3,\); expected .* \(2,\)"):
+        body.set_t_max([1.0, 2.0, 3.0])  # numpy's broadcast error named no variable
+    body.set_t_max([1.0, 2.0])
+    np.testing.assert_array_equal(body.t_max, [1.0, 2.0])
+    body.set_t_max({"a": 5.0})
     with pytest.raises(ValueError, match="fibers has shape"):
         Body(spec, gucc, fibers=np.ones((3, 3)))
     grown = Body(spec, MAT, fibers=fib, growth=FiberGrowth(1.2))
