@@ -43,6 +43,7 @@ import numpy as np
 import skfem
 from numpy.typing import ArrayLike
 from scipy import sparse
+from scipy.sparse import csgraph
 
 from harpx._typing import FloatArray, IntArray
 from harpx.errors import HarpxError
@@ -61,8 +62,11 @@ __all__ = [
     "Prescribed",
     "Pressure",
     "ResidualTerm",
+    "dirichlet_values",
     "free_rigid_motions",
+    "mesh_pieces",
     "split_loads",
+    "unheld_note",
 ]
 
 _EPS = np.zeros((3, 3, 3))
@@ -485,6 +489,61 @@ def split_loads(loads: Iterable[Any]) -> tuple[list[Any], list[Any]]:
     return dirichlet, terms
 
 
+def dirichlet_values(body: Body, dirichlet: Sequence[Any], s: float) -> FloatArray:
+    """Prescribed displacement of every dof at load factor ``s`` (zero where none is).
+
+    Parameters
+    ----------
+    body : Body
+        The body.
+    dirichlet : sequence of Dirichlet
+        The Dirichlet conditions (``dofs(body)``, ``values(body, s)``).
+    s : float
+        Load factor in [0, 1].
+
+    Returns
+    -------
+    ndarray, shape (ndof,)
+        Displacement, mm.
+
+    Raises
+    ------
+    ValueError
+        If two conditions prescribe values more than 1e-9 mm (relative to the value) apart
+        on a dof they share: which one held would depend on their order in ``loads``. The
+        message names both conditions, how many dofs clash and one of them.
+    """
+    g = np.zeros(body.ndof)
+    owner = np.full(body.ndof, -1)
+    for k, condition in enumerate(dirichlet):  # a few conditions
+        dofs = np.asarray(condition.dofs(body), dtype=np.int64)
+        values = np.broadcast_to(np.asarray(condition.values(body, s), np.float64), dofs.shape)
+        clash = (owner[dofs] >= 0) & (np.abs(g[dofs] - values) > 1e-9 * (1.0 + np.abs(values)))
+        if clash.any():
+            i = int(np.flatnonzero(clash)[0])
+            dof = int(dofs[i])
+            raise ValueError(
+                f"the Dirichlet conditions {_label(dirichlet[owner[dof]])} and "
+                f"{_label(condition)} prescribe different displacements on "
+                f"{int(np.count_nonzero(clash))} dofs they share at load factor {s:g} (dof "
+                f"{dof}, node {dof // 3} component {'xyz'[dof % 3]}: {g[dof]:.6g} against "
+                f"{values[i]:.6g} mm), so which holds would depend on their order: make them "
+                "agree there, or keep them apart (a narrower boundary or fewer components)"
+            )
+        g[dofs] = values
+        owner[dofs] = k
+    return g
+
+
+def _label(condition: Any) -> str:
+    """``Fixed('bottom')``, or the class name and facet count of facet ids."""
+    facet = getattr(condition, "facet", None)
+    if facet is None:
+        return repr(condition)
+    where = repr(facet) if isinstance(facet, str) else f"{np.size(facet)} facets"
+    return f"{type(condition).__name__}({where})"
+
+
 def free_rigid_motions(body: Body, dofs: ArrayLike) -> int:
     """How many of the six rigid-body motions the fixed ``dofs`` leave free.
 
@@ -500,10 +559,84 @@ def free_rigid_motions(body: Body, dofs: ArrayLike) -> int:
     int
         6 minus the rank of the rigid-body modes restricted to ``dofs`` (0: the body is held;
         6: nothing holds it). Without a residual term that holds the body, a free motion
-        makes the tangent singular.
+        makes the tangent singular. The body is taken as one piece; see
+        :func:`unheld_note` for a mesh in several.
     """
-    modes = rigid_body_modes(body.dof_points)
-    extent = float(np.ptp(body.dof_points, axis=0).max())
+    return _free_motions(body.dof_points, np.asarray(dofs, dtype=np.int64))
+
+
+def _free_motions(points: FloatArray, held: IntArray) -> int:
+    """6 minus the rank of the rigid-body modes of nodes ``points`` at the ``held`` dofs."""
+    modes = rigid_body_modes(points)
+    extent = float(np.ptp(points, axis=0).max())
     modes[:, 3:] /= max(extent, np.finfo(float).tiny)  # rotations on the translations' scale
-    held = modes[np.asarray(dofs, dtype=np.int64)]
-    return 6 - (int(np.linalg.matrix_rank(held)) if held.size else 0)
+    return 6 - (int(np.linalg.matrix_rank(modes[held])) if held.size else 0)
+
+
+def mesh_pieces(body: Body) -> IntArray:
+    """Label of the connected piece of the mesh that every dof belongs to.
+
+    Parameters
+    ----------
+    body : Body
+        The body.
+
+    Returns
+    -------
+    ndarray of int, shape (ndof,)
+        0, 1, ... per piece (cells that share a node are connected); a mesh in one piece
+        gives zeros.
+    """
+    cell_dofs = body.element_dofs.reshape(body.element_dofs.shape[0], -1)
+    rows = np.repeat(cell_dofs[:, 0], cell_dofs.shape[1])
+    links = sparse.coo_matrix(
+        (np.ones(rows.size, dtype=np.int8), (rows, cell_dofs.ravel())),
+        shape=(body.ndof, body.ndof),
+    )
+    return np.asarray(csgraph.connected_components(links, directed=False)[1], dtype=np.int64)
+
+
+def unheld_note(body: Body, dofs: ArrayLike) -> str:
+    """For a failure message: the rigid-body motions the held ``dofs`` leave free.
+
+    Parameters
+    ----------
+    body : Body
+        The body.
+    dofs : array_like of int
+        The dofs held by Dirichlet conditions.
+
+    Returns
+    -------
+    str
+        ``""`` when every connected piece of the mesh is held; else a clause (starting
+        with "; ") that counts the free motions, and for a mesh in several pieces names
+        the pieces nothing holds by their first cell.
+    """
+    held = np.asarray(dofs, dtype=np.int64)
+    labels = mesh_pieces(body)
+    npiece = int(labels.max()) + 1
+    if npiece == 1:
+        free = _free_motions(body.dof_points, held)
+        return (
+            f"; the Dirichlet conditions leave {free} of the 6 rigid-body motions free, so the "
+            "tangent is singular: hold the body (e.g. Fixed on a boundary)"
+            if free
+            else ""
+        )
+    loose = []
+    for k in range(npiece):  # the pieces of the mesh, in a failure message only
+        piece = np.flatnonzero(labels == k)  # its dofs, 3 per node in node order
+        mine = np.searchsorted(piece, held[labels[held] == k])
+        free = _free_motions(body.dof_points[piece[::3] // 3], mine)
+        if free:
+            first = int(np.flatnonzero(labels[body.element_dofs[:, 0, 0]] == k)[0])
+            loose.append(f"the piece with cell {first} ({free} of 6 motions free)")
+    if not loose:
+        return ""
+    return (
+        f"; the mesh is in {npiece} disconnected pieces and the Dirichlet conditions do not "
+        f"hold {len(loose)} of them, so the tangent is singular: "
+        f"{', '.join(loose[:5])}{' …' if len(loose) > 5 else ''}; hold every piece, or "
+        "check the mesh (pieces that should share nodes)"
+    )

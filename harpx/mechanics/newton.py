@@ -83,7 +83,13 @@ from harpx._typing import FloatArray, IntArray
 from harpx.errors import ConvergenceError, ElementInversionError
 from harpx.mechanics.assembly import Pattern, internal_forces, linearised_jacobian, sparsity
 from harpx.mechanics.linsolve import LinearSolver, rigid_body_modes
-from harpx.mechanics.loads import BodyForce, Pressure, free_rigid_motions, split_loads
+from harpx.mechanics.loads import (
+    BodyForce,
+    Pressure,
+    dirichlet_values,
+    split_loads,
+    unheld_note,
+)
 
 if TYPE_CHECKING:
     from harpx.mechanics.body import Body
@@ -218,20 +224,11 @@ class _Newton:
         """For a failure message: the rigid-body motions nothing holds, when no term can."""
         if any(not isinstance(term, (BodyForce, Pressure)) for term in self.terms):
             return ""  # another term (e.g. the phase constraint) may hold the body
-        free = free_rigid_motions(self.body, self.D)
-        return (
-            f"; the Dirichlet conditions leave {free} of the 6 rigid-body motions free, so the "
-            "tangent is singular: hold the body (e.g. Fixed on a boundary)"
-            if free
-            else ""
-        )
+        return unheld_note(self.body, self.D)
 
     def boundary_values(self, s: float) -> FloatArray:
-        """Prescribed values on ``self.D`` at load factor ``s`` (later conditions win)."""
-        g = np.zeros(self.body.ndof)
-        for d in self.dirichlet:
-            g[np.asarray(d.dofs(self.body), dtype=np.int64)] = d.values(self.body, s)
-        return g[self.D]
+        """Prescribed values on ``self.D`` at load factor ``s`` (conditions must agree)."""
+        return dirichlet_values(self.body, self.dirichlet, s)[self.D]
 
     def count_into(self, res: SolveResult) -> None:
         """Copy the counters over all attempts so far (iterations, timings, line-search

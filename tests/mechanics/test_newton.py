@@ -519,3 +519,44 @@ def test_a_body_nothing_holds_is_named_when_newton_fails():
     assert free_rigid_motions(body, Fixed("bottom", components=(2,)).dofs(body)) == 3
     # one node held in all three components: the three rotations about it stay free
     assert free_rigid_motions(body, [0, 1, 2]) == 3
+
+
+def test_a_disconnected_piece_nothing_holds_is_named_when_newton_fails():
+    # two cubes 1 mm apart in one mesh, the first held: the second falls freely under
+    # gravity; counting the free motions over the whole mesh found none and said nothing
+    import meshio
+
+    from harpx.mechanics.loads import mesh_pieces
+
+    one = Body(box((1.0, 1.0, 1.0), (2, 2, 2)), NEO).to_meshio()
+    hexes = one.cells_dict["hexahedron"]
+    two = meshio.Mesh(
+        np.vstack([one.points, one.points + [2.0, 0.0, 0.0]]),
+        [("hexahedron", np.vstack([hexes, hexes + len(one.points)]))],
+    )
+    body = Body.from_meshio(two, NEO)
+    labels = mesh_pieces(body)
+    assert np.bincount(labels).tolist() == [81, 81]  # 27 nodes x 3 dofs in each cube
+    p = body.mesh.p[:, body.mesh.facets]
+    left = np.flatnonzero(np.all(np.isclose(p[0], 0.0), axis=0))  # the first cube's face
+    with pytest.raises(
+        ConvergenceError, match=r"2 disconnected pieces .* do not hold 1 of them.*cell 8 \(6 of 6"
+    ):
+        solve(body, [Fixed(left), BodyForce((0.0, 0.0, -0.01))], steps=2)
+
+
+def test_dirichlet_conditions_that_disagree_on_a_shared_dof_are_refused():
+    # the bottom-right edge (5 nodes) belongs to both boundaries: Fixed says x = 0 there,
+    # the pull 0.3 s mm; the later condition used to win silently (reaction 1.99 against
+    # 1.68 mN by the order of the list)
+    body = Body(box((1.0, 1.0, 1.0), (4, 4, 4)), NEO)
+    pull = Prescribed("right", lambda X, s: np.outer(0.3 * s + 0 * X[:, 0], [1, 0, 0]), (0,))
+    for loads in ([Fixed("bottom"), pull], [pull, Fixed("bottom")]):
+        with pytest.raises(ValueError, match=r"and .* on 5 dofs they share at load factor 0.5"):
+            solve(body, loads, steps=2)
+    # conditions that agree where they meet are fine: a pull that vanishes at z = 0
+    agree = Prescribed("right", lambda X, s: np.outer(0.3 * s * X[:, 2], [1, 0, 0]), (0,))
+    res = solve(body, [Fixed("bottom"), agree], steps=2)
+    assert res.converged
+    right = body.facet_dofs("right", (0,))
+    np.testing.assert_allclose(res.u[right], 0.3 * body.dof_points[right // 3, 2], atol=1e-12)
