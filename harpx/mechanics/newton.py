@@ -83,13 +83,7 @@ from harpx._typing import FloatArray, IntArray
 from harpx.errors import ConvergenceError, ElementInversionError
 from harpx.mechanics.assembly import Pattern, internal_forces, linearised_jacobian, sparsity
 from harpx.mechanics.linsolve import LinearSolver, rigid_body_modes
-from harpx.mechanics.loads import (
-    BodyForce,
-    Pressure,
-    dirichlet_values,
-    split_loads,
-    unheld_note,
-)
+from harpx.mechanics.loads import BodyForce, Pressure, dirichlet_values, split_loads, unheld_note
 
 if TYPE_CHECKING:
     from harpx.mechanics.body import Body
@@ -518,6 +512,8 @@ def equilibrate(
         If an element inverts and line search cannot avoid it.
     ConvergenceError
         If Newton diverges or stalls.
+    ValueError
+        If two Dirichlet conditions disagree on a dof they share (:func:`.dirichlet_values`).
     """
     u = _check_u0(body, u0)
     nt = _Newton(body, loads, tol=tol, atol=atol, max_iterations=max_iterations,
@@ -612,6 +608,9 @@ def solve(
         and the load factor).
     ConvergenceError
         If Newton fails for another reason after ``max_cutbacks`` halvings.
+    ValueError
+        If an argument is out of range, or two Dirichlet conditions disagree on a dof they
+        share (:func:`~harpx.mechanics.loads.dirichlet_values`).
 
     Examples
     --------
