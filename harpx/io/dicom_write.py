@@ -117,7 +117,8 @@ def write_tagged(ds: xr.Dataset, folder: PathLike, *, overwrite: bool = False) -
     if bad:
         raise SchemaError(
             f"tag labels {bad!r} cannot name the series' folders; use letters, digits, '_', "
-            "'-' and '.' only (e.g. ds.assign_coords(tag=['x', 'y', 'z']))"
+            "'-' and '.' only (e.g. ds.assign_coords(tag=ds.tag.copy(data=['x', 'y', 'z'])), which "
+            "keeps the coordinate's attributes)"
         )
     root = Path(os.path.abspath(folder))  # "." and "out/.." name their folder too
     _check_target(root, overwrite)

@@ -4,6 +4,8 @@ temporary files of killed writes are cleaned, the dashboard stays on loopback.""
 from __future__ import annotations
 
 import os
+import re
+import shutil
 import socket
 import stat
 from pathlib import Path
@@ -257,8 +259,15 @@ def test_dicom_export_refuses_unsafe_labels_and_nan_images(tmp_path: Path, rng) 
     from harpx.io.dicom_write import write_tagged
 
     ds = _two_exports(rng)[1]
-    with pytest.raises(SchemaError, match=r"tag labels \['\.\.'\] cannot name the series"):
-        write_tagged(ds.assign_coords(tag=("tag", ["x", "..", "z"], ds.tag.attrs)), tmp_path / "a")
+    bad = ds.assign_coords(tag=("tag", ["x", "..", "z"], ds.tag.attrs))
+    with pytest.raises(SchemaError, match=r"tag labels \['\.\.'\] cannot name the series") as err:
+        write_tagged(bad, tmp_path / "a")
+    # the advice, followed as written, gives labels that export (a plain list of labels
+    # dropped the coordinate's attributes, and validation refused the result)
+    advice = re.search(r"e\.g\. (ds\.assign_coords\(.*?\]\)\)?)(?:, which|\))", str(err.value))[1]
+    fixed = eval(advice, {"ds": bad})  # noqa: S307 (the message's own example)
+    write_tagged(fixed, tmp_path / "a")
+    shutil.rmtree(tmp_path / "a")
     lazy = ds.copy(deep=True)
     lazy["image"][0, 1, 2, 3, 4] = np.nan
     with pytest.raises(SchemaError, match=r"'image' of tag 'x' has 1 non-finite values"):
