@@ -481,7 +481,7 @@ def _check_tags(ds: xr.Dataset, problems: list[str]) -> None:
             if axis == s:
                 continue
             step = grid_step(ds, axis)
-            if step is None:
+            if step is None or step <= 0:  # a decreasing axis has its own problem line
                 continue
             component = float(f * abs(d[a]))
             limit = 1.0 / (2.0 * step)

@@ -237,6 +237,16 @@ def test_validate_rejects_bad_tagged(
         validate(ds, kind="tagged")
 
 
+def test_a_decreasing_axis_is_one_problem_not_also_a_false_nyquist_one() -> None:
+    # a flipped y used to add "0 cycles/mm > 1/(2 dy) = -0.25" lines for every tag
+    with pytest.raises(SchemaError) as err:
+        validate(_decreasing_y(make_tagged()), kind="tagged")
+    assert err.value.problems == [
+        "coordinate 'y' is not increasing (step -2 mm at index 0); sort with ds.sortby('y') "
+        "or flip the axis"
+    ]
+
+
 def _phase_at_pi(ds: xr.Dataset) -> xr.Dataset:
     ds = ds.copy(deep=True)
     ds["phase"][0, 0, 0, 0, 0] = np.pi
