@@ -29,7 +29,11 @@ Cells keep the VTK/meshio node order of the dataset: ``hex8`` becomes ``hexahedr
 :func:`read_body_mesh` reads the reference mesh back from any of these files (or any mesh
 file meshio reads) as a :class:`~harpx.mechanics.mesh.MeshSpec` with its regions and fibres,
 so ``Body(read_body_mesh(path), material, element=...)`` rebuilds the tracked body with the
-same nodes and cells. It rejects inverted or degenerate hexahedra, naming them.
+same nodes and cells. It rejects inverted or degenerate hexahedra, naming them. Both
+readers take named regions and boundaries from cell sets, named gmsh physical groups,
+``region`` labels and scikit-fem's ``skfem:s:``/``skfem:b:`` cell data, and warn about
+names they cannot map. ``hexahedron20`` cells are reduced to their corners (straight
+edges); a warning says so when the file's edges were curved.
 
 :func:`read_body` reads a model from a mesh file (hexahedra or tetrahedra, e.g. a mesh made
 elsewhere, or one :meth:`~harpx.mechanics.body.Body.to_meshio` wrote) straight into a
@@ -70,9 +74,11 @@ from harpx.io.netcdf import (
     remove_stale_temporaries,
     temporary_prefix,
 )
+from harpx.mechanics._mesh_file_sets import REGION_FIELD, read_named_sets
 from harpx.mechanics.body import Body
-from harpx.mechanics.cells import volume_blocks, vtk_hex_corner_jacobians
+from harpx.mechanics.cells import volume_blocks, vtk_hex_corner_jacobians, warn_dropped_curvature
 from harpx.mechanics.mesh import MeshSpec, hex_mesh
+from harpx.mechanics.meshspec import labelled_spec
 from harpx.schema import validate
 
 __all__ = ["MESHIO_CELL_TYPES", "read_body", "read_body_mesh", "read_meshio", "to_meshio"]
@@ -91,7 +97,6 @@ MESHIO_CELL_TYPES: dict[str, str] = {
 
 #: Suffixes of the index file of each series kind; the first is the default.
 _SUFFIXES: dict[str, tuple[str, ...]] = {"xdmf": (".xdmf", ".xmf"), "vtu": (".pvd", ".vtu")}
-_REGION_FIELD = "region:"
 _XDMF_INFO = "harpx_region_names"
 
 
@@ -293,7 +298,7 @@ class _Export:
 
 def _write_vtu(tmp: Path, target: Path, export: _Export) -> list[str]:
     field = {
-        f"{_REGION_FIELD}{k}": np.array([v], dtype=np.int64) for k, v in export.region_names.items()
+        f"{REGION_FIELD}{k}": np.array([v], dtype=np.int64) for k, v in export.region_names.items()
     }
     frames = []
     for n, point, cell_data in export.frames():
@@ -399,12 +404,16 @@ def read_body_mesh(path: PathLike) -> MeshSpec:
     Returns
     -------
     MeshSpec
-        The corner mesh (``hexahedron20`` files are reduced to their corners; ``Body`` with
-        ``element="hex20"`` rebuilds the edge nodes), the regions from cell data ``region``
-        (named after the stored region names, else ``"region<label>"``) and the fibres from
-        cell data ``fiber``. ``Body(spec, material, element=...)`` then has the nodes and
-        cells of the exported dataset (``body.dof_points == tracked.points``,
-        ``body.cells == tracked.cells``).
+        The corner mesh (``hexahedron20`` files are reduced to their corners, with straight
+        edges; ``Body`` with ``element="hex20"`` rebuilds the edge nodes at the edges'
+        midpoints), its named regions and boundaries (also carried by the skfem mesh) and
+        the fibres from cell data ``fiber``. Regions come from cell data ``region`` (named
+        after the stored region names, else ``"region<label>"``), cell sets, named gmsh
+        physical groups and ``skfem:s:<name>`` cell data; boundaries from cell sets and
+        named gmsh physical groups on face blocks and ``skfem:b:<name>`` cell data (as
+        :meth:`Body.to_meshio <harpx.mechanics.body.Body.to_meshio>` writes them).
+        ``Body(spec, material, element=...)`` then has the nodes and cells of the exported
+        dataset (``body.dof_points == tracked.points``, ``body.cells == tracked.cells``).
 
     Raises
     ------
@@ -416,6 +425,16 @@ def read_body_mesh(path: PathLike) -> MeshSpec:
         If the file has no hexahedra, has other volume cells besides them (e.g. a
         tetrahedron; blocks of hexahedra are merged), or some hexahedra are inverted or
         degenerate (a non-positive Jacobian at a corner); the message lists their ids.
+        Also if a cell set names cells or nodes the file does not have.
+
+    Warns
+    -----
+    HarpxWarning
+        If named sets cannot be mapped (a set on line or vertex cells, an unnamed gmsh tag,
+        a face that is no face of the hexahedra, integer cell data without names; each is
+        named), or if ``hexahedron20`` edge nodes lie off their edges' midpoints by more
+        than :data:`~harpx.mechanics.cells.CURVED_EDGE_TOLERANCE` of the edge length (the
+        curved geometry is lost when reducing to the corners).
 
     See Also
     --------
@@ -426,18 +445,13 @@ def read_body_mesh(path: PathLike) -> MeshSpec:
     if not path.is_file():
         raise FileNotFoundError(f"cannot read mesh {str(path)!r}: no such file")
     suffix = path.suffix.lower()
-    names: dict[str, int] = {}
+    names: dict[str, int] | None = None  # the region label names: field data in the file
     if suffix == ".pvd":
         path = _first_pvd_frame(path)
     if suffix in _SUFFIXES["xdmf"] and _is_time_series(path):
         mesh, names = _read_xdmf_series(path)
     else:
         mesh = _read(path)
-        names = {
-            key[len(_REGION_FIELD) :]: int(np.ravel(value)[0])
-            for key, value in mesh.field_data.items()
-            if key.startswith(_REGION_FIELD)
-        }
     return _mesh_spec(mesh, names, path)
 
 
@@ -448,10 +462,12 @@ def read_body(path: PathLike, material: Any, **kwargs: Any) -> Body:
     ----------
     path : str or os.PathLike
         A file meshio reads (format from its suffix), in mm, with ``hexahedron``,
-        ``hexahedron20`` (reduced to its corners), ``tetra`` or ``tetra10`` (curved edges
-        kept) cells; cell data ``fiber`` (one vector per cell) becomes the fibres, and
-        named boundaries and regions written by
-        :meth:`~harpx.mechanics.body.Body.to_meshio` are kept.
+        ``hexahedron20`` (reduced to its corners: straight edges, element ``hex8`` unless
+        ``element="hex20"`` is given), ``tetra`` or ``tetra10`` (curved edges kept) cells;
+        cell data ``fiber`` (one vector per cell) becomes the fibres. Named regions and
+        boundaries are kept: those :meth:`~harpx.mechanics.body.Body.to_meshio` writes
+        (``skfem:s:``/``skfem:b:`` cell data), cell sets, named gmsh physical groups and
+        the ``region`` labels of a tracked export (as :func:`read_body_mesh` reads them).
     material : object
         The material, e.g. :class:`~harpx.mechanics.materials.NeoHookean`.
     **kwargs
@@ -472,7 +488,16 @@ def read_body(path: PathLike, material: Any, **kwargs: Any) -> Body:
         If meshio cannot parse the file; names the path.
     ValueError
         If the file has no hexahedra or tetrahedra (names the path and its cell blocks),
-        or volume cells of several kinds (counts each; blocks of one kind are merged).
+        or volume cells of several kinds (counts each; blocks of one kind are merged), or
+        inverted or degenerate cells (names them, with a hint at the node order, e.g.
+        ``tetra10`` edge nodes in gmsh's raw order).
+
+    Warns
+    -----
+    HarpxWarning
+        If named sets in the file cannot be mapped to regions or boundaries (each is
+        named), or if ``hexahedron20`` edge nodes lie off their edges' midpoints (curved
+        geometry that reducing to the corners loses).
 
     See Also
     --------
@@ -586,37 +611,39 @@ def _read_xdmf_series(path: Path) -> tuple[meshio.Mesh, dict[str, int]]:
     return meshio.Mesh(points, cells, cell_data=static), names
 
 
-def _mesh_spec(mesh: meshio.Mesh, names: Mapping[str, int], path: Path) -> MeshSpec:
+def _mesh_spec(mesh: meshio.Mesh, names: Mapping[str, int] | None, path: Path) -> MeshSpec:
+    source = f"mesh file {str(path)!r}"
     try:  # blocks of hexahedra merged; other volume cells refused, never dropped
-        _, hexes, data = volume_blocks(
-            mesh, f"mesh file {str(path)!r}", ("hexahedron", "hexahedron20"), "hexahedra"
-        )
+        kind, hexes, data = volume_blocks(mesh, source, ("hexahedron", "hexahedron20"), "hexahedra")
     except ValueError as exc:
         raise SchemaError(str(exc)) from None
     used, inverse = np.unique(hexes[:, :8], return_inverse=True)
     points = np.asarray(mesh.points, dtype=np.float64)[used]
     cells = inverse.reshape(-1, 8)
     if points.ndim != 2 or points.shape[1] != 3:
-        raise SchemaError(
-            f"mesh file {str(path)!r} has points of shape {points.shape}; expected (n, 3) in mm"
-        )
+        raise SchemaError(f"{source} has points of shape {points.shape}; expected (n, 3) in mm")
     bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
     if bad.size:
         raise SchemaError(
-            f"mesh file {str(path)!r} has {bad.size} nodes with a NaN or infinite coordinate "
+            f"{source} has {bad.size} nodes with a NaN or infinite coordinate "
             f"(nodes {used[bad[:10]].tolist()} of the file); fix or remove them"
         )
     _check_hexahedra(points, cells, path)
-    regions: dict[str, IntArray] = {}
-    if "region" in data:
-        label = np.asarray(data["region"]).astype(np.int64).ravel()
-        by_code = {code: name for name, code in names.items()}
-        for code in np.unique(label[label >= 0]):  # loop over the few region labels
-            regions[by_code.get(int(code), f"region{int(code)}")] = np.flatnonzero(label == code)
+    if kind == "hexahedron20":
+        warn_dropped_curvature(mesh.points, hexes, source)
+    skmesh = hex_mesh(points, cells)
+    vertex_of = np.full(len(mesh.points), -1, dtype=np.int64)
+    vertex_of[used] = np.arange(used.size)
+    try:
+        regions, boundaries = read_named_sets(
+            mesh, kind, vertex_of, skmesh.facets.T, source, region_names=names
+        )
+    except ValueError as exc:
+        raise SchemaError(str(exc)) from None
     fibers = None
     if "fiber" in data:
         fibers = np.asarray(data["fiber"], dtype=np.float64)
-    return MeshSpec(hex_mesh(points, cells), regions=regions, fibers=fibers)
+    return labelled_spec(skmesh, regions, boundaries, fibers)
 
 
 def _check_hexahedra(points: FloatArray, cells: IntArray, path: Path) -> None:

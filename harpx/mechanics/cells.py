@@ -9,6 +9,7 @@ validity check of the cell maps (no inverted, twisted or collapsed cells). Units
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from dataclasses import dataclass
 from typing import Any, Literal, TypeAlias
 
@@ -19,8 +20,11 @@ from numpy.typing import ArrayLike
 from skfem.io.meshio import HEX_MAPPING
 
 from harpx._typing import FloatArray, IntArray
+from harpx.errors import HarpxWarning, user_stacklevel
+from harpx.mechanics._mesh_file_sets import read_named_sets
 
 __all__ = [
+    "CURVED_EDGE_TOLERANCE",
     "ELEMENTS",
     "ElementKind",
     "ElementName",
@@ -31,6 +35,7 @@ __all__ = [
     "vtk_cells",
     "vtk_corners",
     "vtk_hex_corner_jacobians",
+    "warn_dropped_curvature",
 ]
 
 #: Element names a :class:`Body` accepts.
@@ -359,39 +364,105 @@ def _skfem_mesh(m: meshio.Mesh, source: str) -> tuple[Any, FloatArray | None]:
     """The scikit-fem mesh and cell fibres of a hexahedral or tetrahedral meshio mesh.
 
     ``hexahedron``, ``hexahedron20`` (straight-edged geometry from the corners; the edge
-    nodes become element dofs again), ``tetra`` and ``tetra10`` (curved: the edge nodes
-    are kept as geometry, a ``skfem.MeshTet2``) cells are accepted; several blocks of one
-    kind are merged (:func:`volume_blocks`), volume cells of several kinds are refused.
-    Cell data ``fiber`` (one vector per cell) becomes the fibres. ``source`` names the
-    mesh in errors.
+    nodes become element dofs again; a HarpxWarning if the file's edges are curved),
+    ``tetra`` and ``tetra10`` (curved: the edge nodes are kept as geometry, a
+    ``skfem.MeshTet2``) cells are accepted; several blocks of one kind are merged
+    (:func:`volume_blocks`), volume cells of several kinds are refused. Cell data ``fiber``
+    (one vector per cell) becomes the fibres; named regions and boundaries (cell sets, named
+    gmsh physical groups, ``region`` labels, skfem cell data) become the mesh's subdomains
+    and boundaries. ``source`` names the mesh in errors.
     """
     kinds = ("hexahedron", "hexahedron20", "tetra", "tetra10")
     kind, cells, data = volume_blocks(m, source, kinds, "hexahedra or tetrahedra")
     fibers = None
     if "fiber" in data:
         fibers = np.asarray(data["fiber"], dtype=np.float64)
-    cell_data = {name: [v] for name, v in data.items()}
+    points = np.asarray(m.points)
     if kind.startswith("hexahedron"):
-        _check_vtk_hexahedra(np.asarray(m.points, dtype=np.float64), cells, source)
+        _check_vtk_hexahedra(np.asarray(points, dtype=np.float64), cells, source)
     if kind == "hexahedron20":
-        used, inv = np.unique(cells[:, :8], return_inverse=True)
-        m = meshio.Mesh(m.points[used], [("hexahedron", inv.reshape(-1, 8))], cell_data=cell_data)
-    elif kind == "tetra10":
-        # skfem numbers the vertices first; keep the corner points, rebuild the edge nodes
-        # from the file (so curved edges stay curved)
-        used, inv = np.unique(cells[:, :4], return_inverse=True)
-        t = inv.reshape(-1, 4)
-        base = skfem.MeshTet1(np.ascontiguousarray(m.points[used].T), np.ascontiguousarray(t.T))
+        warn_dropped_curvature(points, cells, source)
+    ncorner = 8 if kind.startswith("hexahedron") else 4
+    # keep the corners of these cells (drop boundary blocks, stray points and edge nodes)
+    used, inv = np.unique(cells[:, :ncorner], return_inverse=True)
+    vertex_of = np.full(len(points), -1, dtype=np.int64)
+    vertex_of[used] = np.arange(used.size)
+    corners = inv.reshape(-1, ncorner)
+    if kind == "tetra10":  # skfem numbers the vertices first; the file's edge nodes are kept
+        base = skfem.MeshTet1(np.ascontiguousarray(points[used].T), np.ascontiguousarray(corners.T))
         base = _orient_tets(base)
-        return curved_tet_mesh(base, _edge_points(base, t, m.points[cells[:, 4:]])), fibers
-    else:  # keep these cells and their nodes (drop boundary blocks and stray points)
-        used, inv = np.unique(cells, return_inverse=True)
-        nv = cells.shape[1]
-        m = meshio.Mesh(m.points[used], [(kind, inv.reshape(-1, nv))], cell_data=cell_data)
-    mesh = skfem.io.meshio.from_meshio(m)
-    if isinstance(mesh, skfem.MeshTet1):
-        mesh = _orient_tets(mesh)
-    return mesh, fibers
+        edge_points = _edge_points(base, corners, points[cells[:, 4:]])
+    else:
+        linear = "hexahedron" if ncorner == 8 else "tetra"
+        base = skfem.io.meshio.from_meshio(meshio.Mesh(points[used], [(linear, corners)]))
+        if isinstance(base, skfem.MeshTet1):
+            base = _orient_tets(base)
+    regions, boundaries = read_named_sets(m, kind, vertex_of, base.facets.T, source)
+    if regions or boundaries:
+        base = dataclasses.replace(
+            base,
+            _boundaries={k: v.astype(np.int32) for k, v in boundaries.items()} or None,
+            _subdomains={k: v.astype(np.int32) for k, v in regions.items()} or None,
+        )
+    if kind == "tetra10":
+        return curved_tet_mesh(base, edge_points), fibers
+    return base, fibers
+
+
+#: Edge nodes farther than this fraction of their edge's length from its midpoint make a
+#: quadratic cell curved (or unevenly parametrised): reducing it to its corners changes it.
+CURVED_EDGE_TOLERANCE = 1e-3
+
+
+def warn_dropped_curvature(points: ArrayLike, cells: IntArray, source: str) -> float:
+    """Warn if the edge nodes of ``hexahedron20`` cells are not at their edges' midpoints.
+
+    A ``hexahedron20`` mesh is reduced to its corners (straight edges; ``element="hex20"``
+    puts the edge nodes back at the midpoints), so edge nodes off the midpoints, e.g. on
+    the arcs of a curved wall, are geometry that is lost.
+
+    Parameters
+    ----------
+    points : array_like, shape (npoint, 3)
+        Node positions, mm.
+    cells : ndarray of int, shape (ncell, 20)
+        VTK ``hexahedron20`` connectivity (8 corners, then the 12 edge nodes).
+    source : str
+        What the mesh is called in the warning (e.g. its file name).
+
+    Returns
+    -------
+    float
+        Largest distance of an edge node from its edge's midpoint over the edge's length
+        (dimensionless; 0 for straight, evenly parametrised edges).
+
+    Warns
+    -----
+    HarpxWarning
+        If that ratio exceeds :data:`CURVED_EDGE_TOLERANCE`; names the distance (mm), the
+        ratio and the number of cells.
+    """
+    x = np.asarray(points, dtype=np.float64)
+    a = x[cells[:, _VTK_HEX_EDGES[:, 0]]]  # (ncell, 12, 3)
+    b = x[cells[:, _VTK_HEX_EDGES[:, 1]]]
+    off = np.linalg.norm(x[cells[:, 8:20]] - 0.5 * (a + b), axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = off / np.linalg.norm(b - a, axis=-1)
+    ratio = np.where(np.isfinite(ratio), ratio, 0.0)
+    worst = float(ratio.max(initial=0.0))
+    if worst > CURVED_EDGE_TOLERANCE:
+        curved = np.flatnonzero((ratio > CURVED_EDGE_TOLERANCE).any(axis=1))
+        cell, edge = np.unravel_index(np.argmax(ratio), ratio.shape)
+        warnings.warn(
+            f"{source} has {curved.size} 'hexahedron20' cells whose edge nodes are off their "
+            f"edges' midpoints, up to {off[cell, edge]:.4g} mm ({worst:.2%} of the edge length, "
+            f"cell {int(cell)}): the cells are read by their 8 corners with straight edges, so "
+            "that curved geometry is lost (the volume changes). Mesh with finer straight cells, "
+            "or with curved 'tetra10' cells, whose edge nodes are kept",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
+    return worst
 
 
 def _check_vtk_hexahedra(points: FloatArray, cells: IntArray, source: str) -> None:
@@ -521,19 +592,42 @@ def _check_cells(mesh: Any) -> None:
     every cell; a valid mesh has one sign everywhere (skfem's reference orientation makes
     it negative for positively ordered hexahedra; tetrahedra are oriented positively on
     input). A cell with the opposite sign somewhere (inverted or bow-tie) or with a
-    vanishing determinant (collapsed) is named.
+    vanishing determinant (collapsed) is named, with a hint at the vertex order. The
+    determinant is computed from ``DF`` here (skfem's ``detDF`` raises a bare
+    ``Exception`` where it is exactly zero).
     """
     tet = isinstance(mesh, skfem.MeshTet1)
-    det = mesh._mapping().detDF(_TET_CHECK_POINTS if tet else _CHECK_POINTS)  # (ncell, k), mm³
-    det = np.broadcast_to(det, (mesh.nelements, det.shape[-1]))
-    scale = np.abs(det).max()
+    points = _TET_CHECK_POINTS if tet else _CHECK_POINTS
+    with np.errstate(divide="ignore", invalid="ignore"):  # an affine map inverts A
+        DF = np.asarray(mesh._mapping().DF(points))  # (3, 3, ncell, k), mm
+    DF = np.broadcast_to(DF, (3, 3, mesh.nelements, points.shape[1]))
+    det = np.linalg.det(np.moveaxis(DF, (0, 1), (-2, -1)))  # (ncell, k), mm³
+    scale = np.abs(det[np.isfinite(det)]).max(initial=0.0)
     negative = np.count_nonzero(det.mean(axis=1) < 0)
     sign = -1.0 if 2 * negative >= det.shape[0] else 1.0  # the majority orientation
-    bad = np.nonzero(np.any(det * sign <= 1e-10 * scale, axis=1))[0]
+    bad = np.flatnonzero(~np.all(det * sign > 1e-10 * scale, axis=1))
     if bad.size:
         what = "tetrahedra" if tet else "hexahedra"
         raise ValueError(
             f"mesh has {bad.size} inverted or degenerate {what}: cells {bad[:10].tolist()} "
-            "(the Jacobian of the cell map changes sign or vanishes at a corner); fix the "
-            "vertex order or the geometry of those cells"
+            f"(the Jacobian of the cell map changes sign or vanishes; cell {int(bad[0])} has "
+            f"vertices {np.asarray(mesh.t)[:, bad[0]].tolist()}); {_order_hint(mesh)}"
         )
+
+
+def _order_hint(mesh: Any) -> str:
+    """What to check in the cells of ``mesh`` when a cell map is inverted or collapsed."""
+    if isinstance(mesh, skfem.MeshTet2):
+        return (
+            "check the order of the edge nodes: 'tetra10' cells list them as VTK does (edges "
+            "0-1, 1-2, 0-2, 0-3, 1-3, 2-3), while gmsh's raw .msh order swaps the last two "
+            "(2-3 before 1-3); an edge node far off its edge also folds the cell"
+        )
+    if isinstance(mesh, skfem.MeshTet1):
+        return "remove flat (zero-volume) tetrahedra or fix their geometry"
+    return (
+        "a skfem hexahedral mesh needs mesh.t in scikit-fem's local vertex order, not VTK's: "
+        "build it from VTK/meshio-ordered cells with harpx.mechanics.mesh.hex_mesh or "
+        "Body.from_meshio; a hexahedron with coincident corners (collapsed, e.g. at an apex) "
+        "has no valid map: split it into tetrahedra or re-mesh it"
+    )
