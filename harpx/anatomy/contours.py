@@ -60,7 +60,7 @@ def _plane_structure(normal: int) -> Any:
     structure = np.zeros((3, 3, 3), dtype=bool)
     plane = [slice(None)] * 3
     plane[normal] = slice(1, 2)
-    structure[tuple(plane)] = ndi.generate_binary_structure(2, 1)
+    structure[tuple(plane)] = np.expand_dims(ndi.generate_binary_structure(2, 1), normal)
     return structure
 
 

@@ -33,7 +33,13 @@ anterior wall and the segments from there:
   The anterior wall, the centre of segments 1, 7 and 13 (``template.anterior``), lies 90°
   from the middle of the septum towards the lateral wall (the septum is segments 2-3 and
   8-9; Cerqueira et al. 2002), the convention of :mod:`harpx.cardiac.strain`.
-  ``anterior=`` sets it directly.
+  ``anterior=`` sets it directly: an angle, or an image point on the anterior wall (refused
+  more than two wall thicknesses outside the epicardium, or too close to the axis to give
+  a direction).
+* **Base at the wrong end.** A cavity whose radius at the base plane is below 0.85 of its
+  widest (the base plane more than 0.53 of the cavity half-length past the widest level)
+  is flagged (``base_narrow``): a left ventricle is widest near its base, so base and apex
+  may be swapped (check ``base_side`` and ``base_level``).
 * **Residual and segments.** rms residuals above one in-plane voxel are flagged. Every
   tissue voxel gets its AHA segment (the convention of
   :func:`harpx.cardiac.strain.aha_segments`): segments whose level lies beyond the imaged
@@ -128,6 +134,26 @@ def _check_options(slice_axis: str, base_side: Any, rv: Any, anterior: Any) -> N
         raise VentricleFitError(f"base_side={base_side!r} must be 'high', 'low' or None")
     if rv is not None and anterior is not None:
         raise VentricleFitError("pass either rv= (a right-ventricle label) or anterior=, not both")
+    _anterior_form(anterior)
+
+
+def _anterior_form(anterior: Any) -> FloatArray | None:
+    """``anterior=`` as a finite angle (0-d) or image point (3,); TypeError or
+    VentricleFitError naming it and the accepted forms otherwise."""
+    if anterior is None:
+        return None
+    forms = "an angle in degrees (a float) or an image point on the anterior wall (x, y, z mm)"
+    if isinstance(anterior, (str, bytes, bool)):
+        raise TypeError(f"anterior={anterior!r} must be {forms}")
+    try:
+        a = np.asarray(anterior, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"anterior={anterior!r} must be {forms}") from exc
+    if a.shape not in ((), (3,)):
+        raise VentricleFitError(f"anterior={anterior!r} has shape {a.shape}; it must be {forms}")
+    if not np.all(np.isfinite(a)):
+        raise VentricleFitError(f"anterior={anterior!r} is not finite; it must be {forms}")
+    return a
 
 
 def _axis_hint(axis: Any) -> FloatArray | None:
@@ -300,9 +326,9 @@ def _anterior(
 ) -> tuple[float | None, tuple[float, float] | None]:
     """The anterior angle (degrees, as ``template.anterior``) and the RV insertions, from
     ``anterior=`` or the septum the RV touches; None when neither is given (flagged)."""
-    if anterior is not None:
-        a = np.asarray(anterior, dtype=np.float64)
-        return (float(template.angle(a.reshape(1, 3))[0]) if a.size == 3 else float(a)), None
+    a = _anterior_form(anterior)
+    if a is not None:
+        return (float(a) if a.ndim == 0 else _anterior_point(template, a, anterior)), None
     if touch is None:
         _warn(
             flags, "anterior_unknown",
@@ -328,6 +354,60 @@ def _anterior(
     # the anterior wall is 90 degrees from the middle of the septum, on the side of the
     # anterior insertion (positive about the apex-to-base axis)
     return float(np.mod(septum + 90.0, 360.0)), (ant, inf)
+
+
+def _anterior_point(template: VentricleTemplate, point: FloatArray, given: Any) -> float:
+    """The angle of an image point on the anterior wall; refused when it cannot be on the
+    wall: beyond the layer two wall thicknesses outside the epicardium (transmural fraction
+    3; e.g. a direction vector read as a point), or within a quarter of the cavity radius of
+    the long axis (no direction)."""
+    g = template.geometry
+    q = template.to_local(point.reshape(1, 3))[0]
+    radial, near = float(np.hypot(q[0], q[1])), 0.25 * g.inner[0]
+    a3, c3 = (3.0 * o - 2.0 * i for o, i in zip(g.outer, g.inner, strict=True))  # layer t = 3
+    centre = np.round(template.centre, 1).tolist()
+    if (radial / a3) ** 2 + (q[2] / c3) ** 2 > 1.0:
+        raise VentricleFitError(
+            f"anterior={given!r}, read as an image point (mm), lies {radial:.1f} mm from the "
+            f"long axis and {q[2]:.1f} mm along it from the fitted centre {centre}: more than "
+            "two wall thicknesses outside the epicardium, not on the anterior wall. Pass a "
+            "point on the anterior wall in image coordinates (mm) or the angle in degrees "
+            "about the long axis (a direction vector is not accepted)"
+        )
+    if radial < near:
+        raise VentricleFitError(
+            f"anterior={given!r}, read as an image point (mm), lies {radial:.1f} mm from the "
+            f"long axis (less than a quarter of the cavity radius, {near:.1f} mm), where it "
+            "gives no direction: pass a point on the anterior wall (mm) or the angle in "
+            "degrees about the long axis (a direction vector is not accepted)"
+        )
+    return float(template.angle(point.reshape(1, 3))[0])
+
+
+def _check_base_width(
+    template: VentricleTemplate, stack: _Stack, sense: float, flags: dict[str, str]
+) -> None:
+    """Flag a cavity that narrows towards the base plane (its radius there below 0.85 of the
+    widest, i.e. the base plane beyond 0.53 of the cavity half-length past the widest
+    level): a left ventricle is widest near its base, so base and apex may be swapped.
+    0.85 lies below the most base-narrowed truncated ellipsoid in common use (the base 30
+    degrees past the equator, radius 0.87 of the widest) and above short-axis stacks fitted
+    with the base given at their apical end that reach a third of the cavity below the
+    equator (0.82 or less)."""
+    g = template.geometry
+    ratio = float(np.sqrt(max(1.0 - (g.truncation / g.inner[1]) ** 2, 0.0)))
+    if g.truncation <= 0.0 or ratio >= 0.85:
+        return
+    side = "high" if sense > 0 else "low"
+    _warn(
+        flags, "base_narrow",
+        f"the cavity narrows towards the base: its radius at the base plane is {ratio:.2f} of "
+        f"the widest ({ratio * g.inner[0]:.1f} of {g.inner[0]:.1f} mm; the base plane lies "
+        f"{g.truncation / g.inner[1]:.2f} of the cavity half-length beyond the widest level), "
+        "whereas a left ventricle is widest near its base: base and apex may be swapped; "
+        f"check base_side / base_level (the base was taken towards {side} "
+        f"{stack.slice_axis})",
+    )  # fmt: skip
 
 
 def _segments_in_view(
@@ -416,7 +496,7 @@ def fit_ventricle_to_mask(
         Instead of ``rv``: the direction of the anterior wall (the centre of segments 1, 7
         and 13) as an angle (degrees about the long axis, apex to base, from the
         template's +x axis: the image x axis projected onto the short-axis plane, or y for
-        a long axis along x) or as an image point on it (mm).
+        a long axis along x) or as an image point on that wall (mm; not a direction vector).
     base_side : {"high", "low"}, optional
         Which end of the slice axis the base lies towards (increasing or decreasing
         coordinate). Needed when the mask does not show the apex (no apical cap: slices
@@ -458,13 +538,19 @@ def fit_ventricle_to_mask(
         largest); no short-axis slice encloses a cavity (a filled disc or cylinder); the
         base cannot be told from the apex; the base level is unknown; an axis hint
         contradicts the stack; the apex cannot be located; the RV label does not touch the
-        myocardium; the base or apex level lies outside the fitted ventricle.
+        myocardium; the base or apex level lies outside the fitted ventricle; ``anterior``
+        is neither a scalar nor of shape (3,), or not finite, or a point more than two
+        wall thicknesses outside the epicardium or within a quarter of the cavity radius of
+        the long axis (e.g. a direction vector read as a point).
+    TypeError
+        ``anterior`` is not a number or a sequence of numbers.
 
     Warns
     -----
     VentricleFitWarning
         For each warned entry of ``flags`` (residual, axis, apex extrapolated, base out of
-        view, empty segments in view, open slices, implausible septal arc).
+        view, empty segments in view, open slices, implausible septal arc, a cavity that
+        narrows towards the base: ``base_narrow``, base and apex possibly swapped).
 
     Examples
     --------
@@ -553,6 +639,7 @@ def fit_ventricle_to_mask(
     untold = VentricleTemplate(geometry, t.centre, t.rotation)
     angle, insertions = _anterior(untold, anterior, touch, rv, stack, flags)
     template = VentricleTemplate(geometry, t.centre, t.rotation, anterior=angle)
+    _check_base_width(template, stack, sense, flags)
 
     # residuals, checks and the segments
     endo_res = template.surface_distance(endo, "endo")

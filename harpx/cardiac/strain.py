@@ -66,6 +66,7 @@ from numpy.typing import ArrayLike
 
 from harpx._typing import BoolArray, FloatArray, IntArray
 from harpx.anatomy.aha import segments_local
+from harpx.cardiac.anterior import _anterior
 from harpx.cardiac.quality import (
     HEART_SIZE_MM,
     check_body,
@@ -121,6 +122,13 @@ def aha_segments(points: ArrayLike, template: Any, *, anterior: float | None = N
         Segment numbers 1..17, counter-clockwise seen from the apex (points above the base
         plane count as basal).
 
+    Raises
+    ------
+    TypeError
+        If ``anterior`` is not a single number (e.g. a vector or an image point).
+    ValueError
+        If ``anterior`` is not finite.
+
     Warns
     -----
     HarpxWarning
@@ -141,27 +149,6 @@ def aha_segments(points: ArrayLike, template: Any, *, anterior: float | None = N
     angle, _ = _anterior(anterior, template)
     q = template.to_local(points)
     return segments_local(q, template.geometry, angle)
-
-
-def _anterior(anterior: float | None, template: Any) -> tuple[float, str]:
-    """The anterior angle (degrees) and where it came from; warns when nobody knows it."""
-    if anterior is not None:
-        return float(anterior), "argument"
-    value = getattr(template, "anterior", None)
-    try:
-        if value is not None and np.isfinite(float(value)):
-            return float(value), "template"
-    except (TypeError, ValueError):
-        pass
-    warnings.warn(
-        "the anterior direction is unknown (no anterior= and the template has no 'anterior' "
-        "angle): the segments are numbered from the template's +x axis taken as anterior, "
-        "so names such as 'septal' or 'inferior' are not anatomical. Pass anterior= (degrees "
-        "about the long axis from the template's +x axis to the middle of the anterior wall)",
-        HarpxWarning,
-        stacklevel=user_stacklevel(),
-    )
-    return 0.0, "unknown (template +x axis)"
 
 
 def _local_strain(E: FloatArray, basis: tuple[FloatArray, ...]) -> FloatArray:
@@ -301,7 +288,9 @@ def lv_measures(
     Raises
     ------
     TypeError
-        If ``template`` is not a ventricle template.
+        If ``template`` is not a ventricle template, or ``anterior`` is not a single number.
+    ValueError
+        If ``anterior`` is not finite.
     SchemaError
         If the template's size is not a heart's in mm (metres, µm).
     VentricleShapeError
@@ -462,6 +451,23 @@ def _level_rotation(
     return level_rot, height[0] - height[1], float(np.min(level_seen))
 
 
+def _aligned_body(body: xr.DataArray, u: xr.DataArray) -> xr.DataArray:
+    """``body`` in the voxel order of the displacement ``u`` (z, y, x): a coordinate stored
+    in the opposite order is reversed; a different grid is refused."""
+    b = body.transpose("z", "y", "x")
+    for d in (d for d in ("z", "y", "x") if d in b.coords):
+        have, want = (np.asarray(a[d].values, dtype=np.float64) for a in (b, u))
+        if have.shape == want.shape and np.allclose(have[::-1], want) and have.size > 1:
+            b = b.isel({d: slice(None, None, -1)})
+        elif have.shape != want.shape or not np.allclose(have, want):
+            raise ValueError(
+                f"body's {d} coordinate ({have.size} values, {have.min():.4g} .. "
+                f"{have.max():.4g} mm) is not the displacement's ({want.size} values, "
+                f"{want.min():.4g} .. {want.max():.4g} mm); pass a body on the same grid"
+            )
+    return b
+
+
 def _warn_not_recorded(what: str) -> None:
     warnings.warn(
         f"{what} does not record which directions its tags observed (no 'observed_fraction'): "
@@ -525,7 +531,12 @@ def cardiac_strain(
     Raises
     ------
     ValueError
-        If the dataset holds neither a finite-element result nor a grid displacement.
+        If the dataset holds neither a finite-element result nor a grid displacement, if
+        ``body`` is not on the displacement's grid (a coordinate stored in the opposite
+        order is reversed to match), or if ``anterior`` is not finite.
+    TypeError
+        If ``anterior`` is not a single number (an angle in degrees; for a point on the
+        anterior wall pass ``template.angle([point])[0]``).
     SchemaError
         If the template is not a heart's size in mm (coordinates in metres or µm).
     VentricleShapeError
@@ -645,12 +656,14 @@ def cardiac_strain(
         body = tracked["body"]
     use = np.ones(len(pts), dtype=bool)
     if body is not None:
-        use = np.asarray(body.transpose("z", "y", "x").values >= 0.5).ravel()
+        use = np.asarray(_aligned_body(body, u).values >= 0.5).ravel()
     finite = use & np.all(np.isfinite(E), axis=(0, 2, 3))
     n = int(finite.sum())
     if name == "displacement_grid":
         _warn_not_recorded(f"'{name}' (method {tracked.attrs.get('method', 'unknown')!r})")
-    spacing = [float(np.diff(u[d].values).mean()) for d in ("x", "y", "z")]
+    # voxel volume from the absolute steps: a coordinate stored descending (e.g. after
+    # ds.isel(z=slice(None, None, -1))) is the same grid, not a negative volume
+    spacing = [float(np.abs(np.diff(u[d].values)).mean()) for d in ("x", "y", "z")]
     measures = lv_measures(
         pts[finite], E[:, finite], current[:, finite], np.full(n, float(np.prod(spacing))),
         template, observed=np.ones((n, 3)) if name == "displacement_true" else None,
