@@ -10,8 +10,8 @@ Nothing is lost when a cohort is interrupted or a subject fails:
 - archives are only ever complete (atomic writes), so a killed run leaves finished subjects
   finished and the others absent;
 - a re-run skips every subject whose archive opens cleanly and was made from the same input
-  with the same settings (the SHA-256 of the input and a fingerprint of the body factory and
-  tracking settings are recorded in the archive), and redoes missing, corrupt or stale ones;
+  with the same settings and body (SHA-256 of the input and of the body built, fingerprint
+  of the body factory and tracking settings), and redoes missing, corrupt or stale ones;
 - a failing subject does not stop the others: all are run, then one :class:`CohortError`
   lists the failures.
 
@@ -58,6 +58,10 @@ _SOURCE_ATTR = "source_file"
 _DIGEST_ATTR = "source_sha256"
 _SETTINGS_ATTR = "settings_sha256"
 _SETTINGS_TEXT_ATTR = "settings_fingerprint"
+_BODY_ATTR = "body_sha256"
+#: Body attributes that say what is tracked (the rest is derived from them).
+_BODY_FIELDS: tuple[str, ...] = ("element", "volumetric", "regions", "boundaries", "fibers_qp")
+_BODY_FIELDS += ("t_max", "growth_tensor", "material", "active")
 
 
 class CohortError(HarpxError):
@@ -145,9 +149,11 @@ def track_many(
         ``method``), the same for every subject.
     overwrite : bool, default False
         Redo every subject. By default a subject is skipped when its archive opens cleanly,
-        is a valid ``tracked/1`` dataset and records the SHA-256 of the current input and
-        the fingerprint of the current ``body_factory`` and ``track_kwargs``
-        (:func:`settings_fingerprint`): a subject tracked with other settings is redone.
+        is a valid ``tracked/1`` dataset and records the SHA-256 of the current input, the
+        fingerprint of ``body_factory`` and ``track_kwargs`` (:func:`settings_fingerprint`)
+        and the SHA-256 of the body (mesh, element, regions, fibres, material) the factory
+        builds now: other settings, or a body changed by anything the factory reads (a
+        module constant, a helper, a mesh file), mean the subject is redone.
     progress : bool or None, default None
         Progress bar over subjects; None: shown in terminals and notebooks once the call
         has run a few seconds (:mod:`harpx._progress`).
@@ -186,9 +192,10 @@ def track_many(
     Notes
     -----
     The skip decision is made here, before any cluster starts: a cohort that is already
-    complete needs no cluster. Each output archive records ``source_file`` (input name),
-    ``source_sha256``, ``settings_sha256`` and the text it hashes,
-    ``settings_fingerprint``, in its attributes. Workers read the inputs and write the outputs
+    complete needs no cluster, but calls ``body_factory`` here once per existing archive.
+    Each archive records ``source_file`` (input name), ``source_sha256``, ``body_sha256``,
+    ``settings_sha256`` and the text it hashes, ``settings_fingerprint`` (an archive
+    without ``body_sha256`` is redone). Workers read the inputs and write the outputs
     themselves, so on a remote cluster (``address=``) both paths must name the same files
     on the workers (a shared file system).
 
@@ -236,7 +243,7 @@ def track_many(
         except OSError as exc:
             failures[i] = ArchiveError(f"cannot read input {str(source)!r}: {exc}")
             continue
-        if overwrite or not _is_complete(target, digest, settings[0]):
+        if overwrite or not _is_complete(target, digest, settings[0], source, body_factory):
             todo.append((i, digest))
 
     done = len(inputs) - len(todo) - len(failures)
@@ -313,12 +320,15 @@ def track_subject(
             f"input {str(source)!r} has harpx_schema {kind!r}; track_many needs 'tagged/1' "
             "or 'phase/1' archives" + (f" ({newer})" if newer else "")
         )
-    tracked = track(ds, body_factory(ds), **dict(track_kwargs or {}))
+    body = body_factory(ds)
+    body_digest = _body_digest(body)  # before tracking, as the resume check builds it
+    tracked = track(ds, body, **dict(track_kwargs or {}))
     tracked.attrs[_SOURCE_ATTR] = source.name
     tracked.attrs[_DIGEST_ATTR] = digest if digest is not None else _sha256(source)
     sha, text = settings or settings_fingerprint(body_factory, dict(track_kwargs or {}))
     tracked.attrs[_SETTINGS_ATTR] = sha
     tracked.attrs[_SETTINGS_TEXT_ATTR] = text
+    tracked.attrs[_BODY_ATTR] = body_digest
     return to_netcdf(tracked, target)
 
 
@@ -333,6 +343,9 @@ def settings_fingerprint(
         ``body_factory(ds) -> Body``. A function is described by its module, name, source
         code and default arguments; a :func:`functools.partial` by its function and
         arguments; another callable by its type and fields (dataclasses) or ``repr``.
+        Module constants, helper functions and files the factory reads are not part of
+        this description: :func:`track_many` compares the body the factory builds as
+        well (``body_sha256``).
     track_kwargs : mapping, optional
         Keyword arguments of :func:`harpx.tracking.track.track`. Arrays are described by
         their dtype, shape and a SHA-256 of their bytes, dataclasses (e.g. ``Fixed``) by
@@ -361,6 +374,27 @@ def settings_fingerprint(
     }
     text = json.dumps(description, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest(), text
+
+
+def _body_digest(body: Any) -> str:
+    """SHA-256 of what a built body is: type, mesh nodes and cells, :data:`_BODY_FIELDS`."""
+    mesh = getattr(body, "mesh", None)
+    description = {
+        "type": _describe_object(type(body)),
+        "mesh": [_describe_object(type(mesh)), *(_describe(getattr(mesh, a, None)) for a in "pt")],
+        **{name: _describe_object(getattr(body, name, None)) for name in _BODY_FIELDS},
+    }
+    return hashlib.sha256(json.dumps(description, sort_keys=True).encode()).hexdigest()
+
+
+def _describe_object(value: Any) -> Any:
+    """:func:`_describe`; a class by name, a plain object (a material) by its attributes."""
+    if isinstance(value, type):
+        return f"{value.__module__}.{value.__qualname__}"
+    if dataclasses.is_dataclass(value) or callable(value) or not hasattr(value, "__dict__"):
+        return _describe(value)
+    attrs = {str(k): _describe(v) for k, v in sorted(vars(value).items())}
+    return {"type": _describe_object(type(value)), **attrs}
 
 
 def _describe_callable(fn: Any) -> Any:
@@ -543,9 +577,10 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def _is_complete(target: Path, digest: str, settings: str) -> bool:
-    """Whether ``target`` is a readable, valid tracked/1 archive made from this input and
-    these settings.
+def _is_complete(target: Path, digest: str, settings: str, source: Path, factory: Any) -> bool:
+    """Whether ``target`` is a readable, valid tracked/1 archive made from this input,
+    these settings and the body ``factory`` builds now (from the input as
+    :func:`track_subject` reads it; last, and a failing factory means redo).
 
     The archive is opened lazily and its variables are streamed chunk by chunk (a
     truncated file fails while reading), so the check never holds more than one chunk in
@@ -555,13 +590,16 @@ def _is_complete(target: Path, digest: str, settings: str) -> bool:
         return False
     try:
         with open_dataset(target, chunks={}) as ds:
-            if ds.attrs.get(_DIGEST_ATTR) != digest or ds.attrs.get(_SETTINGS_ATTR) != settings:
+            recorded = ds.attrs.get(_BODY_ATTR)
+            if (ds.attrs.get(_DIGEST_ATTR), ds.attrs.get(_SETTINGS_ATTR)) != (digest, settings):
                 return False
             validate(ds, "tracked")
             for var in ds.variables.values():
                 if var.chunks is not None:  # read every block, one at a time
                     for block in var.data.to_delayed().ravel():
                         block.compute(scheduler="synchronous")
+        with open_dataset(source) as subject:  # closed again: the input stays unlocked
+            return bool(_body_digest(factory(subject)) == recorded)
     except MemoryError as exc:  # not a sign of a bad archive: redoing it would not help
         raise MemoryError(
             f"ran out of memory while checking the existing archive {str(target)!r}; free "

@@ -10,12 +10,15 @@ warnings raised (count and first line of each), the total time and the files wri
 other subcommands print the warnings on standard error as ``harpx CMD: warning: ...``.
 
 Errors print as one line (``--debug`` for the traceback), followed by the choices where
-harpx cannot choose for the user (the series ``harpx dicom`` found); exit codes: 0 success,
+harpx cannot choose for the user (the series ``harpx dicom`` found) or by every problem of
+a dataset that breaks the harpx conventions, one per line; exit codes: 0 success,
 1 harpx or input error, 2 usage error. Progress bars follow :mod:`harpx._progress`: shown
 in a terminal for calls longer than a few seconds, never in logs or pipes, unless
 ``--progress`` or ``--no-progress`` says otherwise. Exit code 130 means interrupted
 (Ctrl-C) and 143 terminated (SIGTERM): an interrupted write removes its temporary file and
-leaves an existing output untouched.
+leaves an existing output untouched. ``phase``, ``track``, ``dicom`` and ``demo`` check
+that their output can be written (its directory exists; it is not an input, a directory,
+a link or a read-only file) before any work.
 """
 
 from __future__ import annotations
@@ -61,7 +64,7 @@ def _demo(args: argparse.Namespace) -> int:
     from harpx._progress import elapsed
     from harpx.imaging.harp import extract_phase
     from harpx.imaging.harptrack import track_harp
-    from harpx.io.netcdf import to_netcdf
+    from harpx.io.netcdf import check_writable_target, to_netcdf
     from harpx.plotting import displacement_maps, error_vs_runtime
     from harpx.scenes.phantom import phantom
     from harpx.tracking.results import tracking_error
@@ -70,6 +73,8 @@ def _demo(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
+    for name in [f"phantom_{element}.nc" for element in args.elements] + ["phantom_harp.nc"]:
+        check_writable_target(out / name)  # before the work, not after it
     t = time.perf_counter()
     with elapsed(f"building the phantom scene ({args.size})", progress=args.progress):
         scene = phantom(args.size)
@@ -144,7 +149,7 @@ def _phase(args: argparse.Namespace) -> int:
     from harpx.imaging.harp import extract_phase
     from harpx.io.netcdf import open_dataset, to_netcdf
 
-    _refuse_overwriting_input(args.output, [args.input])
+    _check_output(args.output, [args.input])
     ds = open_dataset(args.input)
     phase = extract_phase(ds, upsample=args.upsample, radius=args.radius)
     to_netcdf(phase, args.output)
@@ -162,7 +167,7 @@ def _track(args: argparse.Namespace) -> int:
     from harpx.tracking.track import track
 
     start = time.perf_counter()
-    _refuse_overwriting_input(args.output, [args.input, args.mesh])
+    _check_output(args.output, [args.input, args.mesh])
     ds = open_dataset(args.input)
     body = read_body(args.mesh, NeoHookean(c1=args.c1, kappa=args.kappa), element=args.element)
     fixed = [_fixed(item, body) for item in args.fix]
@@ -329,7 +334,7 @@ def _dicom(args: argparse.Namespace) -> int:
             "--tag-period is required: DICOM does not record the tag spacing; give it in mm, "
             "e.g. --tag-period 8"
         )
-    _refuse_overwriting_input(args.output, args.input)
+    _check_output(args.output, args.input)
     directions: dict[str, list[tuple[str, Any]]] = {}
     for item in args.tag:
         try:
@@ -396,6 +401,16 @@ def _progress_option(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="progress bars (default: shown when stderr is a terminal, after a few seconds)",
     )
+
+
+def _check_output(output: str, inputs: Sequence[str]) -> None:
+    """Refuse, before any work, an output that is an input or that cannot be written
+    (missing directory, a directory, link or read-only file:
+    :func:`~harpx.io.files.check_writable_target`)."""
+    from harpx.io.files import check_writable_target
+
+    _refuse_overwriting_input(output, inputs)
+    check_writable_target(Path(output))
 
 
 def _refuse_overwriting_input(output: str, inputs: Sequence[str]) -> None:
@@ -615,9 +630,12 @@ def _warnings_to_stderr(command: str, caught: Sequence[warnings.WarningMessage])
 
 def _one_line(exc: BaseException) -> str:
     """First line of an error, prefixed by its type unless it is a harpx or input error
-    (an error listing the user's choices keeps its list)."""
+    (an error listing the user's choices keeps its list, a schema error every problem)."""
     if isinstance(exc, _Choices):
         return str(exc).strip()
+    if isinstance(exc, SchemaError) and len(exc.problems) > 1:  # every problem, one each
+        items = "".join(f"\n  - {' '.join(p.split())}" for p in exc.problems)
+        return f"{len(exc.problems)} schema problems:{items}"
     lines = str(exc).strip().splitlines()
     first = lines[0] if lines else ""
     if isinstance(exc, HarpxError | ValueError | OSError) and first:

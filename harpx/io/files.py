@@ -157,7 +157,10 @@ def _check_path(path: Any) -> None:
 
 
 def _available_memory() -> int:
-    """Bytes of memory available now (Linux ``MemAvailable``), else 16 GiB."""
+    """Bytes of memory available now (Linux ``MemAvailable``), else 16 GiB (assumed).
+
+    The readers allow an eager load half of this: 8 GiB where the memory is unknown.
+    """
     try:
         for line in Path("/proc/meminfo").read_text().splitlines():
             if line.startswith("MemAvailable:"):

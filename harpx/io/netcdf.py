@@ -46,7 +46,8 @@ import os
 import shutil
 import tempfile
 import warnings
-from collections.abc import Mapping
+from collections.abc import Hashable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Literal
 
@@ -125,11 +126,14 @@ def to_netcdf(ds: xr.Dataset, path: PathLike) -> Path:
     Numeric and boolean data variables are compressed with zlib at level
     ``COMPRESSION_LEVEL`` (4) and chunked one frame at a time along ``time``. The file
     also carries the CF ``Conventions`` attribute and, for tracked meshes, a UGRID 1.0 mesh
-    topology (see the module docstring); :func:`open_dataset` removes both again. Only a
-    process killed mid-write (e.g. SIGKILL) can leave a stray temporary file
-    ``.<name>.harpx-<host>-<pid>-*.tmp`` beside the target; the target itself is never
-    partial, and the next write of the same target removes such leftovers once their
-    process is gone (:func:`~harpx.io.files.remove_stale_temporaries`).
+    topology (see the module docstring); :func:`open_dataset` removes both again. A failed
+    write of dask-backed variables returns only once every write task has stopped (on
+    dask's threaded scheduler, the default), so it leaves nothing behind. Only a process
+    killed mid-write (e.g. SIGKILL), or a failed lazy write computed by a dask.distributed
+    client (whose tasks still running are not waited for), can leave a stray temporary
+    file ``.<name>.harpx-<host>-<pid>-*.tmp`` beside the target; the target itself is
+    never partial, and the next write of the same target removes such leftovers once
+    their process is gone (:func:`~harpx.io.files.remove_stale_temporaries`).
 
     Examples
     --------
@@ -168,7 +172,7 @@ def to_netcdf(ds: xr.Dataset, path: PathLike) -> Path:
     tmp = Path(tmp_name)
     try:
         try:
-            encoded.to_netcdf(tmp, engine=_ENGINE, format="NETCDF4", encoding=encoding)
+            _write(encoded, tmp, encoding)
             with open(tmp, "rb+") as fh:
                 fh.flush()
                 os.fsync(fh.fileno())
@@ -185,6 +189,41 @@ def to_netcdf(ds: xr.Dataset, path: PathLike) -> Path:
         if tmp.exists():
             tmp.unlink()
     return path
+
+
+def _write(ds: xr.Dataset, tmp: Path, encoding: dict[Hashable, dict[str, Any]]) -> None:
+    """Write ``ds`` to ``tmp``; dask-backed variables are computed with every write task
+    finished when this returns, also when one of them fails.
+
+    dask's threaded scheduler raises the first failing task's error at once while the
+    other tasks still run on its shared thread pool; xarray then closes the file and a
+    task still writing reopens it (append mode), re-creating the temporary file after it
+    was deleted. The write graph therefore runs on a thread pool of its own (as many
+    threads as the threaded scheduler would use), which is shut down, waiting for running
+    tasks and cancelling queued ones, before this returns. Other schedulers (synchronous,
+    processes, a distributed client) are used as configured.
+    """
+    lazy = any(var.chunks is not None for var in ds.variables.values())
+    if not lazy:
+        ds.to_netcdf(tmp, engine=_ENGINE, format="NETCDF4", encoding=encoding)
+        return
+    import dask
+    import dask.threaded
+    from dask.system import CPU_COUNT
+
+    delayed = ds.to_netcdf(tmp, engine=_ENGINE, format="NETCDF4", encoding=encoding, compute=False)
+    if dask.base.get_scheduler(collections=[delayed]) is not dask.threaded.get:
+        dask.compute(delayed)
+        return
+    executor = getattr(dask.threaded, "ContextAwareThreadPoolExecutor", ThreadPoolExecutor)
+    pool = executor(dask.config.get("num_workers", None) or CPU_COUNT)
+    try:
+        dask.compute(delayed, scheduler="threads", pool=pool)
+    finally:
+        # no task writes any more when this returns: running ones finished, queued ones
+        # cancelled (after a failure the file stays open, unchanged, until the failed
+        # graph is garbage-collected; the caller deletes it)
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _space_hint(directory: Path, ds: xr.Dataset) -> str:
@@ -222,7 +261,8 @@ def open_dataset(
     max_bytes : int, optional
         Largest in-memory size (bytes) an eager load (``chunks=None``) may have; checked
         from the sizes the file declares, before anything is read. Default: half the
-        memory currently available (``MemAvailable``), or 8 GiB where that is unknown.
+        memory currently available (Linux ``MemAvailable``); where that is unknown, 16 GiB
+        are assumed available, so the default is 8 GiB.
 
     Returns
     -------

@@ -82,14 +82,12 @@ def _encode_mapping(attrs: Mapping[Hashable, Any], owner: str) -> dict[Hashable,
                 types[key] = type(value).__name__
         elif isinstance(value, np.ndarray):
             _check_attr_items(list(value.ravel()), key, owner)
-            if value.dtype == bool:
-                out[key] = value.astype(np.int8)
-                types[key] = "ndarray:bool"
-            elif value.ndim != 1 or value.size == 1:
-                out[key] = value.ravel()  # netCDF attributes are 1-D: record the shape
-                types[key] = f"ndarray{value.shape}"
-            else:
-                out[key] = value
+            # netCDF attributes are 1-D numbers (bool as int8): record the shape and kind
+            element = ":bool" if value.dtype == bool else ""
+            shape = f"{value.shape}" if value.ndim != 1 or value.size == 1 else ""
+            out[key] = value.ravel().astype(np.int8) if element else value.ravel()
+            if element or shape:
+                types[key] = f"ndarray{shape}{element}"
         elif isinstance(value, str | numbers.Number | np.number):
             out[key] = value
         else:
@@ -282,11 +280,13 @@ def _decode_mapping(attrs: Mapping[Hashable, Any]) -> dict[Hashable, Any]:
         value = np.atleast_1d(np.asarray(out[key]))
         if kind == "bool":
             out[key] = bool(value[0])
-        elif kind.startswith("ndarray("):
-            shape = tuple(json.loads("[" + kind[len("ndarray(") : -1].rstrip(",") + "]"))
-            out[key] = value.reshape(shape)
-        elif kind == "ndarray:bool":
-            out[key] = value.astype(bool)
+        elif kind.startswith("ndarray"):  # "ndarray(2, 3)", "ndarray:bool", "ndarray(2, 1):bool"
+            shape, _, element = kind[len("ndarray") :].partition(":")
+            if element == "bool":
+                value = value.astype(bool)
+            if shape:
+                value = value.reshape(tuple(json.loads("[" + shape[1:-1].rstrip(",") + "]")))
+            out[key] = value
         else:
             container, _, element = kind.partition(":")
             items = value.astype(bool).tolist() if element == "bool" else value.tolist()

@@ -92,7 +92,23 @@ def test_cohort_completeness_check_decides_from_attributes_first(tmp_path) -> No
         nc.createVariable("a", "f8", ("n",), zlib=True, chunksizes=(1 << 20,))
         nc.harpx_schema = "tracked/1"
         nc.source_sha256 = "other"
-    assert _is_complete(path, "abc", "settings") is False  # digest differs: decided from attributes
+    # digest differs: decided from attributes, before the factory is called
+    assert _is_complete(path, "abc", "settings", path, _no_factory) is False
+
+
+def _no_factory(ds: object) -> None:
+    raise AssertionError("the body factory was called although the attributes decide")
+
+
+def _cohort_body(ds: object) -> Body:
+    """The body of the archives below, as a cohort's factory builds it."""
+    return Body(box((4.0, 4.0, 4.0), (1, 1, 1)), MAT)
+
+
+def _source() -> Path:
+    import harpx.datasets
+
+    return harpx.datasets.path("phantom-small", "tagged")
 
 
 def _complete_archive_declaring(path, values: int) -> None:
@@ -102,6 +118,7 @@ def _complete_archive_declaring(path, values: int) -> None:
     import netCDF4
 
     import harpx.datasets
+    from harpx.batch import _body_digest
 
     shutil.copy(harpx.datasets.path("phantom-small", "tracked"), path)
     with netCDF4.Dataset(path, "a") as nc:
@@ -111,6 +128,7 @@ def _complete_archive_declaring(path, values: int) -> None:
         )
         var.units, var.long_name = "1", "unwritten filler"
         nc.source_sha256, nc.settings_sha256 = "abc", "settings"
+        nc.body_sha256 = _body_digest(_cohort_body(None))
 
 
 def test_cohort_completeness_check_streams_a_large_complete_archive(tmp_path) -> None:
@@ -121,10 +139,10 @@ def test_cohort_completeness_check_streams_a_large_complete_archive(tmp_path) ->
 
     path = tmp_path / "s0_tracked.nc"
     _complete_archive_declaring(path, 1 << 25)  # 256 MiB of float64 in 8 MiB chunks
-    assert _is_complete(path, "abc", "other") is False  # warm up the imports
+    assert _is_complete(path, "abc", "other", _source(), _cohort_body) is False  # warm-up
     tracemalloc.start()
     try:
-        assert _is_complete(path, "abc", "settings") is True
+        assert _is_complete(path, "abc", "settings", _source(), _cohort_body) is True
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
@@ -145,7 +163,7 @@ def test_running_out_of_memory_in_the_check_is_not_an_incomplete_archive(
 
     monkeypatch.setattr(harpx.batch, "validate", no_memory)
     with pytest.raises(MemoryError, match=r"checking the existing archive '.*s0_tracked\.nc'"):
-        harpx.batch._is_complete(path, "abc", "settings")
+        harpx.batch._is_complete(path, "abc", "settings", _source(), _cohort_body)
     assert path.stat().st_size > 0  # left as it was
 
 
