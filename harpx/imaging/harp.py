@@ -28,7 +28,7 @@ from harpx.imaging.phase_parameters import (
     DEFAULT_UPSAMPLE,
     spamm_dc_message,
 )
-from harpx.imaging.tag_frequency import measure_tag_frequency, tag_frequency_mismatch
+from harpx.imaging.tag_frequency import PEAK_ATTRS, measure_tag_peak, tag_frequency_mismatch
 from harpx.schema import AXES, GRID_DIMS, grid_step, standard_attrs, validate
 
 __all__ = ["extract_phase", "refinement_factors", "slice_geometry"]
@@ -106,30 +106,35 @@ def _warn_constant_frames(ds: xr.Dataset) -> None:
         )
 
 
-def _checked_tag_frequency(ds: xr.Dataset, lazy: bool, check: bool) -> xr.Variable:
-    """``tag_frequency_measured`` (tag) from the first frame of the images ``ds``; warns if
-    it misses the stated frequency.
+def _checked_tag_frequency(ds: xr.Dataset, lazy: bool, check: bool) -> dict[str, xr.Variable]:
+    """``tag_frequency_measured`` (tag) and ``tag_peak_measured`` (tag, axis) from the first
+    frame of the images ``ds``; warns if they miss the stated frequency or direction.
 
-    NaN throughout without ``check``. For dask-backed images it stays lazy and nothing is
-    checked here (the trackers check it when they read the phase).
+    NaN throughout without ``check``. For dask-backed images they stay lazy and nothing is
+    checked here (the trackers check them when they read the phase).
     """
     others = [n for n in ds.data_vars if n not in ("image", "mask")]  # e.g. the truth
     first = ds.drop_vars(others).isel(time=[0])
     attrs = standard_attrs("tag_frequency_measured")
+    shape = (ds.sizes["tag"], len(AXES))
     if not check:
-        return xr.Variable(("tag",), np.full(ds.sizes["tag"], np.nan), attrs)
-    if lazy:
+        peak = np.full(shape, np.nan)
+    elif lazy:
         import dask
         import dask.array
 
-        later = dask.delayed(measure_tag_frequency)(first)
-        shape = (ds.sizes["tag"],)
-        return xr.Variable(("tag",), dask.array.from_delayed(later, shape, float), attrs)
-    measured = measure_tag_frequency(first)
-    message = tag_frequency_mismatch(ds, measured)
-    if message:
-        warnings.warn(message, HarpxWarning, stacklevel=user_stacklevel())
-    return xr.Variable(("tag",), measured, attrs)
+        peak = dask.array.from_delayed(dask.delayed(measure_tag_peak)(first), shape, float)
+    else:
+        peak = measure_tag_peak(first)
+    measured = (peak**2).sum(axis=1) ** 0.5
+    if check and not lazy:
+        message = tag_frequency_mismatch(ds, measured, peak)
+        if message:
+            warnings.warn(message, HarpxWarning, stacklevel=user_stacklevel())
+    return {
+        "tag_frequency_measured": xr.Variable(("tag",), measured, attrs),
+        "tag_peak_measured": xr.Variable(("tag", "axis"), peak, dict(PEAK_ATTRS)),
+    }
 
 
 def refinement_factors(ds: xr.Dataset, upsample: int) -> tuple[int, int, int]:
@@ -415,7 +420,8 @@ def extract_phase(
         ``tag_frequency_measured`` (tag), cycles/mm, the tag frequency the first frame's
         images show in each tag's plane (their spectral peak,
         :mod:`harpx.imaging.tag_frequency`; NaN where it cannot be measured; lazy for
-        dask-backed data);
+        dask-backed data); ``tag_peak_measured`` (tag, axis), cycles/mm, that peak's
+        frequency vector (:func:`~harpx.imaging.tag_frequency.measure_tag_peak`);
         ``slice_thickness`` (tag) and ``slice_position`` (tag, slice) when
         :func:`slice_geometry` finds them. Attributes: ``harpx_schema="phase/1"``,
         ``sequence``, ``upsample``, ``radius``, ``bandpass="disk"``
@@ -437,7 +443,9 @@ def extract_phase(
         memory are checked. Also if a tag's measured frequency (``tag_frequency_measured``)
         differs from its stated ``tag_frequency`` by more than
         :data:`~harpx.imaging.tag_frequency.FREQUENCY_TOLERANCE`: the band-pass is centred
-        off the images' tag peak (a wrong tag period). Dask-backed data are checked by the
+        off the images' tag peak (a wrong tag period); likewise if the peak lies more than
+        :data:`~harpx.imaging.tag_frequency.DIRECTION_TOLERANCE` degrees off the stated
+        ``tag_direction`` in the tag's plane. Dask-backed data are checked by the
         trackers instead, which compute them. Also for SPAMM images filtered with ``radius``
         above :data:`~harpx.imaging.phase_parameters.SPAMM_MAX_RADIUS`, whose pass band
         takes in the leakage of the zero-frequency peak (the trackers warn again).
@@ -552,7 +560,7 @@ def _extract_phase(
             var = _refine_linear(source.astype(np.float64), factors, nthreads)
             var.attrs = {**standard_attrs(name), **ds[name].attrs}
             data_vars[name] = var
-    data_vars["tag_frequency_measured"] = _checked_tag_frequency(ds, lazy, check_tag_frequency)
+    data_vars.update(_checked_tag_frequency(ds, lazy, check_tag_frequency))
     attrs = {k: v for k, v in ds.attrs.items() if k != "harpx_schema"}
     attrs.update(
         harpx_schema="phase/1",

@@ -38,13 +38,20 @@ from harpx._blas import matmul_one_thread
 from harpx.errors import HarpxWarning, SchemaError, user_stacklevel
 from harpx.imaging.phase_parameters import warn_spamm_dc
 from harpx.imaging.sample import PhaseSampler, wrap
-from harpx.imaging.tag_frequency import tag_frequency_flag
+from harpx.imaging.tag_frequency import tag_frequency_flag, tags_unmeasured
 from harpx.schema import AXES, GRID_DIMS, grid_step, newer_schema, standard_attrs, validate
 
-__all__ = ["track_harp"]
+__all__ = ["FADE_LEVEL", "FADE_QUANTILE", "track_harp"]
 
 #: A point stops iterating once its residual norm is below this (rad).
 TOLERANCE = 1e-4
+#: A frame's tag has faded when the :data:`FADE_QUANTILE` of the harmonic magnitude over
+#: the tracked points is below this many noise standard deviations of the harmonic image
+#: (``harmonic_noise``); :func:`track_harp`, Notes.
+FADE_LEVEL = 5.0
+#: Quantile of the harmonic magnitude over the tracked points compared with
+#: :data:`FADE_LEVEL` (the lower quartile: a quarter of the tissue)
+FADE_QUANTILE = 0.25
 
 
 def track_harp(
@@ -77,9 +84,15 @@ def track_harp(
         has left the tissue signal, keeps its last position), attributes ``points_lost``
         (points valid at frame 0 that are NaN in some later frame) and ``points_unseen``
         (given points without valid phase at frame 0, NaN in every frame) and
-        ``tags_off_frequency`` (:func:`~harpx.imaging.tag_frequency.tag_frequency_flag`), per-frame
-        ``epsilon`` (mean absolute wrapped residual over the points with a valid phase, rad),
-        ``iterations`` (sweeps run) and ``wall_time`` (s), and
+        ``tags_off_frequency`` (:func:`~harpx.imaging.tag_frequency.tag_frequency_flag`) and
+        ``tags_frequency_unmeasured`` (the tags whose stated frequency and direction nothing
+        could check, :func:`~harpx.imaging.tag_frequency.tags_unmeasured`, or ``"none"``),
+        per-frame ``epsilon`` (mean absolute wrapped residual over the points with a valid
+        phase, rad), ``iterations`` (sweeps run), ``wall_time`` (s), ``valid_points`` (the
+        points with a valid phase at the end of the frame; 0: the frame was not tracked),
+        ``harmonic_snr`` (time, tag; the lower quartile of the harmonic magnitude at the
+        tracked points over ``harmonic_noise``, dimensionless, NaN without a noise estimate)
+        and ``faded`` (some tag's ``harmonic_snr`` below :data:`FADE_LEVEL`; Notes), and
         ``displacement_grid`` (time, axis, z, y, x) when ``points`` is None (NaN outside the
         tracked voxels).
 
@@ -90,7 +103,8 @@ def track_harp(
         ``points`` dataset has no ``z``, ``y``, ``x`` coordinates.
     ValueError
         If ``points`` is not a non-empty (n, 3) array of finite numbers (names the rows
-        with NaN or inf), or ``iterations`` is not a whole number ≥ 1.
+        with NaN or inf), or ``iterations`` is not a whole number ≥ 1, or no point has a
+        valid phase in frame 0 (names an all-False ``mask``; nothing would be tracked).
 
     Warns
     -----
@@ -98,7 +112,9 @@ def track_harp(
         If any point is lost (``points_lost > 0``) or unseen (``points_unseen > 0``), or
         if the phase's ``tag_frequency_measured`` misses a tag's ``tag_frequency``
         (:func:`~harpx.imaging.tag_frequency.tag_frequency_flag`; recorded as
-        ``attrs["tags_off_frequency"]``).
+        ``attrs["tags_off_frequency"]``). If a frame has no point with a valid phase (a blank
+        frame: every point keeps its previous position; ``valid_points`` 0), or a tag has
+        faded to the noise in a frame (``faded``).
 
     Notes
     -----
@@ -107,6 +123,22 @@ def track_harp(
     reference phase :math:`\\varphi_0(X)`, so errors do not accumulate through the phase.
     A point that becomes invalid during a frame (no tissue signal, or outside the
     acquisition) keeps its last position for the next frame.
+
+    Faded tags. The harmonic image is :math:`H = A e^{i\\varphi} + n` with complex Gaussian
+    noise :math:`n` of standard deviation :math:`\\sigma_H` (``harmonic_noise``, both parts
+    together), so :math:`|H|` is Rician: for :math:`A = 0` (no tags left) Rayleigh, with
+    :math:`|H|^2/\\sigma_H^2` exponential, lower quartile :math:`0.54\\,\\sigma_H` and
+    :math:`P(|H| > 5\\sigma_H) = e^{-25}`; for :math:`A \\gg \\sigma_H` about normal, lower
+    quartile :math:`A - 0.48\\,\\sigma_H`, with phase standard deviation
+    :math:`\\sigma_H/(\\sqrt 2 A)`. A lower quartile below :data:`FADE_LEVEL` = 5
+    :math:`\\sigma_H` thus means that a quarter of the tissue has :math:`A \\lesssim
+    5.5\\,\\sigma_H`, where the phase noise exceeds 0.13 rad (2 % of a tag period) and grows
+    as :math:`1/A` as the tags fade further; pure noise never escapes the test. The lower
+    quartile rather than the median because whatever else the band-pass keeps (the
+    untagged signal of SPAMM images at tissue edges, which grows as the tags fade) holds up
+    the magnitude of part of the tissue after its tags are gone. Without a noise estimate
+    (``harmonic_noise`` NaN, e.g. tags oblique to every grid axis) ``harmonic_snr`` is NaN
+    and nothing is flagged; with noise-free images (0) it is infinite.
 
     Examples
     --------
@@ -143,6 +175,8 @@ def track_harp(
     # every sampler prepares only the box the points can reach (see _reach)
     reference = PhaseSampler(ds, 0, region=_bounds(X, np.isfinite(X).all(axis=1), 0.0))
     phi0, valid0 = reference.phase(X)
+    if not valid0.any():
+        raise ValueError(_no_data_message(ds, X.shape[0], grid is not None))
     if grid is not None:
         assert flat_index is not None
         X, flat_index, phi0, valid0 = X[valid0], flat_index[valid0], phi0[valid0], valid0[valid0]
@@ -160,6 +194,11 @@ def track_harp(
     wall = np.zeros(ntime)
     position = X.copy()
     sampler = reference
+    noise = _harmonic_noise(ds)
+    counted = np.zeros(ntime, dtype=np.int64)
+    counted[0] = int(valid0.sum())
+    snr = np.full((ntime, noise.size), np.nan)
+    snr[0] = _harmonic_snr(reference, position, valid0, noise)
     for t in range(1, ntime):
         start = _time.perf_counter()
         region = _bounds(position, valid0, reach)
@@ -168,6 +207,8 @@ def track_harp(
             sampler, position, phi0, valid0, basis, step_limit, int(iterations)
         )
         valid &= valid0
+        counted[t] = int(valid.sum())
+        snr[t] = _harmonic_snr(sampler, position, valid0, noise)
         residual = np.abs(wrap(phi[valid] - phi0[valid]))
         epsilon[t] = float(residual.mean()) if residual.size else np.nan
         # NaN only outside the acquisition; a point without tissue signal keeps its position
@@ -178,9 +219,11 @@ def track_harp(
     frames = {"displacement": displacement, "epsilon": epsilon, "iterations": sweeps,
               "wall_time": wall}  # fmt: skip
     out = _assemble(ds, X, frames, int(iterations))
+    _flag_frames(out, ds, counted, snr)
     lost = int(np.count_nonzero(valid0 & np.isnan(displacement[1:, :, 0]).any(axis=0)))
     out.attrs["points_lost"] = lost
     out.attrs["tags_off_frequency"] = off_frequency
+    out.attrs["tags_frequency_unmeasured"] = " ".join(tags_unmeasured(ds)) or "none"
     unseen = int(np.count_nonzero(~valid0))  # only given points: grid points are selected
     out.attrs["points_unseen"] = unseen
     if unseen:
@@ -448,3 +491,115 @@ def _on_grid(
         coords=coords,
         attrs=standard_attrs("displacement_grid"),
     )
+
+
+def _no_data_message(ds: xr.Dataset, count: int, grid: bool) -> str:
+    """Why no point has a valid phase in the reference frame, and what to do."""
+    what = "no voxel of the grid" if grid else f"none of the {count} given points"
+    reasons = []
+    if "mask" in ds.variables:
+        mask = np.asarray(ds["mask"].transpose("tag", *GRID_DIMS).values, dtype=bool)
+        labels = [str(v) for v in np.asarray(ds["tag"].values).ravel()]
+        empty = [tag for tag, m in zip(labels, mask, strict=True) if not m.any()]
+        if empty:
+            reasons.append(f"the mask of tag(s) {empty!r} is all False (no data at all)")
+        elif not mask.all(axis=0).any():
+            reasons.append("the tags' masks do not overlap (no voxel has data from every tag)")
+    if "body" in ds.variables and not (np.asarray(ds["body"].values) >= 0.5).any():
+        reasons.append("'body' is below 0.5 everywhere (no tissue)")
+    why = "; ".join(reasons) or (
+        "they lie outside the field of view, a tag's mask or the tissue, or below the "
+        "harmonic magnitude floor in frame 0 (no tag pattern where tag_direction and "
+        "tag_frequency say)"
+    )
+    return (
+        f"conventional HARP has nothing to track: {what} has a valid harmonic phase in frame "
+        f"0 ({why}). Check the dataset's 'mask', 'body', tag_direction and tag_frequency, "
+        "or pass points inside the imaged tissue"
+    )
+
+
+def _harmonic_noise(ds: xr.Dataset) -> NDArray[np.float64]:
+    """Each tag's ``harmonic_noise`` (computed, if lazy); NaN where there is none."""
+    if "harmonic_noise" not in ds.variables:
+        return np.full(ds.sizes["tag"], np.nan)
+    return np.asarray(ds["harmonic_noise"].values, dtype=np.float64).ravel()
+
+
+def _harmonic_snr(
+    sampler: PhaseSampler,
+    position: NDArray[np.float64],
+    keep: NDArray[np.bool_],
+    noise: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Per tag, the :data:`FADE_QUANTILE` of the harmonic magnitude at the kept points with
+    data (inside the field of view and every mask) over the tag's noise; NaN without points
+    or noise."""
+    inside = np.flatnonzero(keep)
+    if inside.size:
+        inside = inside[sampler.acquired(position[inside]).all(axis=1)]
+    if inside.size == 0:
+        return np.full(noise.size, np.nan)
+    magnitude, _ = sampler.magnitude(position[inside])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.quantile(magnitude, FADE_QUANTILE, axis=0) / noise
+    return np.asarray(np.where(np.isfinite(noise), ratio, np.nan), dtype=np.float64)
+
+
+def _flag_frames(
+    out: xr.Dataset, ds: xr.Dataset, counted: NDArray[np.int64], snr: NDArray[np.float64]
+) -> None:
+    """Record ``valid_points``, ``harmonic_snr`` and ``faded`` in ``out``; warn about frames
+    without a valid point and frames whose tags have faded to the noise."""
+    labels = [str(v) for v in np.asarray(ds["tag"].values).ravel()]
+    empty = np.flatnonzero(counted == 0)
+    faded_tags = np.asarray(snr < FADE_LEVEL)  # NaN (no noise estimate) compares False
+    faded = np.asarray(faded_tags.any(axis=1))
+    faded[empty] = False  # said below: no point had a phase there at all
+    out["valid_points"] = xr.Variable(
+        "time",
+        counted,
+        {"units": "1", "long_name": "tracked points with a valid harmonic phase in the frame"},
+    )
+    out["harmonic_snr"] = xr.Variable(
+        ("time", "tag"),
+        snr,
+        {
+            "units": "1",
+            "long_name": "lower quartile of the harmonic magnitude at the tracked points over "
+            "harmonic_noise",
+        },
+    )
+    out["faded"] = xr.Variable(
+        "time",
+        faded,
+        {"units": "1", "long_name": f"some tag's harmonic_snr below {FADE_LEVEL:g}"},
+    )
+    out.coords["tag"] = ("tag", np.array(labels, dtype=object), standard_attrs("tag"))
+    if empty.size:
+        warnings.warn(
+            f"conventional HARP: frame(s) {empty[:10].tolist()} have no point with a valid "
+            "harmonic phase (a blank or missing frame, or no tag pattern there): every point "
+            "kept its previous position, so their displacement is the previous frame's, not "
+            "a measurement (out['valid_points'] is 0 there); fix or drop those frames",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
+    if faded.any():
+        frames = np.flatnonzero(faded)
+        which = [
+            f"frame {n} ("
+            + ", ".join(f"{labels[k]!r} {snr[n, k]:.2g}" for k in np.flatnonzero(faded_tags[n]))
+            + ")"
+            for n in frames[:5]
+        ]
+        warnings.warn(
+            f"conventional HARP: the tags have faded to the noise in {frames.size} frame(s): "
+            f"{'; '.join(which)}{' …' if frames.size > 5 else ''} (a quarter of the tracked "
+            f"points have a harmonic magnitude below {FADE_LEVEL:g} × harmonic_noise). The phase "
+            "there is mostly noise, so the tracked positions are not measured motion "
+            "(out['faded'], out['harmonic_snr']); track fewer frames (ds.isel(time=...)) or "
+            "use CSPAMM or a longer T1",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )

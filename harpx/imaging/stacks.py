@@ -45,6 +45,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
 from harpx._typing import FloatArray
+from harpx.imaging.tagged_shapes import check_tagged_shapes
 from harpx.schema import AXES, GRID_DIMS, standard_attrs, validate
 
 __all__ = [
@@ -549,7 +550,9 @@ def tagged_dataset(
     Raises
     ------
     ValueError
-        If a label has no default direction (pass ``tag_direction``), only one of
+        If an array's shape disagrees with the labels and coordinates (names it, its shape
+        and the expected one; :func:`~harpx.imaging.tagged_shapes.check_tagged_shapes`), a
+        label has no default direction (pass ``tag_direction``), only one of
         ``slice_thickness`` and ``slice_position`` is given, or either has not one entry
         per tag.
     SchemaError
@@ -565,6 +568,11 @@ def tagged_dataset(
     >>> ds.tag_direction.values.tolist(), ds.attrs["harpx_schema"]
     ([[1.0, 0.0, 0.0]], 'tagged/1')
     """
+    check_tagged_shapes(
+        image, tag=tag, tag_frequency=tag_frequency, slice_axis=slice_axis, time=time, z=z,
+        y=y, x=x, tag_direction=tag_direction, mask=mask, body=body,
+        displacement_true=displacement_true,
+    )  # fmt: skip
     labels = [str(t) for t in tag]
     data_vars: dict[str, Any] = {
         "image": (("tag", "time", *GRID_DIMS), np.asarray(image), standard_attrs("image"))
