@@ -75,12 +75,12 @@ class Body:
     material : object
         Material with ``isochoric_response(F, fiber)``, ``volumetric(J)``, ``kappa`` and
         ``needs_fibers`` (e.g. :class:`~harpx.mechanics.materials.NeoHookean`).
-    fibers : array_like of shape (ncell, 3) or (ncell, nqp, 3), or callable, optional
-        Reference fibre directions, normalised here: per cell, per quadrature point, or a
-        function ``fibers(X) -> (n, 3)`` of reference positions ``X`` (n, 3) in mm,
-        evaluated at the body's quadrature points. Needed by fibre materials, active
-        contraction and fibre growth.
-    regions : dict of str to array of int, optional
+    fibers : array_like of shape (ncell, 3), (nnode, 3) or (ncell, nqp, 3), or callable, optional
+        Reference fibre directions: per cell, per node (interpolated), per quadrature point,
+        or a function ``fibers(X) -> (n, 3)`` of reference positions ``X`` (n, 3) in mm, at
+        the quadrature points (rules: :func:`~harpx.mechanics.body_inputs.quadrature_fibers`).
+        Needed by fibre materials, active contraction and fibre growth.
+    regions : dict of str to array of int or of bool (one per cell), optional
         Named cell sets. Defaults to the mesh's regions/subdomains or ``{"body": all}``.
     element : {"hex8", "hex20", "tet4", "tet10"}, optional
         Trilinear hexahedron (2x2x2 Gauss points), 20-node serendipity hexahedron (3x3x3),
@@ -95,7 +95,7 @@ class Body:
     growth : FiberGrowth or array_like of shape (ncell,), optional
         Growth along the fibres, ``F = Fe Fg`` with ``Fg = I + (θ - 1) f0 ⊗ f0``: a uniform
         law or one stretch θ per cell (dimensionless).
-    boundaries : dict of str to array of int, optional
+    boundaries : dict of str to array of int or of bool (one per facet), optional
         Named facet sets (columns of ``mesh.facets``). Defaults to the mesh's boundaries.
     volumetric : {"mean-dilatation", "linear-dilatation", "nodal-dilatation", "pointwise"}, optional
         Treatment of the volumetric energy:
@@ -148,6 +148,8 @@ class Body:
         Reference cell volumes, mm³.
     fibers_qp : ndarray, shape (ncell, nqp, 3) or None
         Unit fibres at the quadrature points.
+    fibers_per : str or None
+        How ``fibers`` was read ("cell", "node", "quadrature point"; two-way if ambiguous).
     t_max : ndarray, shape (ncell,) or None
         Active-stress level per cell, kPa.
     growth_tensor : ndarray, shape (ncell, nqp, 3, 3) or None
@@ -255,9 +257,7 @@ class Body:
         )
 
         # fibres
-        self.fibers, self.fibers_qp = quadrature_fibers(
-            fibers, self.ncell, nqp, lambda: self.quadrature_points
-        )
+        self.fibers, self.fibers_qp, self.fibers_per = quadrature_fibers(fibers, sb, self.cells)
         check_fibers_given(material, active, growth, self.fibers_qp)
 
         # active stress level per cell
@@ -409,8 +409,8 @@ class Body:
 
         Parameters
         ----------
-        name : str or array_like of int
-            Boundary name from ``body.boundaries`` or facet ids.
+        name : str, array_like of int or array_like of bool
+            Boundary name from ``body.boundaries``, facet ids or a mask over the facets.
         components : sequence of int, default (0, 1, 2)
             Displacement components (0 = x, 1 = y, 2 = z).
 
@@ -436,9 +436,9 @@ class Body:
 
         Parameters
         ----------
-        name : str or array_like of int
-            Boundary name from ``body.boundaries``, or facet ids (columns of
-            ``mesh.facets``).
+        name : str, array_like of int or array_like of bool
+            Boundary name from ``body.boundaries``, facet ids (columns of ``mesh.facets``)
+            or a boolean mask with one entry per facet.
 
         Returns
         -------
@@ -450,7 +450,7 @@ class Body:
         KeyError
             If ``name`` is a string that names no boundary.
         ValueError
-            If the ids are not a 1-D array of valid facet indices.
+            If the ids are not valid facet indices nor a mask of one entry per facet.
         """
         return facet_ids(self.boundaries, int(self.mesh.facets.shape[1]), name)
 

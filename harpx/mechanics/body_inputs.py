@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 import meshio
@@ -21,7 +21,7 @@ import skfem
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray, IntArray
-from harpx.errors import CoincidentNodesWarning, user_stacklevel
+from harpx.errors import CoincidentNodesWarning, HarpxWarning, user_stacklevel
 from harpx.mechanics import kinematics
 from harpx.mechanics.cells import (
     _HEX20_MESHES,
@@ -43,6 +43,7 @@ __all__ = [
     "facet_ids",
     "growth_needs_fibers",
     "growth_tensors",
+    "index_array",
     "named_sets",
     "quadrature_fibers",
     "resolve_mesh",
@@ -200,9 +201,10 @@ def named_sets(
         Its ``subdomains`` and ``boundaries`` are the last defaults.
     ncell : int
         Number of cells.
-    regions, boundaries : mapping of str to array_like of int, optional
-        As given to :class:`~harpx.mechanics.body.Body`.
-    spec_regions, spec_boundaries : mapping of str to array_like of int
+    regions, boundaries : mapping of str to array_like of int or of bool, optional
+        As given to :class:`~harpx.mechanics.body.Body`: cell / facet ids, or boolean masks
+        with one entry per cell / facet (checked by :func:`index_array`).
+    spec_regions, spec_boundaries : mapping of str to array_like of int or of bool
         Those of a MeshSpec, the defaults before the mesh's own.
 
     Returns
@@ -215,54 +217,151 @@ def named_sets(
     Raises
     ------
     ValueError
-        If a region holds cell ids outside ``[0, ncell)``.
+        If a region or boundary is not a 1-D array of integer ids in ``[0, ncell)`` /
+        ``[0, nfacet)`` nor a boolean mask of one entry per cell / facet (the message names
+        it).
     """
     if regions is None:
         regions = spec_regions or (mesh.subdomains or {})
     named_regions: dict[str, IntArray] = {
-        k: np.asarray(v, dtype=np.int64) for k, v in regions.items()
+        k: index_array(v, ncell, f"region {k!r}", "cell") for k, v in regions.items()
     } or {"body": np.arange(ncell)}
-    for name, ids in named_regions.items():
-        if ids.size and (ids.min() < 0 or ids.max() >= ncell):
-            raise ValueError(f"region {name!r} has cell ids outside [0, {ncell}); check the mesh")
     if boundaries is None:
         boundaries = spec_boundaries or (mesh.boundaries or {})
+    nfacet = int(mesh.facets.shape[1])
     named_boundaries: dict[str, IntArray] = {
-        k: np.asarray(v, dtype=np.int64) for k, v in boundaries.items()
+        k: index_array(v, nfacet, f"boundary {k!r}", "facet") for k, v in boundaries.items()
     }
     return named_regions, named_boundaries
 
 
-def quadrature_fibers(
-    fibers: Any, ncell: int, nqp: int, quadrature_points: Callable[[], FloatArray]
-) -> tuple[FloatArray | None, FloatArray | None]:
-    """Unit fibres as given (per cell or point) and at every quadrature point.
+def index_array(values: ArrayLike, n: int, what: str, unit: str) -> IntArray:
+    """Ids in ``[0, n)`` from integer ids or a boolean mask of ``n`` entries, checked.
 
     Parameters
     ----------
-    fibers : array_like of shape (ncell, 3) or (ncell, nqp, 3), callable or None
-        As given to :class:`~harpx.mechanics.body.Body`; a callable is evaluated at the
-        reference quadrature points.
-    ncell, nqp : int
-        Number of cells and of quadrature points per cell.
-    quadrature_points : callable
-        ``quadrature_points() -> (ncell, nqp, 3)`` reference positions, mm.
+    values : array_like of int or of bool
+        Ids (integers, or floats with integer values), or a boolean mask with one entry
+        per cell or facet of the mesh (``np.flatnonzero(mask)`` are the ids).
+    n : int
+        Number of cells or facets of the mesh.
+    what : str
+        What ``values`` is, for the messages (e.g. ``"region 'apex'"``).
+    unit : {"cell", "facet"}
+        What the ids count.
 
     Returns
     -------
-    fibers : ndarray, shape (ncell, 3) or (ncell, nqp, 3), or None
-        Normalised fibres.
-    fibers_qp : ndarray, shape (ncell, nqp, 3), or None
-        The fibres at every quadrature point.
+    ndarray of int64, shape (nid,)
+        The ids.
 
     Raises
     ------
     ValueError
-        If the fibres (or the callable's result) have the wrong shape.
+        If ``values`` is a mask of another length than ``n``, not 1-D, not integer
+        (e.g. ``2.5``), a 0/1 integer array of length ``n`` (a mask given as integers), or
+        holds an id outside ``[0, n)``; the message names ``what`` and the length expected.
     """
-    if callable(fibers):
-        X = quadrature_points()
-        fibers = np.asarray(fibers(X.reshape(-1, 3)), dtype=np.float64)
+    arr = np.asarray(values)
+    if arr.dtype == np.bool_:
+        if arr.shape != (n,):
+            raise ValueError(
+                f"{what} is a boolean mask of shape {arr.shape!r}; a mask needs one entry per "
+                f"{unit} of the mesh, shape ({n},), or pass the {unit} ids instead"
+            )
+        return np.flatnonzero(arr)
+    if arr.ndim > 1 or arr.dtype.kind not in "iuf":
+        raise ValueError(
+            f"{what} has shape {arr.shape!r} and dtype {arr.dtype.name!r}; expected a 1-D "
+            f"array of integer {unit} ids in [0, {n}) or a boolean mask of shape ({n},)"
+        )
+    arr = np.atleast_1d(arr)
+    if arr.dtype.kind == "f":
+        bad = ~np.isfinite(arr) | (arr != np.round(arr))
+        if bad.any():
+            raise ValueError(
+                f"{what} holds {unit} id {arr[bad][0].item()!r}, which is not an integer; "
+                f"pass integer {unit} ids in [0, {n}) or a boolean mask of shape ({n},)"
+            )
+    ids = arr.astype(np.int64)
+    outside = (ids < 0) | (ids >= n)
+    if outside.any():
+        raise ValueError(
+            f"{what} holds {unit} id {ids[outside][0].item()!r}, outside [0, {n}) (the mesh "
+            f"has {n} {unit}s); check the ids, or the mesh they were made for"
+        )
+    if n > 2 and ids.size == n and ids.max() <= 1:
+        raise ValueError(
+            f"{what} is {n} integer ids that are all 0 or 1: a mask given as integers "
+            f"would select {unit}s 0 and 1 only; pass it as a boolean mask "
+            "(mask.astype(bool)) or as ids (np.flatnonzero(mask))"
+        )
+    return ids
+
+
+def quadrature_fibers(
+    fibers: Any, basis: Any, cells: IntArray
+) -> tuple[FloatArray | None, FloatArray | None, str | None]:
+    """Unit fibres as given (per cell, node or point) and at every quadrature point.
+
+    Parameters
+    ----------
+    fibers : array_like of shape (ncell, 3), (nnode, 3) or (ncell, nqp, 3), callable or None
+        As given to :class:`~harpx.mechanics.body.Body` (any non-zero length; a fibre and
+        its opposite are the same fibre):
+
+        * ``(ncell, 3)``: one direction per cell;
+        * ``(nnode, 3)``: one direction per dof node (rows of ``Body.dof_points``) or per
+          vertex (rows of ``Body.nodes`` for hex20 on a ``MeshHex2`` or tet10 on a
+          ``MeshTet1``), interpolated to the quadrature points with the element's shape
+          functions (per vertex: the trilinear / linear ones) and normalised; within each
+          cell the node directions are first turned to the side of its first node's, so
+          that ``f`` and ``-f`` do not cancel;
+        * ``(ncell, nqp, 3)``: one direction per quadrature point, in the order of
+          ``Body.quadrature_points``;
+        * a callable ``fibers(X) -> (n, 3)``, evaluated at the reference quadrature points
+          ``X`` (n, 3), mm.
+
+        When the mesh has as many nodes as cells, ``(ncell, 3)`` is read per cell (a
+        warning says so if the directions are not all equal). On hex8, whose 8 Gauss points
+        are as many as its corners but not at them (Gauss point k is not near corner k), an
+        ``(ncell, 8, 3)`` array whose values agree at every node shared by cells (as
+        ``nodal[body.cells]`` does) is refused: pass the per-node array itself.
+    basis : skfem.CellBasis
+        The scalar basis of the body (cells, quadrature points, shape functions).
+    cells : ndarray of int, shape (ncell, ncorner)
+        Node ids per cell in VTK order (``Body.cells``).
+
+    Returns
+    -------
+    fibers : ndarray, shape (ncell, 3), (nnode, 3) or (ncell, nqp, 3), or None
+        Normalised fibres as given (a callable's at the quadrature points).
+    fibers_qp : ndarray, shape (ncell, nqp, 3), or None
+        The unit fibres at every quadrature point.
+    per : {"cell", "node", "quadrature point", "cell or node", "quadrature point or corner"}
+        How ``fibers`` was read (None without fibres); the two-way values flag a reading
+        that rests on a default (a warning was given).
+
+    Raises
+    ------
+    ValueError
+        If the fibres (or the callable's result) have another shape or a zero direction,
+        an ``(ncell, 8, 3)`` hex8 array holds per-corner values, or per-node fibres cancel
+        inside a cell.
+
+    Warns
+    -----
+    HarpxWarning
+        If the reading of ``fibers`` is ambiguous and matters (``per`` says which).
+    """
+    ncell, nqp = int(basis.nelems), int(basis.X.shape[1])
+    nvertex, ndofnode = int(basis.mesh.nvertices), int(basis.N)
+    if fibers is None:
+        return None, None, None
+    given_per_point = callable(fibers)
+    if given_per_point:
+        X = np.asarray(basis.global_coordinates()).transpose(1, 2, 0).reshape(-1, 3)
+        fibers = np.asarray(fibers(np.ascontiguousarray(X)), dtype=np.float64)
         if fibers.shape != (ncell * nqp, 3):
             raise ValueError(
                 f"the fibers function returned shape {fibers.shape!r} for "
@@ -270,19 +369,96 @@ def quadrature_fibers(
                 "direction per reference point"
             )
         fibers = fibers.reshape(ncell, nqp, 3)
-    if fibers is not None:
-        f = kinematics.unit_fibers(fibers)
-        if f.shape == (ncell, 3):
-            fq = np.broadcast_to(f[:, None, :], (ncell, nqp, 3))
-        elif f.shape == (ncell, nqp, 3):
-            fq = f
-        else:
-            raise ValueError(
-                f"fibers has shape {f.shape!r}; expected ({ncell}, 3) per cell or "
-                f"({ncell}, {nqp}, 3) per quadrature point"
+    f = kinematics.unit_fibers(fibers)
+    per = "cell"
+    if f.shape == (ncell, 3):
+        fq = np.broadcast_to(f[:, None, :], (ncell, nqp, 3))
+        if ncell in (nvertex, ndofnode) and _varies(f[None]):
+            per = "cell or node"
+            _warn(
+                f"fibers has shape {f.shape!r}: the mesh has as many nodes as cells, so "
+                "the directions could be per node; they are read per cell. For per-node "
+                "fibres pass them per quadrature point: np.einsum('aq,eai->eqi', "
+                "body.basis_values, nodal[body.cell_scalar_dofs])"
             )
-        return f, np.ascontiguousarray(fq)
-    return None, None
+    elif f.shape == (ncell, nqp, 3):
+        fq, per = f, "quadrature point"
+        if nqp == cells.shape[1] and not given_per_point and _varies(f):
+            orders = (cells, np.asarray(basis.element_dofs).T)
+            shared = [_node_copies_agree(f, c) for c in orders]
+            if any(s is True for s in shared):
+                raise ValueError(
+                    f"fibers has shape {f.shape!r}, one direction per hex8 Gauss point, but "
+                    "its values agree at every node shared by cells, as per-corner values "
+                    "(nodal[body.cells]) do; the Gauss points are not at the corners. Pass "
+                    f"the per-node directions themselves, shape ({nvertex}, 3), which are "
+                    "interpolated to the Gauss points; per-point values in the order of "
+                    "body.quadrature_points go through a callable: fibers=lambda X: "
+                    "values.reshape(-1, 3)"
+                )
+            if shared[0] is None:
+                per = "quadrature point or corner"
+                _warn(
+                    f"fibers has shape {f.shape!r}: on hex8 that is one direction per "
+                    "Gauss point or per corner, and no node is shared by two cells to "
+                    "tell; it is read per Gauss point (order of body.quadrature_points). "
+                    "For per-corner directions pass the per-node array, shape "
+                    f"({nvertex}, 3)"
+                )
+    elif f.ndim == 2 and f.shape[0] in (nvertex, ndofnode):
+        fq, per = _nodal_to_quadrature(f, basis, vertices=f.shape[0] != ndofnode), "node"
+    else:
+        nodes = f"({ndofnode}, 3)" + (f" or ({nvertex}, 3)" if nvertex != ndofnode else "")
+        raise ValueError(
+            f"fibers has shape {f.shape!r}; expected ({ncell}, 3) per cell, {nodes} per "
+            f"node or ({ncell}, {nqp}, 3) per quadrature point"
+        )
+    return f, np.ascontiguousarray(fq), per
+
+
+def _warn(message: str) -> None:
+    warnings.warn(message, HarpxWarning, stacklevel=user_stacklevel())
+
+
+def _varies(f: FloatArray) -> bool:
+    """Whether unit fibres ``(ncell, k, 3)`` are not all the same direction in each cell
+    (the reading of an ambiguous shape then matters; ``f[None]`` compares all cells)."""
+    return bool(np.abs(np.abs(np.einsum("eki,ei->ek", f, f[:, 0])) - 1.0).max() > 1e-12)
+
+
+def _node_copies_agree(f: FloatArray, cell_nodes: IntArray) -> bool | None:
+    """Whether the values ``f[e, k]`` agree wherever ``cell_nodes[e, k]`` is the same node
+    (None if no node is in two cells)."""
+    ids = cell_nodes.ravel()
+    if np.unique(ids).size == ids.size:
+        return None
+    first = np.empty((int(ids.max()) + 1, 3))
+    first[ids[::-1]] = f.reshape(-1, 3)[::-1]
+    return bool(np.abs(first[ids] - f.reshape(-1, 3)).max() <= 1e-12)
+
+
+def _nodal_to_quadrature(f: FloatArray, basis: Any, *, vertices: bool) -> FloatArray:
+    """Unit fibres ``(ncell, nqp, 3)`` interpolated from unit fibres per dof node (the
+    element's shape functions) or per vertex (the linear / trilinear ones)."""
+    if vertices:
+        hexa = isinstance(basis.mesh, skfem.MeshHex1)
+        element = skfem.ElementHex1() if hexa else skfem.ElementTetP1()
+        nb = 8 if hexa else 4
+    else:
+        element, nb = basis.elem, int(basis.Nbfun)
+    N = np.stack([element.lbasis(basis.X, j)[0] for j in range(nb)])  # (nb, nqp)
+    g = f[np.asarray(basis.element_dofs)[:nb].T]  # (ncell, nb, 3)
+    g = g * np.where(np.einsum("eai,ei->ea", g, g[:, 0]) < 0.0, -1.0, 1.0)[..., None]
+    fq = np.einsum("aq,eai->eqi", N, g)
+    norm = np.linalg.norm(fq, axis=-1)
+    if norm.min() < 1e-3:
+        cell = int(np.argmin(norm.min(axis=1)))
+        raise ValueError(
+            f"the per-node fibres of cell {cell} nearly cancel at a quadrature point "
+            f"(interpolated length {norm.min():.2g}): they turn by about 90 degrees across "
+            "the cell; refine the mesh there, or give the fibres per cell or per point"
+        )
+    return fq / norm[..., None]
 
 
 def check_fibers_given(material: Any, active: Any, growth: Any, fibers_qp: Any) -> None:
@@ -371,8 +547,8 @@ def facet_ids(boundaries: Mapping[str, IntArray], nfacet: int, name: str | Array
         The body's named facet sets.
     nfacet : int
         Number of facets of the mesh (columns of ``mesh.facets``).
-    name : str or array_like of int
-        A boundary name, or facet ids.
+    name : str, array_like of int or array_like of bool
+        A boundary name, facet ids, or a boolean mask with one entry per facet.
 
     Returns
     -------
@@ -384,15 +560,19 @@ def facet_ids(boundaries: Mapping[str, IntArray], nfacet: int, name: str | Array
     KeyError
         If ``name`` is a string that names no boundary (the message lists them).
     ValueError
-        If the ids are not a 1-D array of indices in [0, nfacet).
+        If the ids are not a 1-D array of integer indices in ``[0, nfacet)`` nor a boolean
+        mask of shape ``(nfacet,)`` with at least one True (see :func:`index_array`).
     """
     if isinstance(name, str):
         if name not in boundaries:
             raise KeyError(f"no boundary named {name!r}; this body has {sorted(boundaries)!r}")
         return boundaries[name]
-    ids = np.asarray(name, dtype=np.int64)
-    if ids.ndim != 1 or (ids.size and (ids.min() < 0 or ids.max() >= nfacet)):
-        raise ValueError("facet ids must be a 1-D array of valid mesh facet indices")
+    ids = index_array(name, nfacet, "the facet ids", "facet")
+    if ids.size == 0 and np.asarray(name).dtype == np.bool_:
+        raise ValueError(
+            "the facet mask selects no facet (all False): a condition or load on it would "
+            "act on nothing; check how the mask was built"
+        )
     return ids
 
 

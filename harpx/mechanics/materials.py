@@ -125,6 +125,7 @@ References
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -133,6 +134,7 @@ from numpy.typing import ArrayLike
 
 from harpx._moved import moved_getattr
 from harpx._typing import FloatArray
+from harpx.errors import HarpxWarning, user_stacklevel
 from harpx.mechanics.kernel import TangentFactors
 from harpx.mechanics.kinematics import _as_tensor, fiber_basis, positive_det_cof
 
@@ -162,6 +164,32 @@ def _log_volumetric(kappa: float, J: ArrayLike) -> tuple[FloatArray, FloatArray,
     J = np.asarray(J, dtype=np.float64)
     lnJ = np.log(J)
     return 0.5 * kappa * lnJ**2, kappa * lnJ / J, kappa * (1.0 - lnJ) / J**2
+
+
+def _poisson_ratio(shear_weights: tuple[float, float, float], kappa: float) -> float:
+    """Smallest small-strain Poisson ratio of an uncoupled law with linearised energy
+    ``sum_a w_a dev(eps)_aa^2 / 2 + kappa tr(eps)^2 / 2`` along its axes (kPa), from the
+    compliance of the normal components (shears decouple); nan if it is singular."""
+    P = np.eye(3) - 1.0 / 3.0
+    D = P @ np.diag(shear_weights) @ P + kappa * np.ones((3, 3))
+    if np.linalg.cond(D) > 1e12:
+        return math.nan
+    S = np.linalg.inv(D)
+    nu = -S / np.diag(S)[:, None]  # nu[a, b] = -eps_b / eps_a under a stress along a
+    return float(nu[~np.eye(3, dtype=bool)].min())
+
+
+def _warn_auxetic(law: str, nu: float, kappa: float, shear: str) -> None:
+    """A HarpxWarning when the small-strain Poisson ratio ``nu`` is negative."""
+    if nu < 0.0:
+        warnings.warn(
+            f"{law}: kappa={kappa!r} kPa is small for {shear}, a negative small-strain "
+            f"Poisson ratio ({nu:.3f}): the solid widens when stretched. Soft tissue is "
+            "nearly incompressible (harpx's guide keeps kappa / C1 >= 100, C1 = mu / 2); "
+            "check that the parameters are not swapped and are in kPa",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
 
 
 class _Uncoupled:
@@ -323,6 +351,12 @@ class NeoHookean(_Uncoupled):
     ValueError
         If a parameter is not a finite positive number (the message names it).
 
+    Warns
+    -----
+    HarpxWarning
+        If ``kappa < 4 c1 / 3``: the small-strain Poisson ratio (:attr:`poisson_ratio`) is
+        negative, which soft tissue's is not (swapped parameters, or one not in kPa).
+
     Notes
     -----
     .. math::
@@ -358,6 +392,14 @@ class NeoHookean(_Uncoupled):
     def __post_init__(self) -> None:
         _check("c1", self.c1)
         _check("kappa", self.kappa)
+        _warn_auxetic("NeoHookean", self.poisson_ratio, self.kappa, f"c1={self.c1!r} kPa")
+
+    @property
+    def poisson_ratio(self) -> float:
+        """Small-strain Poisson ratio ``(3 kappa - 4 C1) / (2 (3 kappa + 2 C1))`` (negative,
+        with a warning at construction, if ``kappa < 4 C1 / 3``)."""
+        k, c1 = float(self.kappa), float(self.c1)
+        return (3.0 * k - 4.0 * c1) / (2.0 * (3.0 * k + 2.0 * c1))
 
     def isochoric_energy(self, F: ArrayLike, fiber: ArrayLike | None = None) -> FloatArray:
         """Isochoric energy density ``C1 (J^{-2/3} I1 - 3)``.
@@ -435,6 +477,13 @@ class Guccione(_Uncoupled):
         If ``c`` or ``kappa`` is not a finite positive number, or ``bf``, ``bt`` or ``bfs``
         not a finite non-negative one (the message names it).
 
+    Warns
+    -----
+    HarpxWarning
+        If ``kappa`` is so small for ``c bf`` and ``c bt`` that a small-strain Poisson ratio
+        (:attr:`poisson_ratio`, the smallest along the fibre, sheet and normal axes) is
+        negative, which soft tissue's is not.
+
     Notes
     -----
     .. math::
@@ -481,6 +530,16 @@ class Guccione(_Uncoupled):
         _check("bt", self.bt, allow_zero=True)
         _check("bfs", self.bfs, allow_zero=True)
         _check("kappa", self.kappa)
+        shear = f"c={self.c!r} kPa with bf={self.bf!r}, bt={self.bt!r}"
+        _warn_auxetic("Guccione", self.poisson_ratio, self.kappa, shear)
+
+    @property
+    def poisson_ratio(self) -> float:
+        """Smallest small-strain Poisson ratio along the fibre, sheet and normal axes (nan if
+        ``bt = 0``: no transverse stiffness); negative, with a warning at construction, if
+        ``kappa`` is too small for ``c bf`` and ``c bt``."""
+        c, bf, bt = float(self.c), float(self.bf), float(self.bt)
+        return _poisson_ratio((c * bf, c * bt, c * bt), float(self.kappa))
 
     def _weights(self) -> FloatArray:
         bf, bt, bfs = float(self.bf), float(self.bt), float(self.bfs)
