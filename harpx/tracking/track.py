@@ -26,7 +26,7 @@ from harpx._typing import BoolArray
 from harpx.errors import ElementInversionError, HarpxWarning, SchemaError, user_stacklevel
 from harpx.imaging.coverage import explain_missing_data, phase_direction_mismatch
 from harpx.imaging.phase_parameters import PhaseParameters, warn_spamm_dc
-from harpx.imaging.tag_frequency import tag_frequency_flag
+from harpx.imaging.tag_frequency import tag_frequency_flag, tags_unmeasured
 from harpx.mechanics.assembly import internal_forces
 from harpx.mechanics.linsolve import LinearSolver
 from harpx.schema import GRID_DIMS, grid_step, validate
@@ -291,9 +291,10 @@ def track(
     HarpxWarning
         When the tags leave a direction of the body's motion unseen (names it), when a
         frame misses its target ε, when a Gauss–Newton solve stops at its iteration limit,
-        or when the phase's ``tag_frequency_measured`` misses a tag's ``tag_frequency``
-        (:func:`~harpx.imaging.tag_frequency.tag_frequency_flag`; recorded as
-        ``attrs["tags_off_frequency"]``).
+        or when the phase's measured tag peak misses a tag's ``tag_frequency`` or
+        ``tag_direction`` (:func:`~harpx.imaging.tag_frequency.tag_frequency_flag`; recorded
+        as ``attrs["tags_off_frequency"]``; the tags nothing could check as
+        ``attrs["tags_frequency_unmeasured"]``).
 
     Notes
     -----
@@ -390,6 +391,7 @@ def track(
         "rigid_modes_removed": int(seen.unseen_modes.shape[0]),
         "outside_fraction": float(outside),
         "tags_off_frequency": off_frequency,
+        "tags_frequency_unmeasured": " ".join(tags_unmeasured(phase)) or "none",
         "blur_passes_applied": int(plan.passes),
         **({} if plan.across is None else {"wall_cells_across": round(plan.across, 2)}),
         "first_pass_tolerance": float(plan.first_tolerance),
