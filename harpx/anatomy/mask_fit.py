@@ -65,6 +65,7 @@ from numpy.typing import ArrayLike
 from harpx._typing import FloatArray, IntArray
 from harpx.anatomy.aha import segments_local
 from harpx.anatomy.contours import _contours, _lax_points, _lax_sense, _padded_along
+from harpx.anatomy.fit_checks import check_base_width, check_held_tilt
 from harpx.anatomy.mask_slices import (
     VentricleFitError,
     VentricleFitWarning,  # noqa: F401 (still importable from here)
@@ -384,32 +385,6 @@ def _anterior_point(template: VentricleTemplate, point: FloatArray, given: Any) 
     return float(template.angle(point.reshape(1, 3))[0])
 
 
-def _check_base_width(
-    template: VentricleTemplate, stack: _Stack, sense: float, flags: dict[str, str]
-) -> None:
-    """Flag a cavity that narrows towards the base plane (its radius there below 0.85 of the
-    widest, i.e. the base plane beyond 0.53 of the cavity half-length past the widest
-    level): a left ventricle is widest near its base, so base and apex may be swapped.
-    0.85 lies below the most base-narrowed truncated ellipsoid in common use (the base 30
-    degrees past the equator, radius 0.87 of the widest) and above short-axis stacks fitted
-    with the base given at their apical end that reach a third of the cavity below the
-    equator (0.82 or less)."""
-    g = template.geometry
-    ratio = float(np.sqrt(max(1.0 - (g.truncation / g.inner[1]) ** 2, 0.0)))
-    if g.truncation <= 0.0 or ratio >= 0.85:
-        return
-    side = "high" if sense > 0 else "low"
-    _warn(
-        flags, "base_narrow",
-        f"the cavity narrows towards the base: its radius at the base plane is {ratio:.2f} of "
-        f"the widest ({ratio * g.inner[0]:.1f} of {g.inner[0]:.1f} mm; the base plane lies "
-        f"{g.truncation / g.inner[1]:.2f} of the cavity half-length beyond the widest level), "
-        "whereas a left ventricle is widest near its base: base and apex may be swapped; "
-        f"check base_side / base_level (the base was taken towards {side} "
-        f"{stack.slice_axis})",
-    )  # fmt: skip
-
-
 def _segments_in_view(
     template: VentricleTemplate, stack: _Stack, inside: Any, flags: dict[str, str]
 ) -> tuple[IntArray, tuple[int, ...]]:
@@ -639,7 +614,9 @@ def fit_ventricle_to_mask(
     untold = VentricleTemplate(geometry, t.centre, t.rotation)
     angle, insertions = _anterior(untold, anterior, touch, rv, stack, flags)
     template = VentricleTemplate(geometry, t.centre, t.rotation, anterior=angle)
-    _check_base_width(template, stack, sense, flags)
+    check_base_width(template, stack, sense, flags)
+    if hold:
+        check_held_tilt(template, stack, slices, flags)
 
     # residuals, checks and the segments
     endo_res = template.surface_distance(endo, "endo")

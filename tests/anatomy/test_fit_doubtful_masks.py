@@ -7,6 +7,7 @@ The masks are the truncated spheroid of ``_lv_masks`` (endocardium 25 x 70 mm, e
 
 from __future__ import annotations
 
+import re
 from contextlib import nullcontext
 
 import numpy as np
@@ -16,6 +17,7 @@ import xarray as xr
 from harpx.anatomy.ventricle_fit import (
     VentricleFitError,
     VentricleFitWarning,
+    VentricleTemplate,
     fit_ventricle_to_mask,
 )
 from tests.anatomy._lv_masks import GEOMETRY, TRUTH, short_axis_stack, volume
@@ -131,3 +133,24 @@ def test_anterior_of_a_wrong_form_is_refused_by_name(anterior, error, match):
     # refused before any fitting, naming anterior and the two forms it takes
     with pytest.raises(error, match=match):
         fit_ventricle_to_mask(short_axis_stack(z=RINGS), anterior=anterior, base_side="high")
+
+
+@pytest.mark.parametrize(("tilt", "flagged"), [(0.0, False), (5.0, False), (12.0, True)])
+def test_a_tilted_heart_under_an_axis_held_at_the_slice_normal_is_flagged(tilt, flagged):
+    # 8 mm rings without apex: the axis is held at z. Tilted 12 degrees about y, the rings'
+    # cavity centres lean 10 degrees (the conjugate diameter of a 25 x 70 mm cavity), which
+    # gives back about 13 degrees (measured; 8 -> 8 and 16 -> 18). Unflagged, a 10 degree
+    # tilt put a segment's longitudinal strain 30 % off
+    a = np.radians(tilt)
+    rotation = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    heart = VentricleTemplate(GEOMETRY, centre=TRUTH.centre, rotation=rotation)
+    with pytest.warns(VentricleFitWarning) as caught:
+        fit = fit_ventricle_to_mask(
+            short_axis_stack(z=RINGS, template=heart, half=60.0), base_side="high", base_level=10.0
+        )
+    assert ("axis_tilt" in fit.flags) is flagged
+    said = [str(w.message) for w in caught if "cavity's centre moves" in str(w.message)]
+    if flagged:
+        assert re.search(r"the long axis is about 1[234] degrees off the slice normal z", said[0])
+    else:
+        assert said == []
