@@ -649,8 +649,9 @@ class Body:
             cells, all of one of these kinds; several blocks of that kind are merged in
             block order, while surface and line blocks (boundaries) and points no cell uses
             are dropped. Cell data ``fiber`` (one vector per cell) becomes the fibres
-            unless ``fibers=`` is given; named boundaries and regions written by
-            :meth:`to_meshio` are kept.
+            unless ``fibers=`` is given; named regions and boundaries are kept (those
+            :meth:`to_meshio` writes, cell sets, named gmsh physical groups, ``region``
+            labels), names that cannot be mapped are warned about (HarpxWarning).
         material : object
             The material (see :class:`Body`).
         source : str, default "the meshio mesh"
@@ -666,7 +667,8 @@ class Body:
         ------
         ValueError
             If the mesh has no hexahedra or tetrahedra, or volume cells of several kinds
-            (e.g. hexahedra and a tetrahedron; the message counts each kind).
+            (e.g. hexahedra and a tetrahedron; the message counts each kind), or inverted
+            or collapsed cells (named, with a hint at the node order).
 
         See Also
         --------
