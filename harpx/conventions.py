@@ -19,7 +19,9 @@ Three kinds of :class:`xarray.Dataset` flow through harpx. Each carries its kind
     the tracker derives the noise floor of its residual; optional
     ``tag_frequency_measured`` (tag): the tag frequency in cycles/mm of the tag peak in the
     first frame's images, in each tag's acquisition plane, NaN where not measured
-    (:mod:`harpx.imaging.tag_frequency`).
+    (:mod:`harpx.imaging.tag_frequency`), and ``tag_peak_measured`` (tag, axis): that peak's
+    frequency vector (x, y, z) in cycles/mm, whose direction is checked against
+    ``tag_direction``.
     Optional slice geometry (either kind of image dataset): ``slice_thickness`` (tag), the
     thickness of each tag's slices along its ``slice_axis`` in mm (boxcar profile; NaN:
     unknown), and ``slice_position`` (tag, slice), their centres along it in mm,
@@ -28,7 +30,10 @@ Three kinds of :class:`xarray.Dataset` flow through harpx. Each carries its kind
     slice profile with them and keeps its in-plane model without them.
 ``tracked/1``
     ``points`` (node, axis), ``cells`` (cell, vertex) and ``displacement`` (time, node, axis),
-    plus optional strain and per-frame diagnostics.
+    plus optional strain and per-frame diagnostics (conventional HARP adds ``valid_points``
+    (time), ``harmonic_snr`` (time, tag) and ``faded`` (time): the points with a valid phase,
+    the lower quartile of the harmonic magnitude over its noise, and the frames whose tags
+    faded to the noise).
 
 Units are mm, ms, rad and kPa; grid coordinates ``z``, ``y``, ``x`` are voxel centres, evenly
 spaced and increasing; every variable and coordinate carries ``long_name`` and (unless it holds
@@ -167,6 +172,7 @@ UNITS: dict[str, str] = {
     "magnitude": "1",
     "harmonic_noise": "1",
     "tag_frequency_measured": "1/mm",
+    "tag_peak_measured": "1/mm",
     "points": "mm",
     "cells": "1",
     "region": "1",
@@ -189,6 +195,9 @@ UNITS: dict[str, str] = {
     "epsilon_floor": "rad",
     "observed_directions": "1",
     "observed_fraction": "1",
+    "valid_points": "1",
+    "harmonic_snr": "1",
+    "faded": "1",
 }
 
 #: Descriptive ``long_name`` of each standard variable/coordinate.
@@ -212,6 +221,7 @@ LONG_NAMES: dict[str, str] = {
     "magnitude": "harmonic image magnitude",
     "harmonic_noise": "noise standard deviation of the complex harmonic image",
     "tag_frequency_measured": "tag spatial frequency of the first frame's tag peak",
+    "tag_peak_measured": "frequency vector of the first frame's tag peak in the tag's plane",
     "points": "reference position of node",
     "cells": "cell connectivity",
     "region": "region label of cell",
@@ -236,6 +246,10 @@ LONG_NAMES: dict[str, str] = {
     "epsilon_floor": "noise floor of the tracking residual estimated from the images",
     "observed_directions": "number of independent directions the tags with data in the cell see",
     "observed_fraction": "fraction of each axis seen by the cell's tags, |P e_axis|^2",
+    "valid_points": "tracked points with a valid harmonic phase in the frame",
+    "harmonic_snr": "lower quartile of the harmonic magnitude at the tracked points over "
+    "harmonic_noise",
+    "faded": "some tag's harmonic_snr below the fade level",
 }
 
 #: CF ``standard_name`` of the standard variables that have one in the CF standard-name
@@ -375,6 +389,7 @@ SCHEMAS: dict[str, dict[str, VarSpec]] = {
         "magnitude": VarSpec(IMAGE_DIMS, coord=False),
         "harmonic_noise": VarSpec(("tag",), required=False),
         "tag_frequency_measured": VarSpec(("tag",), required=False),
+        "tag_peak_measured": VarSpec(("tag", "axis"), required=False),
         **_COMMON_IMAGE_COORDS,
     },
     SCHEMA_TRACKED: {
@@ -393,6 +408,9 @@ SCHEMAS: dict[str, dict[str, VarSpec]] = {
         "iterations": VarSpec(("time",), required=False),
         "wall_time": VarSpec(("time",), required=False),
         "displacement_grid": VarSpec(("time", "axis", *GRID_DIMS), required=False),
+        "valid_points": VarSpec(("time",), required=False),
+        "harmonic_snr": VarSpec(("time", "tag"), required=False),
+        "faded": VarSpec(("time",), required=False),
     },
 }
 

@@ -28,7 +28,7 @@ from harpx.imaging.phase_parameters import (
     DEFAULT_UPSAMPLE,
     spamm_dc_message,
 )
-from harpx.imaging.tag_frequency import PEAK_ATTRS, measure_tag_peak, tag_frequency_mismatch
+from harpx.imaging.tag_frequency import measure_tag_peak, tag_frequency_mismatch
 from harpx.schema import AXES, GRID_DIMS, grid_step, standard_attrs, validate
 
 __all__ = ["extract_phase", "refinement_factors", "slice_geometry"]
@@ -133,7 +133,9 @@ def _checked_tag_frequency(ds: xr.Dataset, lazy: bool, check: bool) -> dict[str,
             warnings.warn(message, HarpxWarning, stacklevel=user_stacklevel())
     return {
         "tag_frequency_measured": xr.Variable(("tag",), measured, attrs),
-        "tag_peak_measured": xr.Variable(("tag", "axis"), peak, dict(PEAK_ATTRS)),
+        "tag_peak_measured": xr.Variable(
+            ("tag", "axis"), peak, standard_attrs("tag_peak_measured")
+        ),
     }
 
 

@@ -560,25 +560,9 @@ def _flag_frames(
     faded_tags = np.asarray(snr < FADE_LEVEL)  # NaN (no noise estimate) compares False
     faded = np.asarray(faded_tags.any(axis=1))
     faded[empty] = False  # said below: no point had a phase there at all
-    out["valid_points"] = xr.Variable(
-        "time",
-        counted,
-        {"units": "1", "long_name": "tracked points with a valid harmonic phase in the frame"},
-    )
-    out["harmonic_snr"] = xr.Variable(
-        ("time", "tag"),
-        snr,
-        {
-            "units": "1",
-            "long_name": "lower quartile of the harmonic magnitude at the tracked points over "
-            "harmonic_noise",
-        },
-    )
-    out["faded"] = xr.Variable(
-        "time",
-        faded,
-        {"units": "1", "long_name": f"some tag's harmonic_snr below {FADE_LEVEL:g}"},
-    )
+    out["valid_points"] = xr.Variable("time", counted, standard_attrs("valid_points"))
+    out["harmonic_snr"] = xr.Variable(("time", "tag"), snr, standard_attrs("harmonic_snr"))
+    out["faded"] = xr.Variable("time", faded, standard_attrs("faded"))
     out.coords["tag"] = ("tag", np.array(labels, dtype=object), standard_attrs("tag"))
     if empty.size:
         warnings.warn(

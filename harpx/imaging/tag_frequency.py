@@ -60,7 +60,6 @@ __all__ = [
     "DIRECTION_TOLERANCE",
     "FREQUENCY_TOLERANCE",
     "MIN_PERIODS",
-    "PEAK_ATTRS",
     "PAD",
     "SEARCH",
     "SUPPORT_LEVEL",
@@ -80,11 +79,6 @@ FREQUENCY_TOLERANCE = 0.02
 #: Angle (degrees) between the measured tag peak and the stated ``tag_direction`` in the
 #: tag's plane above which :func:`tag_frequency_mismatch` reports it (module notes)
 DIRECTION_TOLERANCE = 5.0
-#: Attributes of the ``tag_peak_measured`` (tag, axis) variable of ``phase/1``
-PEAK_ATTRS = {
-    "units": "1/mm",
-    "long_name": "frequency vector of the first frame's tag peak in the tag's plane",
-}
 #: Tag periods the tissue must span along a grid axis of the tag's plane for the frequency
 #: to be measured, scaled by the wave's share of that axis (module notes)
 MIN_PERIODS = 4.0
