@@ -215,12 +215,18 @@ def tracking_error(
         and maximum of the error magnitude ``|u − u_true|`` in mm, plus
         ``coverage``: the fraction of body voxels that the tracked result covers.
         Frames are matched by their time (to 1e-6 relative); frames only one side has
-        are left out.
+        are left out. The tracked displacement is relative to its first frame, so the
+        truth must hold that frame with zero displacement there (its reference
+        configuration; below 1e-6 mm plus 1e-4 of the largest true displacement).
 
     Raises
     ------
     ValueError
-        If either variable is missing, or no frame time is common to both datasets.
+        If either variable is missing; no frame time is common to both datasets; the truth
+        lacks the tracked first (reference) frame or is not zero there (referenced to
+        another frame, e.g. a result tracked from a later frame); the reference frame is
+        the only common one; or no body voxel after it (within ``where``) has a tracked
+        displacement.
 
     Examples
     --------
@@ -278,6 +284,7 @@ def tracking_error(
             f"truth {t_true.tolist()} ms; pass the truth of the same acquisition (or select "
             "matching frames with .sel(time=...))"
         )
+    _check_reference(true, t_est, t_true, nearest_true, match)
     est = est.isel(time=np.flatnonzero(match))
     true = true.isel(time=nearest_true[match])
     est = est.assign_coords(time=true.time.values)
@@ -296,6 +303,18 @@ def tracking_error(
         return np.array([fn(v[m]) if m.any() else np.nan for v, m in zip(values, ok, strict=True)])
 
     everything = values[1:][ok[1:]]  # the reference frame is exact by construction
+    if everything.size == 0:
+        raise ValueError(
+            f"no body voxel after the reference frame has both a true and a tracked "
+            f"displacement (frames {true.time.values.tolist()} ms; body voxels "
+            f"{int(body.values[1:].sum())}, covered {int(ok[1:].sum())}): the tracked result "
+            "does not overlap the truth's body"
+            + (
+                " within 'where'; pass a 'where' that selects body voxels"
+                if where is not None
+                else "; pass the truth of the same acquisition and grid"
+            )
+        )
     stats = {
         "mean": (frame_stat(np.mean), float(np.mean(everything))),
         "sd": (frame_stat(np.std), float(np.std(everything))),
@@ -317,3 +336,58 @@ def tracking_error(
         attrs={"units": "1", "long_name": "fraction of body voxels with a tracked displacement"},
     )
     return out
+
+
+#: Largest |displacement_true| at the reference frame, relative to the largest over all
+#: frames, that still counts as zero (the truth's reference configuration); plus 1e-6 mm.
+_REFERENCE_ZERO = 1e-4
+
+
+def _check_reference(
+    true: xr.DataArray,
+    t_est: FloatArray,
+    t_true: FloatArray,
+    nearest_true: np.ndarray,
+    match: np.ndarray,
+) -> None:
+    """Refuse a truth whose displacement is not relative to the tracked reference frame.
+
+    The tracked displacement is relative to its first frame; the truth's to the frame where
+    it is zero. They compare only when the truth has the tracked first frame and is zero
+    there (then the two reference configurations are the same), and a frame after it.
+    """
+    t_ref = float(t_est[0])
+    times = f"tracked has time {t_est.tolist()} ms, truth {t_true.tolist()} ms"
+    if not match[0]:
+        raise ValueError(
+            f"truth lacks the tracked result's reference frame, time {t_ref!r} ms ({times}): "
+            f"the tracked displacement is relative to {t_ref!r} ms and the truth's reference "
+            f"cannot be checked; pass a truth that keeps time {t_ref!r} ms (e.g. select "
+            f"frames with .sel(time=[{t_ref!r}, ...]))"
+        )
+    values = np.asarray(true.transpose("time", ...).values, dtype=np.float64)
+    size = np.where(np.isfinite(values), np.abs(values), 0.0).reshape(values.shape[0], -1)
+    per_frame = size.max(axis=1, initial=0.0)  # largest |u_true| of each truth frame, mm
+    tol = 1e-6 + _REFERENCE_ZERO * float(per_frame.max(initial=0.0))
+    at_ref = float(per_frame[nearest_true[0]])
+    if at_ref > tol:
+        zero = np.flatnonzero(per_frame <= tol)
+        where = (
+            f"the truth is referenced to time {float(t_true[zero[0]])!r} ms"
+            if zero.size
+            else "no frame of the truth has zero displacement (its reference frame is not "
+            "among its times)"
+        )
+        raise ValueError(
+            f"tracked is referenced to its first frame, time {t_ref!r} ms, but the truth's "
+            f"'displacement_true' there is not zero (up to {at_ref:.3g} mm): {where}, so the "
+            f"two are displacements from different configurations ({times}); track from "
+            "the truth's reference frame (keep it in the phase given to track) or pass a "
+            f"truth referenced to {t_ref!r} ms"
+        )
+    if int(np.count_nonzero(match)) == 1:
+        raise ValueError(
+            f"tracked and truth share only the reference frame, time {t_ref!r} ms ({times}): "
+            "the error there is zero by construction and there is no later frame to "
+            "compare; pass a truth with the tracked frames after the reference"
+        )

@@ -53,6 +53,7 @@ from harpx.tracking.uncertainty_linear import (
     setting,
 )
 from harpx.tracking.uncertainty_noise import BACKGROUND, SIGNIFICANCE, ImageNoise, image_noise
+from harpx.tracking.uncertainty_phase import NoiseSampleWarning
 
 __all__ = [
     "BACKGROUND",
@@ -81,6 +82,9 @@ EXCLUDED = (
 PENALTY_SENSITIVITY = 0.5
 #: RMS phase noise of the residual (rad) above which the first-order model is doubtful.
 _LINEAR_PHASE_LIMIT = 0.3
+#: Image noise level, relative to the largest frame-0 harmonic magnitude of its tag, at or
+#: below which a tag's images count as noise-free (an SNR above about a million).
+_NOISE_FREE = 1e-6
 
 
 def tracking_uncertainty(
@@ -145,16 +149,19 @@ def tracking_uncertainty(
     ValueError
         If ``tracked`` is not a penalty-method result of this body, ``samples`` < 2, the
         Dirichlet conditions differ from the tracked ones (the held dofs moved, or another
-        number of rigid modes is unseen), or there is no noise level (no
-        ``harmonic_noise`` and no ``tagged``).
+        number of rigid modes is unseen), there is no noise level (no
+        ``harmonic_noise`` and no ``tagged``), or the images are noise-free (every tag's
+        noise level at most 1e-6 of its largest harmonic magnitude: nothing to propagate).
 
     Warns
     -----
     HarpxWarning
-        When the noise across slices is assumed rather than measured, a frame missed its
-        target or did not converge, the rebuilt state is not in equilibrium, the noise is
-        too large for a first-order model, or half the penalty moves a frame's motion by
-        more than its standard deviation (each also listed in ``flags``).
+        When the noise across slices is assumed rather than measured, some tags carry no
+        noise while others do, a frame missed its target or did not converge, the rebuilt
+        state is not in equilibrium, the noise is too large for a first-order model, half
+        the penalty moves a frame's motion by more than its standard deviation, or the
+        phase extraction warned about the internal noise samples (once, gathered; each
+        also listed in ``flags``).
 
     Notes
     -----
@@ -205,6 +212,7 @@ def tracking_uncertainty(
 
     problem = rebuild(tracked, body, images, dirichlet, terms)
     noise = image_noise(images, tagged)
+    _check_noise_level(noise, images, tagged is not None, flag)
     if not noise.estimated.all():
         unmeasured = [str(t) for t, e in zip(images["tag"].values, noise.estimated, strict=True)
                       if not e]  # fmt: skip
@@ -215,7 +223,21 @@ def tracking_uncertainty(
             "standard deviations too small; pass tagged="
         )
     _warn_frames(tracked, flag)
-    dU, noise_residual, step = sample_response(problem, noise, int(samples), seed)
+    # the noise samples pass through the phase extraction as frames of their own: what it
+    # says about them is gathered into one flag; anything else reaches the caller as raised
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        dU, noise_residual, step = sample_response(problem, noise, int(samples), seed)
+    internal = [w for w in caught if issubclass(w.category, NoiseSampleWarning)]
+    for w in caught:
+        if not issubclass(w.category, NoiseSampleWarning):
+            warnings.warn(w.message, w.category, stacklevel=user_stacklevel())
+    if internal:
+        said = dict.fromkeys(str(w.message) for w in internal)  # distinct, in order
+        flag(
+            f"{' / '.join(said)} (in {len(internal)} of the noise sample batches): the "
+            "standard deviations rest on these samples and may be wrong"
+        )
     std = np.sqrt(np.mean(dU**2, axis=0))  # (time, dof): the linear response has zero mean
     _check_result(problem, std, step, noise_residual, flag)
     sensitivity = _penalty_sensitivity(problem, std)
@@ -249,6 +271,43 @@ def tracking_uncertainty(
         flags=" | ".join(flags),
     )
     return out
+
+
+def _check_noise_level(noise: ImageNoise, images: xr.Dataset, measured: bool, flag: Any) -> None:
+    """Refuse noise-free images (nothing to propagate); flag tags without noise among noisy
+    ones (their phase is then taken as exact)."""
+    names = [str(t) for t in images["tag"].values]
+    level = np.array([float(std.max(initial=0.0)) for std in noise.plane_std()])
+    magnitude = np.asarray(images["magnitude"].isel(time=0).transpose("tag", ...).values)
+    peak = np.where(np.isfinite(magnitude), np.abs(magnitude), 0.0).reshape(len(names), -1)
+    quiet = level <= _NOISE_FREE * peak.max(axis=1, initial=0.0)
+    if not quiet.any():
+        return
+    source = f"harmonic_noise {_harmonic_noise_values(images)!r}" + (
+        " and the tagged images measure none" if measured else ""
+    )
+    if quiet.all():
+        raise ValueError(
+            f"the images are noise-free: the image noise of every tag {names!r} is 0 "
+            f"({source}; largest plane noise sd {level.max():.3g}), so there is no noise to "
+            "propagate and every standard deviation would be 0, which is not the "
+            "uncertainty of an acquisition; pass noisy images (e.g. synthesize_tagged(..., "
+            "snr=20)), or assume a noise level: images.assign(harmonic_noise=...) on the "
+            "phase, without tagged="
+        )
+    flag(
+        f"tag(s) {[n for n, q in zip(names, quiet, strict=True) if q]!r} carry no image "
+        f"noise ({source}) while the others do: their phase is taken as exact and the "
+        "standard deviations leave out any noise of theirs; if their images are noisy, "
+        "give them a harmonic_noise"
+    )
+
+
+def _harmonic_noise_values(images: xr.Dataset) -> list[float] | None:
+    """The phase's ``harmonic_noise`` per tag as a list, or None without it."""
+    if "harmonic_noise" not in images.variables:
+        return None
+    return [float(v) for v in np.asarray(images["harmonic_noise"].values).reshape(-1)]
 
 
 def _penalty_sensitivity(problem: Problem, std: FloatArray) -> FloatArray:

@@ -10,12 +10,14 @@ with the tracker's sampler: :math:`\delta\phi = W(\arg(H + h) - \arg H)`.
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
 import xarray as xr
 
-from harpx._typing import FloatArray
+from harpx._typing import BoolArray, FloatArray
+from harpx.errors import HarpxWarning, user_stacklevel
 from harpx.imaging.harp import _extract_phase
 from harpx.imaging.phase_parameters import PhaseParameters
 from harpx.imaging.sample import PhaseSampler, wrap
@@ -23,7 +25,21 @@ from harpx.imaging.stacks import tagged_dataset
 from harpx.schema import GRID_DIMS
 from harpx.tracking.uncertainty_noise import ImageNoise
 
-__all__ = ["frame_harmonic", "harmonic_fields", "perturbed_phases"]
+__all__ = ["NoiseSampleWarning", "frame_harmonic", "harmonic_fields", "perturbed_phases"]
+
+#: Longest excerpt of each distinct warning quoted in a :class:`NoiseSampleWarning`.
+_EXCERPT = 240
+
+
+class NoiseSampleWarning(HarpxWarning):
+    """What the phase extraction said about internally sampled image noise, in one warning.
+
+    :func:`harmonic_fields` passes noise images, numbered as frames, through the phase
+    extraction; whatever that extraction warns is about those noise samples, not about the
+    user's frames, and is gathered into one warning of this class per call.
+    :func:`~harpx.tracking.uncertainty.tracking_uncertainty` gathers these in turn into
+    one flagged warning.
+    """
 
 
 def harmonic_fields(
@@ -49,32 +65,58 @@ def harmonic_fields(
     -------
     ndarray of complex64, shape (ntag, count, nz, ny, nx)
         Harmonic noise h of each tag on the grid of ``phase``, in the units of its
-        ``magnitude``.
+        ``magnitude`` (0 for a tag whose image noise is 0 everywhere, which is not
+        extracted).
 
     Raises
     ------
     ValueError
         If the noise's grid, extracted with the phase's ``upsample``, is not the grid of
         ``phase``.
+
+    Warns
+    -----
+    NoiseSampleWarning
+        Once, quoting each distinct warning the phase extraction raised on the noise
+        samples (those warnings themselves do not reach the caller).
     """
     params = PhaseParameters.from_dataset(phase)
     direction = np.asarray(phase["tag_direction"].transpose("tag", "axis").values, dtype=float)
+    fields = noise.sample(rng, count)  # every tag drawn: the same stream with or without
+    # tags whose noise is identically 0: their harmonic noise is 0 (the extraction is
+    # linear), and a blank image would only make the extraction warn about it
+    live: BoolArray = np.asarray(fields.reshape(fields.shape[0], -1).any(axis=1), dtype=bool)
+    out = np.zeros((live.size, count, *(phase.sizes[d] for d in GRID_DIMS)), np.complex64)
+    if not live.any():
+        return out
     ds = tagged_dataset(
-        noise.sample(rng, count),
-        tag=[str(t) for t in phase["tag"].values],
-        tag_frequency=np.asarray(phase["tag_frequency"].values, dtype=np.float64),
-        tag_direction=direction,
-        slice_axis=[GRID_DIMS[int(a)] for a in noise.slice_axis],
+        fields[live],
+        tag=[str(t) for t, keep in zip(phase["tag"].values, live, strict=True) if keep],
+        tag_frequency=np.asarray(phase["tag_frequency"].values, dtype=np.float64)[live],
+        tag_direction=direction[live],
+        slice_axis=[GRID_DIMS[int(a)] for a in noise.slice_axis[live]],
         time=np.arange(count, dtype=np.float64),
         z=noise.z, y=noise.y, x=noise.x,
         sequence=params.sequence,
-        mask=noise.mask,
+        mask=noise.mask[live],
         check=False,
     )  # fmt: skip
-    # noise has no tag pattern whose frequency could be checked
-    harmonic = _extract_phase(
-        ds, params.upsample, params.radius, None, "float32", check_tag_frequency=False
-    )  # float32: single precision is ample for noise and halves the memory traffic
+    # noise has no tag pattern whose frequency could be checked; what the extraction warns
+    # is about these noise samples (numbered as frames), not the user's frames: gathered
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        harmonic = _extract_phase(
+            ds, params.upsample, params.radius, None, "float32", check_tag_frequency=False
+        )  # float32: single precision is ample for noise and halves the memory traffic
+    if caught:
+        said = " / ".join(dict.fromkeys(str(w.message)[:_EXCERPT] for w in caught))  # distinct
+        warnings.warn(
+            NoiseSampleWarning(
+                f"the phase extraction of {count} sampled image-noise image(s) per tag "
+                f"(internal samples numbered as frames, not your frames) warned: {said}"
+            ),
+            stacklevel=user_stacklevel(),
+        )
     for d in GRID_DIMS:
         mine, theirs = harmonic[d].values, phase[d].values
         if mine.shape != theirs.shape or not np.allclose(mine, theirs, atol=1e-6):
@@ -84,8 +126,9 @@ def harmonic_fields(
                 "images the phase was extracted from"
             )
     dims = ("tag", "time", *GRID_DIMS)
-    return _complex(harmonic["magnitude"].transpose(*dims).values,
-                    harmonic["phase"].transpose(*dims).values)  # fmt: skip
+    out[live] = _complex(harmonic["magnitude"].transpose(*dims).values,
+                         harmonic["phase"].transpose(*dims).values)  # fmt: skip
+    return out
 
 
 def _complex(magnitude: np.ndarray, angle: np.ndarray) -> np.ndarray:
