@@ -568,11 +568,10 @@ def tagged_dataset(
     >>> ds.tag_direction.values.tolist(), ds.attrs["harpx_schema"]
     ([[1.0, 0.0, 0.0]], 'tagged/1')
     """
-    check_tagged_shapes(
-        image, tag=tag, tag_frequency=tag_frequency, slice_axis=slice_axis, time=time, z=z,
-        y=y, x=x, tag_direction=tag_direction, mask=mask, body=body,
-        displacement_true=displacement_true,
-    )  # fmt: skip
+    check_tagged_shapes(image, dict(
+        tag=tag, tag_frequency=tag_frequency, slice_axis=slice_axis, time=time, z=z, y=y, x=x,
+        tag_direction=tag_direction, mask=mask, body=body, displacement_true=displacement_true,
+    ))  # fmt: skip
     labels = [str(t) for t in tag]
     data_vars: dict[str, Any] = {
         "image": (("tag", "time", *GRID_DIMS), np.asarray(image), standard_attrs("image"))

@@ -9,7 +9,8 @@ the expected one, before numpy or xarray broadcast them into an error that names
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -21,43 +22,21 @@ def _shape(value: ArrayLike) -> tuple[int, ...]:
     return tuple(int(n) for n in np.shape(value))
 
 
-def check_tagged_shapes(
-    image: ArrayLike,
-    *,
-    tag: Sequence[str],
-    tag_frequency: ArrayLike,
-    slice_axis: Sequence[str],
-    time: ArrayLike,
-    z: ArrayLike,
-    y: ArrayLike,
-    x: ArrayLike,
-    tag_direction: ArrayLike | None = None,
-    mask: ArrayLike | None = None,
-    body: ArrayLike | None = None,
-    displacement_true: ArrayLike | None = None,
-) -> None:
+def check_tagged_shapes(image: ArrayLike, arrays: Mapping[str, Any]) -> None:
     """Check that the arrays of a ``tagged/1`` dataset agree with its labels and coordinates.
 
     Parameters
     ----------
     image : array_like
         Expected shape (tag, time, z, y, x).
-    tag : sequence of str
-        Tag labels; their number is the ``tag`` length.
-    tag_frequency : array_like
-        Cycles/mm; a scalar (every tag) or shape (tag,).
-    slice_axis : sequence of str
-        One axis name per tag.
-    time, z, y, x : array_like
-        One-dimensional coordinates (ms, mm): the lengths of those dims.
-    tag_direction : array_like, optional
-        Expected shape (tag, 3), columns (x, y, z).
-    mask : array_like, optional
-        Expected shape (tag, z, y, x), or (z, y, x) for one mask shared by every tag.
-    body : array_like, optional
-        Expected shape (z, y, x).
-    displacement_true : array_like, optional
-        Expected shape (time, 3, z, y, x), mm.
+    arrays : mapping of str to object
+        The other arguments of :func:`~harpx.imaging.stacks.tagged_dataset` by name:
+        ``tag`` (sequence of str: the ``tag`` length), ``tag_frequency`` (a scalar or shape
+        (tag,), cycles/mm), ``slice_axis`` (one axis name per tag), ``time``, ``z``, ``y``,
+        ``x`` (one-dimensional coordinates, ms and mm: the lengths of those dims) and, where
+        not None, ``tag_direction`` (tag, 3), ``mask`` (tag, z, y, x) or (z, y, x) for one
+        mask shared by every tag, ``body`` (z, y, x) and ``displacement_true`` (time, 3, z,
+        y, x).
 
     Raises
     ------
@@ -65,7 +44,10 @@ def check_tagged_shapes(
         Naming every array whose shape is wrong, with its shape and the expected one
         spelled out in dims.
     """
-    coords = {"time": time, "z": z, "y": y, "x": x}
+    tag, tag_frequency, slice_axis = arrays["tag"], arrays["tag_frequency"], arrays["slice_axis"]
+    tag_direction, mask, body = arrays.get("tag_direction"), arrays.get("mask"), arrays.get("body")
+    displacement_true = arrays.get("displacement_true")
+    coords = {name: arrays[name] for name in ("time", "z", "y", "x")}
     problems = [
         f"coordinate {name!r} has shape {_shape(value)!r}; expected one dimension (its values)"
         for name, value in coords.items()
