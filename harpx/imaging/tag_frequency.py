@@ -240,9 +240,9 @@ def measure_tag_frequency(tagged: xr.Dataset, time_index: int = 0) -> FloatArray
     Parameters
     ----------
     tagged : xarray.Dataset
-        ``tagged/1`` dataset (``image``, ``mask`` if any, and the tag coordinates).
+        As for :func:`measure_tag_peak`.
     time_index : int, default 0
-        The frame to read; the first (the tagging's reference) shows the undeformed pattern.
+        As for :func:`measure_tag_peak`.
 
     Returns
     -------

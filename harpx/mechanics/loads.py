@@ -579,7 +579,7 @@ def mesh_pieces(body: Body) -> IntArray:
     Parameters
     ----------
     body : Body
-        The body.
+        The body whose mesh is split into pieces.
 
     Returns
     -------
@@ -602,9 +602,9 @@ def unheld_note(body: Body, dofs: ArrayLike) -> str:
     Parameters
     ----------
     body : Body
-        The body.
+        The body, as for :func:`free_rigid_motions`.
     dofs : array_like of int
-        The dofs held by Dirichlet conditions.
+        The held dofs, as for :func:`free_rigid_motions`.
 
     Returns
     -------
