@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import warnings
+from typing import Any
+
 import numpy as np
 import xarray as xr
 
-from harpx._typing import FloatArray, IntArray
+from harpx._typing import BoolArray, FloatArray, IntArray
+from harpx.errors import HarpxWarning, user_stacklevel
 from harpx.mechanics.body import Body
 from harpx.schema import standard_attrs
 
@@ -19,6 +23,24 @@ ATTRS: dict[str, dict[str, str]] = {
     "t_max_q25": {"units": "kPa", "long_name": "25th percentile of the cell T_max"},
     "t_max_q75": {"units": "kPa", "long_name": "75th percentile of the cell T_max"},
     "valid_cells": {"units": "1", "long_name": "cells with a finite T_max estimate"},
+    "negative_cells": {
+        "units": "1",
+        "long_name": "cells with a negative T_max estimate (fibres lengthened or passively "
+        "shortened)",
+    },
+    "out_of_range_cells": {
+        "units": "1",
+        "long_name": "cells whose fibres are shortened past the law's active range (g = 0): "
+        "no estimate",
+    },
+    "t_max_undetermined": {
+        "units": "1",
+        "long_name": "the tracked stretches do not determine T_max of the region (NaN)",
+    },
+    "t_max_missing": {
+        "units": "1",
+        "long_name": "T_max was NaN (no estimate): the region was simulated at rest",
+    },
     "fiber_stretch_simulated": {"units": "1", "long_name": "simulated fiber stretch"},
     "fiber_stretch_tracked": {"units": "1", "long_name": "tracked fiber stretch"},
     "displacement": standard_attrs("displacement"),
@@ -62,8 +84,89 @@ ATTRS: dict[str, dict[str, str]] = {
 }
 
 
+#: attrs of an estimate's ``fiber_stretch``: the stretch the law was evaluated at
+STRETCH_NOTE = {"comment": "elastic fibre stretch |Fe f0| (growth divided out), as in the law"}
+
+
 def attrs(name: str) -> dict[str, str]:
     return dict(ATTRS[name])
+
+
+def region_statistics(
+    body: Body, names: list[str], t_cell: FloatArray, out_of_range: BoolArray, aggregate: str
+) -> dict[str, FloatArray | IntArray]:
+    """Per-region aggregate, mean, quartiles and cell counts of the cell estimates (kPa)."""
+    w = body.cell_volume
+    agg, mean, q25, q75 = (np.full(len(names), np.nan) for _ in range(4))
+    valid, negative, beyond = (np.zeros(len(names), dtype=np.int64) for _ in range(3))
+    for k, name in enumerate(names):  # loop over the few regions
+        ids = body.regions[name]
+        vals = t_cell[ids]
+        ok = np.isfinite(vals)
+        valid[k], beyond[k] = ok.sum(), out_of_range[ids].sum()
+        negative[k] = np.count_nonzero(vals[ok] < 0.0)
+        if not ok.any():
+            continue
+        mean[k] = weighted_stats(vals, w[ids])[0]
+        q25[k], agg[k], q75[k] = np.percentile(vals[ok], [25, 50, 75])
+        if aggregate == "mean":
+            agg[k] = mean[k]
+    return {
+        "t_max": agg,
+        "t_max_mean": mean,
+        "t_max_q25": q25,
+        "t_max_q75": q75,
+        "valid_cells": valid,
+        "negative_cells": negative,
+        "out_of_range_cells": beyond,
+    }
+
+
+def warn_doubtful_regions(estimate: xr.Dataset, body: Body, law: Any) -> None:
+    """Warn about regions whose estimate is negative or NaN, naming them and the cause."""
+    names = [str(n) for n in estimate["region"].values]
+    t = np.asarray(estimate["t_max"].values, dtype=np.float64)
+    negative = {n: round(float(v), 4) for n, v in zip(names, t, strict=True) if v < 0.0}
+    if negative:
+        warnings.warn(
+            f"the activation estimate is negative in region(s) {negative!r} (kPa): their "
+            "fibres are lengthened, or shortened less than their passive stress needs (e.g. "
+            "squeezed from the side), so they are not actively contracting as the uniaxial "
+            "estimate assumes; 'negative_cells' counts such cells per region. A negative "
+            "level cannot be simulated (region_values refuses it): correct the estimate "
+            "(correct_activation) or treat these regions as passive",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
+    missing = [k for k, v in enumerate(t) if np.isnan(v)]
+    if not missing:
+        return
+    beyond = estimate["out_of_range_cells"].values
+    limit = ""
+    if getattr(law, "law", None) == "calcium":
+        limit = f", fibre stretch <= l0/lr = {law.l0 / law.lr:.4g}"
+    causes = []
+    for k in missing:  # loop over the few regions without an estimate
+        n = int(np.asarray(body.regions[names[k]]).size)
+        if n == 0:
+            why = "no cells"
+        elif int(beyond[k]) == n:
+            why = f"fibres shortened past the law's active range in all {n} cells"
+        else:
+            why = (
+                f"{int(beyond[k])} of {n} cells shortened past the law's active range, "
+                f"{n - int(beyond[k])} without data (NaN stretch or tension)"
+            )
+        causes.append(f"{names[k]!r}: {why}")
+    warnings.warn(
+        f"no activation estimate (NaN) for region(s) {'; '.join(causes)}. Past the law's "
+        f"active range (g(lambda) = 0{limit}) the law has no active tension, so no T_max "
+        "fits the stretch: it is not 'no activation' - the most contracted muscle lands "
+        "there. Simulating such a region needs a level (region_values would use 0 kPa, "
+        "with a warning); 'out_of_range_cells' counts the cells per region",
+        HarpxWarning,
+        stacklevel=user_stacklevel(),
+    )
 
 
 def matching_regions(estimate: xr.Dataset, body: Body) -> list[str]:

@@ -27,6 +27,7 @@ from harpx.mechanics.fiber_laws import ActiveContraction
 from harpx.physiology.active import (
     default_law,
     fibred_body,
+    missing_regions,
     region_values,
     simulate_activation,
     with_active_law,
@@ -54,7 +55,8 @@ def resimulate(
     body : Body
         The tracking model (fibres, regions); it is not modified (an active copy is solved).
     t_max_by_region : dict of str to float or DataArray over ``region``
-        Activation per region, kPa (e.g. ``estimate["t_max"]``); NaN counts as 0.
+        Activation per region, kPa, >= 0 (e.g. ``estimate["t_max"]``); NaN (no estimate)
+        counts as 0, with a warning, and is flagged in ``t_max_missing``.
     dirichlet : sequence, optional
         Boundary conditions, e.g. ``[Fixed("mandible"), Fixed("base")]`` — the same as
         for tracking.
@@ -77,18 +79,26 @@ def resimulate(
         volume-weighted over the region's cells); with ``tracked``: also
         ``fiber_stretch_tracked`` (cell), ``stretch_tracked``, ``stretch_tracked_sd``,
         ``correlation`` (Pearson r of the cell stretches), ``mean_abs_difference``
-        (region) and their values over all regions (``*_all``).
+        (region) and their values over all regions (``*_all``); ``t_max_missing``
+        (region, bool) marks the regions whose level was NaN and that were simulated at
+        rest.
 
     Raises
     ------
     ValueError
-        For an unknown region, a body without fibres or a ``tracked`` dataset of another
-        model.
+        For an unknown region, a negative or infinite level, a body without fibres or a
+        ``tracked`` dataset of another model.
     ConvergenceError
         If the forward solve fails.
+
+    Warns
+    -----
+    HarpxWarning
+        If a level is NaN (:func:`harpx.physiology.active.region_values`).
     """
     fibred_body(body)
     law = default_law(body, law)
+    missing = missing_regions(t_max_by_region)
     values = region_values(body, t_max_by_region)
     active = with_active_law(body, law)
     loads = [*dirichlet, *terms]
@@ -107,6 +117,7 @@ def resimulate(
                 attrs("region_label") | {"flag_meanings": " ".join(names)},
             ),
             "t_max": ("region", t_region, attrs("t_max")),
+            "t_max_missing": ("region", np.isin(names, missing), attrs("t_max_missing")),
             "cell_volume": ("cell", w, {"units": "mm3", "long_name": "reference cell volume"}),
         },
         coords={

@@ -24,6 +24,7 @@ factorisation, and propagates tracking errors like any stretch-matching estimate
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -33,6 +34,7 @@ from scipy import sparse
 from scipy.sparse import linalg as spla
 
 from harpx._typing import FloatArray
+from harpx.errors import HarpxWarning, user_stacklevel
 from harpx.inverse._common import (
     attrs,
     matching_regions,
@@ -86,7 +88,7 @@ def correct_activation(
     ----------
     estimate : xarray.Dataset
         Output of :func:`estimate_activation` (``t_max`` over ``region``, kPa); its values
-        only set the linearisation point.
+        only set the linearisation point (a NaN level counts as 0 there).
     tracked : xarray.Dataset
         The ``tracked/1`` result the estimate came from.
     body : Body
@@ -106,13 +108,21 @@ def correct_activation(
         ``estimate`` with ``t_max`` (region) replaced by the corrected values (clipped at
         0; unclipped in ``t_max_linear``), the direct values kept in ``t_max_direct``, and
         the linear system: ``stretch_sensitivity`` (region, source_region), 1/kPa, and
-        ``stretch_recoil`` (region). attrs ``method`` is updated.
+        ``stretch_recoil`` (region); ``t_max_undetermined`` (region, bool) marks the
+        regions whose activation changes no muscle's stretch at the tracked configuration
+        (fibres past the law's active range): their ``t_max`` is NaN. attrs ``method`` is
+        updated.
 
     Raises
     ------
     ValueError
         If ``tracked`` does not belong to ``body`` or the regions differ from the
         estimate's.
+
+    Warns
+    -----
+    HarpxWarning
+        If the tracked stretches do not determine a region's activation (``t_max`` NaN).
 
     Notes
     -----
@@ -178,7 +188,21 @@ def correct_activation(
     dcell = _stretch_derivative(body, u, du)  # (1 + nregion, ncell)
     D = np.array([region_means(body, names, d) for d in dcell])  # (1 + nregion, nregion)
     recoil, S = D[0], D[1:].T  # S[k, m]: stretch change of region k per kPa in region m
-    t1 = np.linalg.lstsq(S, -recoil, rcond=None)[0]
+    reach = np.abs(S).max(axis=0)
+    undetermined = ~(reach > 1e-10 * reach.max())  # g = 0 there: T_max moves nothing
+    t1 = np.full(len(names), np.nan)
+    if not undetermined.all():
+        t1[~undetermined] = np.linalg.lstsq(S[:, ~undetermined], -recoil, rcond=None)[0]
+    if undetermined.any():
+        warnings.warn(
+            "the tracked stretches do not determine the activation of region(s) "
+            f"{[n for n, u in zip(names, undetermined, strict=True) if u]!r}: a unit T_max "
+            "there changes no muscle's stretch (their fibres are shortened past the law's "
+            "active range, g = 0, at the tracked configuration), so their corrected t_max is "
+            "NaN ('t_max_undetermined'), not 0",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
     out = estimate.copy()
     out = out.assign_coords(
         source_region=("source_region", names, {"units": "1", "long_name": "activated region"})
@@ -188,6 +212,7 @@ def correct_activation(
     out["t_max"] = ("region", np.maximum(t1, 0.0), attrs("t_max"))
     out["stretch_sensitivity"] = (("region", "source_region"), S, attrs("stretch_sensitivity"))
     out["stretch_recoil"] = ("region", recoil, attrs("stretch_recoil"))
+    out["t_max_undetermined"] = ("region", undetermined, attrs("t_max_undetermined"))
     out.attrs["method"] = (
         "direct (uniaxial fibre equilibrium per element) + one linear equilibrium correction "
         "at the tracked configuration"

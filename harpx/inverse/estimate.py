@@ -67,15 +67,17 @@ from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray
 from harpx.inverse._common import (
+    STRETCH_NOTE,
     attrs,
+    region_statistics,
     region_table,
     time_index,
     tracked_u,
-    weighted_stats,
+    warn_doubtful_regions,
 )
 from harpx.mechanics.body import Body
 from harpx.mechanics.fiber_laws import ActiveContraction
-from harpx.mechanics.kinematics import split_growth
+from harpx.mechanics.kinematics import split_growth, unit_fibers
 from harpx.physiology.active import default_law, fibred_body
 
 __all__ = ["estimate_activation", "uniaxial_active_tension"]
@@ -96,7 +98,8 @@ def uniaxial_active_tension(
     F : array_like, shape (..., 3, 3)
         (Elastic) deformation gradients, dimensionless, ``det F > 0``.
     fiber : array_like, shape (..., 3)
-        Unit reference fibre directions, broadcasting against ``F``.
+        Reference fibre directions (any non-zero length; normalised here), broadcasting
+        against ``F``.
 
     Returns
     -------
@@ -105,6 +108,11 @@ def uniaxial_active_tension(
         Piola--Kirchhoff fibre component; see the module docstring).
     stretch : ndarray, shape (...)
         Fibre stretch :math:`\lambda = |F f_0|` (dimensionless).
+
+    Raises
+    ------
+    ValueError
+        If a fibre direction is zero or not finite, or ``fiber`` is not of shape (..., 3).
 
     Examples
     --------
@@ -117,7 +125,7 @@ def uniaxial_active_tension(
     True
     """
     F = np.asarray(F, dtype=np.float64)
-    f = np.asarray(fiber, dtype=np.float64)
+    f = unit_fibers(fiber)  # names a zero or non-finite direction
     f = np.broadcast_to(f, F.shape[:-1])
     P, _ = material.isochoric_response(F, f)
     J = np.linalg.det(F)
@@ -158,15 +166,29 @@ def estimate_activation(
     -------
     xarray.Dataset
         ``t_max_cell`` (cell) kPa, NaN where :math:`g(\lambda) = 0`; ``active_tension_cell``
-        (cell) kPa; ``fiber_stretch`` (cell); ``region_label`` (cell); per ``region``:
-        ``t_max`` (the aggregate), ``t_max_mean``, ``t_max_q25``, ``t_max_q75`` (kPa) and
-        ``valid_cells``. attrs record the method, frame and law.
+        (cell) kPa; ``fiber_stretch`` (cell), the elastic stretch the law is evaluated at
+        (the tracked ``fiber_stretch`` if present, else from the displacement; a body's
+        growth divided out, by the cell's elastic-to-total stretch ratio, :math:`1/\vartheta`
+        for fibre growth); ``region_label`` (cell); per ``region``: ``t_max`` (the
+        aggregate), ``t_max_mean``, ``t_max_q25``, ``t_max_q75`` (kPa), ``valid_cells``,
+        ``negative_cells`` (cells with :math:`T_{max} < 0`) and ``out_of_range_cells``
+        (cells with :math:`g(\lambda) = 0`, no estimate). attrs record the method, frame
+        and law.
 
     Raises
     ------
     ValueError
         If ``tracked`` does not belong to ``body``, ``time`` is out of range, the body has
-        no fibres or ``aggregate`` is unknown.
+        no fibres, ``aggregate`` is unknown or the tracked ``fiber_stretch`` is not one
+        value per cell.
+
+    Warns
+    -----
+    HarpxWarning
+        If a region's ``t_max`` is negative (fibres lengthened or passively shortened: not
+        the active contraction the estimate assumes; it cannot be simulated), or NaN (the
+        message tells fibres shortened past the law's active range from cells without
+        data).
 
     Notes
     -----
@@ -203,53 +225,42 @@ def estimate_activation(
     law = default_law(body, law)
     index = time_index(tracked, time)
     u = tracked_u(tracked, body, index)
-    F = body.deformation_gradient(u)
-    if body.growth_tensor is not None:
-        F = split_growth(F, body.growth_tensor)
     assert body.fibers_qp is not None  # checked by fibred_body
-    T_qp, lam_qp = uniaxial_active_tension(body.material, F, body.fibers_qp)
+    F = body.deformation_gradient(u)
+    Fe = F if body.growth_tensor is None else split_growth(F, body.growth_tensor)
+    T_qp, lam_qp = uniaxial_active_tension(body.material, Fe, body.fibers_qp)
     T_cell = body.cell_average(T_qp)
+    lam = body.cell_average(lam_qp)  # elastic fibre stretch |Fe f0|, as in the forward law
     if "fiber_stretch" in tracked:
-        lam = np.asarray(tracked["fiber_stretch"].isel(time=index).values, dtype=np.float64)
-        if lam.shape != (body.ncell,):
+        lam_tracked = np.asarray(tracked["fiber_stretch"].isel(time=index).values, dtype=np.float64)
+        if lam_tracked.shape != (body.ncell,):
             raise ValueError(
-                f"tracked 'fiber_stretch' has shape {lam.shape!r}; expected ({body.ncell},) "
-                "cells of the body"
+                f"tracked 'fiber_stretch' has shape {lam_tracked.shape!r}; expected "
+                f"({body.ncell},) cells of the body"
             )
-    else:
-        lam = body.cell_average(lam_qp)
+        # the tracked stretch is the total |F f0|; the law acts on the elastic stretch:
+        # divide the growth out (the cell's elastic / total ratio; 1/θ for fibre growth)
+        lam = (
+            lam_tracked if body.growth_tensor is None else lam_tracked * lam / body.fiber_stretch(u)
+        )
     t_cell = np.asarray(law.t_max_for_tension(lam, T_cell), dtype=np.float64)
+    g = np.asarray(law.activation_factor(lam), dtype=np.float64)
+    out_of_range = np.isfinite(lam) & np.isfinite(T_cell) & (g <= 0.0)
 
     names, label = region_table(body)
-    w = body.cell_volume
-    agg, mean, q25, q75, count = (np.full(len(names), np.nan) for _ in range(5))
-    for k, name in enumerate(names):  # loop over the few regions
-        ids = body.regions[name]
-        vals = t_cell[ids]
-        ok = np.isfinite(vals)
-        count[k] = ok.sum()
-        if not ok.any():
-            continue
-        mean[k] = weighted_stats(vals, w[ids])[0]
-        q25[k], agg[k], q75[k] = np.percentile(vals[ok], [25, 50, 75])
-        if aggregate == "mean":
-            agg[k] = mean[k]
+    stats = region_statistics(body, names, t_cell, out_of_range, aggregate)
     ds = xr.Dataset(
         {
             "t_max_cell": ("cell", t_cell, attrs("t_max_cell")),
             "active_tension_cell": ("cell", T_cell, attrs("active_tension_cell")),
-            "fiber_stretch": ("cell", lam, attrs("fiber_stretch")),
+            "fiber_stretch": ("cell", lam, attrs("fiber_stretch") | STRETCH_NOTE),
             "region_label": (
                 "cell",
                 label,
                 attrs("region_label") | {"flag_meanings": " ".join(names)},
             ),
-            "t_max": ("region", agg, attrs("t_max")),
-            "t_max_mean": ("region", mean, attrs("t_max_mean")),
-            "t_max_q25": ("region", q25, attrs("t_max_q25")),
-            "t_max_q75": ("region", q75, attrs("t_max_q75")),
-            "valid_cells": ("region", count.astype(np.int64), attrs("valid_cells")),
-        },
+        }
+        | {key: ("region", value, attrs(key)) for key, value in stats.items()},
         coords={"region": ("region", names, {"units": "1", "long_name": "muscle region"})},
         attrs={
             "method": "direct: uniaxial fibre equilibrium per element",
@@ -260,4 +271,5 @@ def estimate_activation(
     )
     if "time" in tracked.coords:
         ds.attrs["time"] = float(tracked["time"].values[index])
+    warn_doubtful_regions(ds, body, law)
     return ds

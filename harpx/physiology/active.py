@@ -11,6 +11,7 @@ passive model (:func:`with_active_law`) without touching it.
 from __future__ import annotations
 
 import time as _time
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -19,7 +20,7 @@ import xarray as xr
 from numpy.typing import ArrayLike
 
 from harpx._typing import FloatArray
-from harpx.errors import ConvergenceError
+from harpx.errors import ConvergenceError, HarpxWarning, user_stacklevel
 from harpx.mechanics.body import Body
 from harpx.mechanics.fiber_laws import ActiveContraction
 from harpx.mechanics.newton import SolveResult, equilibrate
@@ -27,6 +28,7 @@ from harpx.mechanics.newton import SolveResult, equilibrate
 __all__ = [
     "default_law",
     "fibred_body",
+    "missing_regions",
     "region_values",
     "simulate_activation",
     "simulate_history",
@@ -68,10 +70,12 @@ def fibred_body(body: object) -> Body:
 
 
 def region_values(body: Body, t_max: Any) -> dict[str, float]:
-    """Activation per region (kPa) from a dict or a DataArray over ``region``; NaN -> 0.
+    """Activation per region (kPa) from a dict or a DataArray over ``region``; NaN -> 0, warned.
 
-    NaN stands for a region without an estimate (no data) and becomes 0; an infinite level
-    is refused.
+    NaN stands for a region without an estimate (no data, or fibres shortened past the active
+    law's range); it becomes 0 (the region at rest) with a
+    :class:`~harpx.errors.HarpxWarning` that names it. A negative or infinite level is
+    refused: a negative activation would lengthen the muscle actively.
 
     Parameters
     ----------
@@ -88,10 +92,16 @@ def region_values(body: Body, t_max: Any) -> dict[str, float]:
     Raises
     ------
     ValueError
-        For a region the body does not have, an infinite level, or a DataArray with other
-        dims.
+        For a region the body does not have, a negative or infinite level, or a DataArray
+        with other dims.
     TypeError
         For any other kind of ``t_max``.
+
+    Warns
+    -----
+    HarpxWarning
+        If a level is NaN (the region is simulated at rest); :func:`missing_regions` lists
+        them.
     """
     if isinstance(t_max, xr.DataArray):
         if t_max.dims != ("region",):
@@ -114,8 +124,45 @@ def region_values(body: Body, t_max: Any) -> dict[str, float]:
         v = float(value)
         if np.isinf(v):
             raise ValueError(f"t_max of region {name!r} is {v!r} kPa; expected a finite level")
+        if v < 0.0:
+            raise ValueError(
+                f"t_max of region {name!r} is {v!r} kPa; an activation must be >= 0 (a "
+                "negative one would lengthen the muscle actively). A negative estimate "
+                "means lengthened or passively shortened fibres: pass 0 for that region, "
+                "or correct the estimate (harpx.inverse.correct_activation)"
+            )
         out[str(name)] = 0.0 if np.isnan(v) else v
+    missing = missing_regions(t_max)
+    if missing:
+        warnings.warn(
+            f"t_max is NaN (no estimate) for region(s) {missing!r}; they are simulated at "
+            "rest (0 kPa). An estimate is NaN where the region has no data or its fibres "
+            "are shortened past the active law's range (see the estimate's "
+            "'out_of_range_cells'); pass a level for them to simulate them activated",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
     return out
+
+
+def missing_regions(t_max: Any) -> list[str]:
+    """Names of the regions whose level in ``t_max`` is NaN (no estimate).
+
+    Parameters
+    ----------
+    t_max : dict of str to float or xarray.DataArray over ``region``
+        Activation per region, kPa.
+
+    Returns
+    -------
+    list of str
+        The regions with a NaN level, in the order of ``t_max``; empty for other kinds.
+    """
+    if isinstance(t_max, xr.DataArray) and t_max.dims == ("region",):
+        t_max = dict(zip(t_max["region"].values.tolist(), t_max.values.tolist(), strict=True))
+    if not isinstance(t_max, Mapping):
+        return []
+    return [str(k) for k, v in t_max.items() if np.isnan(float(v))]
 
 
 def with_active_law(body: Body, law: ActiveContraction) -> Body:
@@ -183,6 +230,7 @@ def simulate_activation(
     u0: ArrayLike | None = None,
     t_start: Any = None,
     max_cutbacks: int = 6,
+    min_step: float = 1e-6,
     tol: float = 1e-8,
     linear_solver: str = "auto",
 ) -> SolveResult:
@@ -193,7 +241,7 @@ def simulate_activation(
     body : Body
         Body with an active law (``body.active``); its ``t_max`` is set to the target.
     t_max : float, dict of str to float, DataArray over ``region`` or array of shape (ncell,)
-        Target activation, kPa (per region: other cells 0).
+        Target activation, kPa, >= 0 (per region: other cells 0).
     loads : sequence, optional
         Dirichlet conditions and residual terms (ramped with the same factor).
     steps : int, default 4
@@ -204,6 +252,10 @@ def simulate_activation(
         Activation of ``u0``, kPa; default 0 (rest).
     max_cutbacks : int, default 6
         Consecutive halvings of a failing increment before giving up.
+    min_step : float, default 1e-6
+        Smallest activation increment (fraction of the ramp from ``t_start`` to ``t_max``)
+        before giving up: increments that alternately converge and fail shrink towards a
+        limit point of the ramp, past which no equilibrium exists.
     tol : float, default 1e-8
         Relative Newton tolerance (see :func:`harpx.mechanics.newton.solve`).
     linear_solver : str, default "auto"
@@ -217,9 +269,11 @@ def simulate_activation(
     Raises
     ------
     ValueError
-        If the body has no active law or ``steps < 1``.
+        If the body has no active law, ``steps < 1``, ``min_step`` is not in (0, 1), or an
+        activation (``t_max`` or ``t_start``) is negative or not finite.
     ConvergenceError
-        If an increment fails ``max_cutbacks`` times in a row.
+        If an increment fails ``max_cutbacks`` times in a row, or the increment falls below
+        ``min_step`` (the message names the fraction of the target reached).
     """
     if getattr(body, "active", None) is None:
         raise ValueError(
@@ -228,6 +282,8 @@ def simulate_activation(
         )
     if int(steps) < 1:
         raise ValueError(f"steps={steps!r} must be >= 1")
+    if not 0.0 < float(min_step) < 1.0:
+        raise ValueError(f"min_step={min_step!r} must lie in (0, 1) (a fraction of the ramp)")
     if isinstance(t_max, xr.DataArray):
         t_max = region_values(body, t_max)
     if isinstance(t_start, xr.DataArray):
@@ -236,6 +292,14 @@ def simulate_activation(
     first = np.array(body.t_max, copy=True)
     body.set_t_max(t_max)
     target = np.array(body.t_max, copy=True)
+    for what, level in (("t_start", first), ("t_max", target)):
+        bad = ~(np.isfinite(level) & (level >= 0.0))
+        if bad.any():
+            raise ValueError(
+                f"{what} is {float(level[bad][0])!r} kPa in {int(bad.sum())} cell(s) (e.g. cell "
+                f"{int(np.flatnonzero(bad)[0])}); an activation must be finite and >= 0 (a "
+                "negative one would lengthen the muscle actively)"
+            )
     start = _time.perf_counter()
     u = np.zeros(body.ndof) if u0 is None else np.array(u0, dtype=np.float64, copy=True)
     if u.shape != (body.ndof,):
@@ -272,6 +336,16 @@ def simulate_activation(
                 step.residual_history[-1] if step.residual_history else [],
             )
         ds *= 0.5
+        if ds < min_step:
+            body.set_t_max(target)
+            raise ConvergenceError(
+                f"activation ramp stalled at factor {done:.6g} of the target (increment "
+                f"{ds:.2g} < min_step={min_step!r}; {step.message}): no equilibrium was found "
+                "past it, so the target lies beyond a limit point of the ramp (the loads or "
+                "the activation exceed what the body can carry); use a smaller t_max or "
+                "check the loads",
+                step.residual_history[-1] if step.residual_history else [],
+            )
     body.set_t_max(target)
     result.u = u
     result.converged = True
@@ -296,7 +370,7 @@ def simulate_history(
     body : Body
         The model (not modified; an active copy is solved).
     t_max_by_region : dict of str to float or DataArray over ``region``
-        Final activation per region, kPa.
+        Final activation per region, kPa, >= 0.
     frames : int
         Number of frames (frame 0 at rest).
     dirichlet, terms : sequence, optional
@@ -314,7 +388,13 @@ def simulate_history(
     Raises
     ------
     ValueError
-        If ``frames`` is below 2, or ``fractions`` is not one fraction per frame starting at 0.
+        If ``frames`` is below 2, ``fractions`` is not one fraction per frame starting at 0,
+        or a level is negative, infinite or of an unknown region (:func:`region_values`).
+
+    Warns
+    -----
+    HarpxWarning
+        If a level is NaN (the region stays at rest; :func:`region_values`).
     """
     fibred_body(body)
     law = default_law(body, law)
