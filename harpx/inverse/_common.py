@@ -11,6 +11,7 @@ import xarray as xr
 from harpx._typing import BoolArray, FloatArray, IntArray
 from harpx.errors import HarpxWarning, user_stacklevel
 from harpx.mechanics.body import Body
+from harpx.physiology.active import NEGATIVE_TOLERANCE
 from harpx.schema import standard_attrs
 
 ATTRS: dict[str, dict[str, str]] = {
@@ -104,7 +105,7 @@ def region_statistics(
         vals = t_cell[ids]
         ok = np.isfinite(vals)
         valid[k], beyond[k] = ok.sum(), out_of_range[ids].sum()
-        negative[k] = np.count_nonzero(vals[ok] < 0.0)
+        negative[k] = np.count_nonzero(vals[ok] < -NEGATIVE_TOLERANCE)
         if not ok.any():
             continue
         mean[k] = weighted_stats(vals, w[ids])[0]
@@ -126,7 +127,9 @@ def warn_doubtful_regions(estimate: xr.Dataset, body: Body, law: Any) -> None:
     """Warn about regions whose estimate is negative or NaN, naming them and the cause."""
     names = [str(n) for n in estimate["region"].values]
     t = np.asarray(estimate["t_max"].values, dtype=np.float64)
-    negative = {n: round(float(v), 4) for n, v in zip(names, t, strict=True) if v < 0.0}
+    negative = {
+        n: round(float(v), 4) for n, v in zip(names, t, strict=True) if v < -NEGATIVE_TOLERANCE
+    }
     if negative:
         warnings.warn(
             f"the activation estimate is negative in region(s) {negative!r} (kPa): their "

@@ -7,6 +7,7 @@ per-muscle scaling (:func:`calibrate_activation`); no optimisation loop.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -14,6 +15,7 @@ import numpy as np
 import xarray as xr
 
 from harpx._typing import FloatArray
+from harpx.errors import HarpxWarning, user_stacklevel
 from harpx.inverse._common import (
     attrs,
     matching_regions,
@@ -79,7 +81,14 @@ def calibrate_activation(
         ``estimate`` with ``t_max`` replaced by the calibrated values, the input values in
         ``t_max_uncalibrated``, the transfer in ``chain_transfer`` (region) and the
         calibration run's estimate in ``t_max_calibration_run``; attrs ``method`` updated
-        and ``calibration_epsilon`` (the calibration run's last tracking residual, rad).
+        and ``calibration_epsilon`` (the calibration run's last tracking residual, rad);
+        ``t_max_missing`` (region, bool) marks the regions without an estimate, which rest in
+        the calibration run and stay NaN.
+
+    Warns
+    -----
+    HarpxWarning
+        If a region has no estimate (``t_max`` NaN), naming it.
 
     Raises
     ------
@@ -97,11 +106,20 @@ def calibrate_activation(
     law = default_law(body, law)
     names = matching_regions(estimate, body)
     index = int(estimate.attrs.get("time_index", tracked.sizes["time"] - 1))
-    t1 = np.nan_to_num(np.asarray(estimate["t_max"].values, dtype=np.float64))
+    t1 = np.asarray(estimate["t_max"].values, dtype=np.float64)
+    missing = np.isnan(t1)
+    if missing.any():
+        warnings.warn(
+            f"calibrate_activation: region(s) {np.asarray(names)[missing].tolist()!r} have no "
+            "estimate (t_max NaN): they rest in the calibration run and stay NaN "
+            "(out['t_max_missing'])",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
     frames = int(tracked.sizes["time"])
     U = simulate_history(
         body,
-        dict(zip(names, t1.tolist(), strict=True)),
+        dict(zip(names, np.nan_to_num(t1).tolist(), strict=True)),
         frames,
         dirichlet=dirichlet,
         terms=terms,
@@ -113,12 +131,16 @@ def calibrate_activation(
             f"measure(body, U) must return a tracked/1 dataset with the data's {frames} "
             "frames (image U with the data's acquisition and track it like the data)"
         )
-    run = estimate_activation(
-        observed, body, time=index, law=law, aggregate=estimate.attrs.get("aggregate", "median")
-    )
-    corrected = "t_max_direct" in estimate
-    if corrected:
-        run = correct_activation(run, observed, body, dirichlet=dirichlet, terms=terms, law=law)
+    # what the estimator says of the calibration run (e.g. a resting muscle passively
+    # lengthened by its neighbours reads negative) is about the model's own motion, not the
+    # user's data: kept in t_max_calibration_run, not warned about
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HarpxWarning)
+        run = estimate_activation(
+            observed, body, time=index, law=law, aggregate=estimate.attrs.get("aggregate", "median")
+        )
+        if "t_max_direct" in estimate:
+            run = correct_activation(run, observed, body, dirichlet=dirichlet, terms=terms, law=law)
     t_cal = np.asarray(run["t_max"].values, dtype=np.float64)
     transfer = np.full_like(t1, np.nan)
     np.divide(t_cal, t1, out=transfer, where=t1 > 0)
@@ -129,6 +151,7 @@ def calibrate_activation(
     out["t_max_calibration_run"] = ("region", t_cal, attrs("t_max_calibration_run"))
     out["chain_transfer"] = ("region", transfer, attrs("chain_transfer"))
     out["t_max"] = ("region", t2, attrs("t_max"))
+    out["t_max_missing"] = ("region", missing, attrs("t_max_missing"))
     out.attrs["method"] = str(estimate.attrs.get("method", "direct")) + (
         " + calibration of the measurement chain with one re-simulation"
     )

@@ -28,12 +28,19 @@ from harpx.mechanics.newton import SolveResult, equilibrate
 __all__ = [
     "default_law",
     "fibred_body",
+    "NEGATIVE_TOLERANCE",
     "missing_regions",
     "region_values",
     "simulate_activation",
     "simulate_history",
     "with_active_law",
 ]
+
+
+#: Activation levels (kPa) between minus this and 0 are the round-off of a resting muscle's
+#: estimate (the uniaxial closed form at a stretch of 1 to the solver's tolerance): taken
+#: as 0, neither refused nor warned about as negative
+NEGATIVE_TOLERANCE = 1e-6
 
 
 def fibred_body(body: object) -> Body:
@@ -124,14 +131,14 @@ def region_values(body: Body, t_max: Any) -> dict[str, float]:
         v = float(value)
         if np.isinf(v):
             raise ValueError(f"t_max of region {name!r} is {v!r} kPa; expected a finite level")
-        if v < 0.0:
+        if v < -NEGATIVE_TOLERANCE:
             raise ValueError(
                 f"t_max of region {name!r} is {v!r} kPa; an activation must be >= 0 (a "
                 "negative one would lengthen the muscle actively). A negative estimate "
                 "means lengthened or passively shortened fibres: pass 0 for that region, "
                 "or correct the estimate (harpx.inverse.correct_activation)"
             )
-        out[str(name)] = 0.0 if np.isnan(v) else v
+        out[str(name)] = 0.0 if np.isnan(v) else max(v, 0.0)  # round-off of rest: 0
     missing = missing_regions(t_max)
     if missing:
         warnings.warn(

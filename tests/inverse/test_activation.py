@@ -217,3 +217,21 @@ def test_bad_inputs_are_named(two_muscles):
         calibrate_activation(est, tracked, body, measure=lambda b, d: _as_tracked(b, d[:2]))
     with pytest.raises(ValueError, match="no tracked stretch"):
         plot_stretch_agreement(resimulate(body, truth, dirichlet=bcs))
+
+
+def test_calibration_keeps_a_region_without_an_estimate_nan(two_muscles):
+    # muscle B without an estimate: it rests in the calibration run and stays NaN (it came
+    # out 0 kPa before, a plausible "inactive muscle"); A is calibrated as usual
+    body, bcs, truth, U = two_muscles
+
+    def measure(b, displacement):
+        return _as_tracked(b, 0.7 * np.asarray(displacement))
+
+    tracked = measure(body, U)
+    est = correct_activation(estimate_activation(tracked, body), tracked, body, dirichlet=bcs)
+    est["t_max"] = est["t_max"].where(est["region"] != "B")
+    with pytest.warns(HarpxWarning, match=r"region\(s\) \['B'\] have no estimate"):
+        cal = calibrate_activation(est, tracked, body, measure=measure, dirichlet=bcs)
+    assert np.isnan(cal["t_max"].sel(region="B").item())
+    assert cal["t_max_missing"].values.tolist() == [False, True]
+    assert 0.0 < cal["t_max"].sel(region="A").item() < 2 * truth["A"]
