@@ -136,8 +136,9 @@ class FrameOutcome:
         Whether the penalty raise stopped because ε no longer fell (the data's plateau)
         rather than at ``penalty_limit``.
     plateau : bool
-        Whether the frame counts as reached above its target (ε levelled off, or the
-        penalty at its limit, within the accepted level).
+        Whether the frame counts as reached above its target: ε levelled off (``stalled``)
+        within the accepted level. A raise stopped at ``penalty_limit`` while ε still fell
+        is a miss, never a plateau.
     """
 
     u: FloatArray
@@ -171,12 +172,14 @@ class FrameOutcome:
         """End a penalty raise that did not meet the target (limit or plateau).
 
         The raise stalled if the last ε fell by less than the fraction ``stall`` below the
-        ``best`` before it; otherwise it stopped at ``penalty_limit``, where the data
-        outweigh the model 10⁴-fold and more penalty changes little. Either way an ε of at
-        most ``accepted`` counts as reached (``plateau``); above it the frame is a miss.
+        ``best`` before it: ε has levelled off at what the data allow, and an ε of at most
+        ``accepted`` counts as reached (``plateau``). Otherwise it stopped at
+        ``penalty_limit`` while ε was still falling (or the first level was already the
+        limit, so nothing shows it levelled off): a higher penalty would have lowered it,
+        so the frame is a miss whatever its ε, as is a plateau above ``accepted``.
         """
-        self.stalled = self.epsilon > (1.0 - stall) * best
-        self.plateau = self.epsilon <= accepted
+        self.stalled = bool(self.epsilon > (1.0 - stall) * best)
+        self.plateau = self.stalled and self.epsilon <= accepted
         return self.finish(reached=self.plateau)
 
     def finish(self, *, reached: bool) -> FrameOutcome:

@@ -7,8 +7,10 @@ mechanics carries it past wrap ambiguities; the frame stops at the first stage w
 the target. When the ramp's top does not reach it, λ_max is doubled (up to ``penalty_limit``)
 while each doubling still lowers ε by at least 3 %; past that the residual is at the noise
 floor of the data, and raising λ would only fit noise: a plateau within the accepted level
-(:meth:`~harpx.tracking.settings.TrackingSettings.accepted_plateau`) counts as reached. The
-λ_max that worked starts the next frame.
+(:meth:`~harpx.tracking.settings.TrackingSettings.accepted_plateau`) counts as reached. A
+raise that reaches ``penalty_limit`` while ε still falls has not levelled off: the frame is
+a miss (:meth:`~harpx.tracking.frame.FrameOutcome.finish_raise`). The λ_max that worked
+starts the next frame.
 
 A doubling refines a fit that has converged at the λ before it, so it moves the body little
 (well under half a tag period on every scene; ``benchmarks/results/tracking_defaults.md``).

@@ -25,6 +25,11 @@ PREDICTORS: tuple[str, ...] = ("none", "linear")
 REGULARIZATIONS: tuple[str, ...] = ("increment", "total")
 
 
+#: Mean |wrapped residual| of phase uniform in [−π, π), rad: what ε is when the body matches
+#: nothing, so a target at or above it is met by noise.
+_NOISE_EPSILON = 0.5 * math.pi
+
+
 def _is_number(value: Any) -> bool:
     """A real scalar: Python or numpy int/float (numpy scalars come from arrays), not bool."""
     return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
@@ -205,7 +210,8 @@ class TrackingSettings:
         Default (None): ``epsilon_factor`` times the noise floor the images allow in each
         frame (``epsilon_floor`` in the result, :mod:`harpx.tracking.noise`), but never
         below ``epsilon_min``, so that the penalty is not raised to fit noise. A number
-        keeps full control.
+        keeps full control; it must be below π/2, the mean of ``|W(·)|`` over phase that
+        matches nothing (uniform in [−π, π)): a target there is met by any displacement.
     epsilon_factor : float, default 1.5
         Default target relative to the estimated phase-noise floor (dimensionless, ≥ 1).
         The residual at the true motion exceeds the noise alone (the band-pass blur the
@@ -213,19 +219,19 @@ class TrackingSettings:
         fitting noise; a looser fit under-reports wall thickening, the only cue the model
         has for motion no tag sees. Why 1.5: ``benchmarks/results/tracking_defaults.md``.
     plateau_factor : float, default 2.0
-        With the default target only: a frame whose ε ends above the target — it levels off
+        With the default target only: a frame whose ε levels off above the target
         (doubling λ lowers it by less than 3 %: the images' own residual, e.g. the band-pass
-        filter's blur at the tissue's edges, not noise) or the penalty reaches
-        ``penalty_limit`` — has reached what the data allow if ε is within
-        ``plateau_factor`` times the target (dimensionless, ≥ 1); it is marked ``plateau``
-        and counts as reached. Above that it is a miss (warned). A user-given ``epsilon``
-        is never relaxed.
+        filter's blur at the tissue's edges, not noise) has reached what the data allow if
+        ε is within ``plateau_factor`` times the target (dimensionless, ≥ 1); it is marked
+        ``plateau`` and counts as reached. Above that it is a miss (warned), and so is a
+        frame whose penalty reaches ``penalty_limit`` while ε is still falling, whatever
+        its ε. A user-given ``epsilon`` is never relaxed.
     epsilon_min : float, default 0.03
-        Lowest default target, rad (0.5 % of a tag period): on clean data (an estimated
-        floor near 0) the target is this; on noisy images the floor decides. About the
-        phase the band-pass blur correction leaves at a wall: a tighter default fit
-        follows that leftover instead of the tissue (wall thickening under-reported on
-        noise-free images; user guide, "Wall thickening").
+        Lowest default target, rad (0.5 % of a tag period; below π/2, as ``epsilon``): on
+        clean data (an estimated floor near 0) the target is this; on noisy images the
+        floor decides. About the phase the band-pass blur correction leaves at a wall: a
+        tighter default fit follows that leftover instead of the tissue (wall thickening
+        under-reported on noise-free images; user guide, "Wall thickening").
     penalty : float, default 1.0
         Starting λ_max relative to material stiffness and tag wavenumber (dimensionless;
         1 makes the data stiffness λ|k|² equal to μ/h² at the element scale h). The tracker
@@ -355,6 +361,16 @@ class TrackingSettings:
         for name in ("epsilon_factor", "plateau_factor", "epsilon_min", "penalty", "penalty_limit",
                      "multiplier_tolerance", "tolerance"):  # fmt: skip
             set_(self, name, _positive(name, getattr(self, name)))
+        for name in ("epsilon", "epsilon_min"):
+            value = getattr(self, name)
+            if value is not None and value >= _NOISE_EPSILON:
+                raise ValueError(
+                    f"{name}={value!r} rad is at or above π/2 ({_NOISE_EPSILON:.4f} rad), the "
+                    "mean |wrapped phase residual| of phase that matches nothing: noise meets "
+                    "such a target at any displacement. Give a target well below it (the "
+                    f"residual at the true motion is near the images' noise floor), or omit "
+                    f"{name} for its default"
+                )
         if self.epsilon_factor < 1.0:
             raise ValueError(
                 f"epsilon_factor={self.epsilon_factor!r} must be ≥ 1: a target below the "

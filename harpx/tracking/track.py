@@ -35,7 +35,7 @@ from harpx.tracking.blur import blur_models, lazily_deblurred
 from harpx.tracking.constraint import PhaseConstraint
 from harpx.tracking.equilibrium import Timings, split_dirichlet
 from harpx.tracking.frame import FrameGoal, FrameOutcome, FrameProblem
-from harpx.tracking.image_fit import check_coverage, check_fits_image
+from harpx.tracking.image_fit import background_fraction, check_coverage, check_fits_image
 from harpx.tracking.observability import describe_direction
 from harpx.tracking.penalty import track_frame_penalty
 from harpx.tracking.results import tracked_dataset
@@ -390,6 +390,9 @@ def track(
         "unseen_directions": "; ".join(seen.unseen_directions) or "none",
         "rigid_modes_removed": int(seen.unseen_modes.shape[0]),
         "outside_fraction": float(outside),
+        "background_fraction": background_fraction(
+            phase, constraint.points, constraint.volume, constraint.reference_valid
+        ),
         "tags_off_frequency": off_frequency,
         "tags_frequency_unmeasured": " ".join(tags_unmeasured(phase)) or "none",
         "blur_passes_applied": int(plan.passes),
