@@ -85,15 +85,15 @@ def calibrate_activation(
         ``t_max_missing`` (region, bool) marks the regions without an estimate, which rest in
         the calibration run and stay NaN.
 
-    Warns
-    -----
-    HarpxWarning
-        If a region has no estimate (``t_max`` NaN), naming it.
-
     Raises
     ------
     ValueError
         If ``measure`` does not return a tracked dataset of ``body`` with the data's frames.
+
+    Warns
+    -----
+    HarpxWarning
+        If a region has no estimate (``t_max`` NaN), naming it.
 
     Notes
     -----
