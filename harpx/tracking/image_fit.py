@@ -41,8 +41,8 @@ OUTSIDE_WARN = 0.05
 #: Fraction of the body's volume inside the field of view and masks but without tissue
 #: signal from any tag (in the reference frame) above which :func:`check_coverage` warns.
 #: A mesh fitted to the tissue has some such volume at its edges, where the band-pass blur
-#: or partial volume drops the magnitude below its floor; the user guide (choosing the
-#: tracking settings) gives how much the bundled scenes have, a few per cent.
+#: or partial volume drops the magnitude below its floor; the user guide ("Choosing ε and
+#: the penalty") gives how much the bundled scenes have, a few per cent.
 BACKGROUND_WARN = 0.15
 
 _EDGES_BY_DIRECTION = np.array(
