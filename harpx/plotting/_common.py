@@ -63,14 +63,18 @@ _SLICE_DOC_TAIL = """    ValueError
 
 
 def _map_doc(
-    kind: str, *variables: str, slices: bool = True, slice_params: bool = False
+    kind: str,
+    *variables: str,
+    slices: bool = True,
+    slice_params: bool = False,
+    value_errors: str = "",
 ) -> Callable[[_F], _F]:
     """Append the shared ``ax``, Returns and Raises sections to a plot's docstring; the
     Raises entry names the dataset ``kind`` and the ``variables`` the plot needs, and for a
     map that picks the nearest frame and slice (``slices``) what that raises and warns.
     ``slice_params``: also document ``ds`` (first: the ``kind`` dataset with ``variables``)
     and ``time`` and ``z`` as the image-grid maps take them (after the plot's own
-    parameters, before ``ax``)."""
+    parameters, before ``ax``). ``value_errors``: what else raises ValueError (", or ...")."""
     quoted = [f"``{v}``" for v in variables]
     names = quoted[-1] if len(quoted) == 1 else ", ".join(quoted[:-1]) + " or " + quoted[-1]
 
@@ -78,7 +82,13 @@ def _map_doc(
         assert func.__doc__ is not None
         tail = _MAP_DOC_TAIL.format(kind=kind, names=names)
         if slices:
-            tail = tail.rstrip() + "\n" + _SLICE_DOC_TAIL
+            tail = (
+                tail.rstrip()
+                + "\n"
+                + _SLICE_DOC_TAIL.replace(
+                    "not a finite number.", f"not a finite number{value_errors}."
+                )
+            )
         doc = _indented(func.__doc__).rstrip()
         # the plot's own Examples stay last (numpydoc order), after the shared sections
         doc, examples_header, examples = doc.partition("\n\n    Examples\n    --------\n")

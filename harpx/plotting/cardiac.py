@@ -18,6 +18,7 @@ References
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -29,6 +30,8 @@ from matplotlib import patheffects
 from matplotlib.patches import Wedge
 
 from harpx.cardiac.strain import AHA_NAMES
+from harpx.errors import HarpxWarning, user_stacklevel
+from harpx.plotting._common import _nearest, _number
 
 __all__ = ["RINGS", "bullseye", "segment_curves", "segment_wedges"]
 
@@ -73,12 +76,18 @@ def segment_wedges() -> dict[int, tuple[float, float, float, float]]:
 def _select(
     values: xr.Dataset | xr.DataArray | Sequence[float],
     variable: str,
-    component: str,
+    component: str | None,
     time: float | None,
-) -> tuple[Any, str, str]:
-    """The 17-value DataArray (or numbers), its title and the frame it shows."""
+) -> tuple[Any, str, str, str]:
+    """The 17-value DataArray (or numbers), its title, the frame it shows and its component.
+
+    A dataset's variable is titled by what it is; a DataArray given as such is not titled by
+    its name or attributes, which arithmetic keeps (an error against a truth keeps the name
+    and ``long_name`` of the strain), only by its component and frame."""
     da: Any = values
     when = ""
+    plot = "bullseye"
+    trusted = isinstance(da, xr.Dataset)
     if isinstance(da, xr.Dataset):
         if variable not in da:
             raise ValueError(f"the dataset has no {variable!r}; run cardiac_strain first")
@@ -86,23 +95,68 @@ def _select(
             when = f"peak over t = {float(da.time[0]):.0f}-{float(da.time[-1]):.0f} ms"
         da = da[variable]
     if not isinstance(da, xr.DataArray):
-        return da, "", when
+        if component is not None:
+            raise ValueError(
+                f"{plot}: component={component!r} cannot be selected from plain numbers; "
+                "pass the 17 values of that component without component="
+            )
+        return da, "", when, ""
     if "component" in da.dims:
-        da = da.sel(component=component)
+        da = da.sel(component="circumferential" if component is None else component)
+    elif component is not None:
+        has = "component" in da.coords and da["component"].ndim == 0
+        if not has or str(da["component"].item()) != component:
+            what = f"holds {str(da['component'].item())!r}" if has else "has no 'component'"
+            raise ValueError(
+                f"{plot}: component={component!r} cannot be selected: the DataArray {what}; "
+                "pass the array with its 'component' dim, or drop component="
+            )
     if "time" in da.dims:
         if time is None:
             raise ValueError(
                 "select one frame first (time=... or .isel(time=-1)): the values have 'time'"
             )
-        da = da.sel(time=time, method="nearest")
-    if "time" in da.coords and da["time"].ndim == 0:
-        when = f"t = {float(da['time']):.0f} ms"
+        shown, note = _nearest(da["time"].values, "time", float(time), plot)
+        da = da.sel(time=shown)
+        when = "\n".join([f"t = {_number(shown)} ms", *([note] if note else [])])
+    elif time is not None:
+        raise ValueError(
+            f"{plot}: time={time!r} cannot be selected: the values have no 'time' dim "
+            f"({when or 'one value per segment'}); drop time= or pass a variable with "
+            "'time', e.g. variable='segment_strain'"
+        )
+    elif "time" in da.coords and da["time"].ndim == 0:
+        when = f"t = {_number(float(da['time']))} ms"
     named = "component" in da.coords and da["component"].ndim == 0
     c = str(da["component"].item()) if named else ""
-    # a derived array (arithmetic drops the attributes) keeps its name but not its meaning
-    long_name = da.attrs.get("long_name")
-    title = "" if long_name is None else _TITLES.get(str(da.name), str(long_name))
-    return da, title.format(c=c).strip(), when
+    if not trusted:
+        return da, " ".join(p for p in (c, "value") if p), when, c
+    long_name = da.attrs.get("long_name", variable)
+    title = _TITLES.get(variable, str(long_name))
+    return da, title.format(c=c).strip().replace("  ", " "), when, c
+
+
+def _units(
+    v: np.ndarray, units: str | None, given: Any, plot: str = "bullseye"
+) -> tuple[bool, str, str]:
+    """Whether values ``v`` are drawn in % (dimensionless), their unit as drawn, and a
+    caption note when that rests on an assumption. ``units``: as the caller gives them;
+    ``given``: the data's ``units`` attribute (None for plain numbers)."""
+    stated = units if units is not None else given
+    if stated is not None:
+        dimensionless = str(stated) in ("", "1")
+        return dimensionless, "%" if dimensionless else str(stated), ""
+    finite = np.abs(v[np.isfinite(v)])
+    if finite.size and float(finite.max()) > 1.0:
+        warnings.warn(
+            f"{plot}: the values state no units and reach {float(finite.max()):.4g}; they are "
+            f"drawn as dimensionless strains in % (up to {100 * float(finite.max()):.4g} %); "
+            "pass units= (e.g. units='ms' for times, units='1' for strains)",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
+        return True, "%", "no units given: drawn as strain (%)"
+    return True, "%", ""
 
 
 def _label(ax: Any, k: int, wedge: tuple[float, ...], value: str, face: Any) -> None:
@@ -125,8 +179,9 @@ def bullseye(
     values: xr.Dataset | xr.DataArray | Sequence[float],
     *,
     variable: str = "peak_strain",
-    component: str = "circumferential",
+    component: str | None = None,
     time: float | None = None,
+    units: str | None = None,
     ax: Any = None,
     cmap: str = "RdBu_r",
     vmin: float | None = None,
@@ -139,10 +194,13 @@ def bullseye(
 
     Anterior at the top, septum on the left (see the module notes and
     :func:`segment_wedges`); segment numbers in every segment, values in % for
-    dimensionless quantities, blank segments without data, hatched segments whose
-    component the model inferred, a colour bar with units, a title naming the quantity and
-    the frame (or the peak). The radial component of a result whose
-    ``attrs["radial_strain_caution"]`` is set says "under-reported" in its caption.
+    dimensionless quantities (others in their own units, e.g. ms), blank segments without
+    data, hatched segments whose component the model inferred, a colour bar with units, a
+    title naming the quantity and the frame (or the peak). The radial component of a result
+    whose ``attrs["radial_strain_caution"]`` is set says "under-reported" in its caption.
+    A DataArray is titled by its component and frame only, not by its name or attributes
+    (arithmetic keeps them: a difference of two strains keeps the strain's name); give
+    ``title`` and ``label`` to say what it is.
 
     Parameters
     ----------
@@ -153,10 +211,17 @@ def bullseye(
         (segment 1 first).
     variable : str, default "peak_strain"
         Variable of a dataset.
-    component : str, default "circumferential"
-        ``component`` to select when the variable has one.
+    component : str, optional
+        ``component`` to select from a dataset or DataArray with that dim (default
+        ``"circumferential"``); a DataArray already reduced to one component must hold
+        this one.
     time : float, optional
-        Frame (ms, nearest) of a variable with a ``time`` dim (required for those).
+        Frame (ms) of a variable with a ``time`` dim (required for those, refused for
+        others); the nearest frame is shown and named in the title.
+    units : str, optional
+        Units of the values: ``"1"`` (dimensionless, drawn in %) or any other (drawn as
+        given, e.g. ``"ms"``). Default the ``units`` attribute of the data; values without
+        one (plain numbers) are taken as dimensionless strains.
     ax : matplotlib.axes.Axes, optional
         Axes to draw in (default: a new figure).
     cmap : str, default "RdBu_r"
@@ -180,7 +245,17 @@ def bullseye(
     Raises
     ------
     ValueError
-        If there are not 17 values, the dataset lacks ``variable``, or a frame is needed.
+        If there are not 17 values, the dataset lacks ``variable``, a frame is needed
+        (``time``) or given to values without frames, ``time`` is not a finite number, or
+        ``component`` cannot be selected from the values.
+
+    Warns
+    -----
+    HarpxWarning
+        If the frame shown, the nearest to ``time``, lies more than half the frame
+        interval away from it (``time`` outside the data); or the values state no units
+        and exceed 1 in magnitude, so that taking them as strains is doubtful (the caption
+        says so too).
 
     Examples
     --------
@@ -198,16 +273,16 @@ def bullseye(
     ('blank: no data', 'value (%)')
     >>> plt.close(fig)
     """
-    da, quantity, when = _select(values, variable, component, time)
+    da, quantity, when, shown_component = _select(values, variable, component, time)
     source: Any = None
     anterior = ""
-    units: Any = None
+    given: Any = None
     if isinstance(da, xr.DataArray):
         if "segment" in da.dims and da.sizes["segment"] == 17 and "segment" in da.coords:
             da = da.sel(segment=np.arange(1, 18))
         if "strain_source" in da.coords and da["strain_source"].dims == ("segment",):
             source = np.asarray(da["strain_source"].values, dtype=str)
-        units = da.attrs.get("units")
+        given = da.attrs.get("units")
     if isinstance(values, xr.Dataset) and "anterior_deg" in values.attrs:
         anterior = (
             f"anterior {float(values.attrs['anterior_deg']):g}° from the template's x axis "
@@ -216,9 +291,8 @@ def bullseye(
     v = np.asarray(da, dtype=np.float64).ravel()
     if v.size != 17:
         raise ValueError(f"bullseye needs 17 segment values, got {v.size}")
-    percent = units in (None, "", "1")
+    percent, unit, assumed = _units(v, units, given)
     shown = 100.0 * v if percent else v
-    unit = "%" if percent else str(units)
     finite = shown[np.isfinite(shown)]
     if finite.size and (percent or finite.min() < 0.0):
         bound = float(np.abs(finite).max()) or 1.0
@@ -255,8 +329,10 @@ def bullseye(
     ax.axis("off")
     heading = title if title is not None else "\n".join(p for p in (quantity, when) if p)
     ax.set_title(heading, fontsize=10)
-    if component == "radial" and _radial_caution(values):
+    if shown_component == "radial" and _radial_caution(values):
         notes.add("under-reported: see attrs['radial_strain_caution']")
+    if assumed:
+        notes.add(assumed)
     caption = "; ".join([*sorted(notes), *([anterior] if anterior else [])])
     if caption:
         ax.text(0.5, -0.02, caption, transform=ax.transAxes, ha="center", va="top",

@@ -11,7 +11,7 @@ import xarray as xr
 
 from harpx._typing import PathLike
 from harpx.errors import SchemaError
-from harpx.plotting._common import _magnitude, _require
+from harpx.plotting._common import _magnitude, _nearest, _number, _require
 
 __all__ = [
     "displacement_maps",
@@ -20,6 +20,9 @@ __all__ = [
     "plot_stretch_agreement",
     "run_seconds",
 ]
+
+# a result's frame matches the truth's when within this fraction of the frame interval
+_FRAME_TOLERANCE = 1e-3
 
 
 def displacement_maps(
@@ -34,6 +37,10 @@ def displacement_maps(
 
     Like the paper's Fig. 1 c/d: the top row shows ``|u|`` of each method at ``time`` on the
     slice nearest ``z``; the bottom row shows the error ``|u − u_true|`` against the truth.
+    Every panel shows the same frame and slice, named in the title (with the time or slice
+    asked for when the truth's nearest is another); a result on another grid is
+    interpolated to the truth's slice. Each row has one colour scale from 0 to its largest
+    value, so no panel saturates.
 
     Parameters
     ----------
@@ -42,9 +49,10 @@ def displacement_maps(
     truth : xarray.Dataset
         Dataset with ``displacement_true``.
     time : float
-        Frame time, ms (nearest frame).
+        Frame time, ms: the truth's frame nearest it is shown, and every result must have
+        a frame at that time.
     z : float, optional
-        Slice position, mm (default: the middle slice).
+        Slice position, mm (default: the truth's middle slice; the nearest slice is shown).
     path : path-like, optional
         Write the figure here (PNG).
 
@@ -58,6 +66,15 @@ def displacement_maps(
     SchemaError
         If the dataset is not ``tracked/1`` (the message names the kind it is) or has no
         ``displacement_grid`` (or ``truth`` has no ``displacement_true``).
+    ValueError
+        If ``time`` or ``z`` is not a finite number, or a result has no frame at the time
+        shown (the message lists its frame times).
+
+    Warns
+    -----
+    HarpxWarning
+        If the truth's frame (slice) nearest ``time`` (``z``) lies more than half the frame
+        interval (slice spacing) away from it: ``time`` (``z``) is outside the data.
     """
     if "displacement_true" not in truth.variables:
         raise SchemaError(
@@ -66,41 +83,89 @@ def displacement_maps(
         )
     for name, ds in results.items():
         _require(ds, "tracked", ["displacement_grid"], f"displacement_maps (results[{name!r}])")
-    true = truth["displacement_true"].sel(time=time, method="nearest")
-    zsel = float(true.z[true.sizes["z"] // 2]) if z is None else z
-    true = true.sel(z=zsel, method="nearest")
+    plot = "displacement_maps"
+    true = truth["displacement_true"]
+    shown_t, t_note = _nearest(true["time"].values, "time", float(time), plot)
+    true = true.sel(time=shown_t)
+    if z is None:
+        true = true.isel(z=true.sizes["z"] // 2)
+        z_note = None
+    else:
+        shown_z, z_note = _nearest(true["z"].values, "z", float(z), plot)
+        true = true.sel(z=shown_z)
+    zsel = float(true.z)
+    estimates = {
+        name: _on_slice(ds["displacement_grid"], true, name) for name, ds in results.items()
+    }
     ncol = len(results) + 1
     fig, axes = plt.subplots(
         2, ncol, figsize=(3.6 * ncol, 6.6), squeeze=False, layout="constrained"
     )
-    vmax = float(np.nanmax(_magnitude(true)))
+    true_mag = _magnitude(true)
+    mags = {name: _magnitude(est) for name, est in estimates.items()}
+    errors = {name: _magnitude(est - true.values) for name, est in estimates.items()}
+    # one scale per row, spanning every panel of it: nothing saturates
+    vmax = _top([true_mag, *mags.values()])
+    emax = _top(list(errors.values()))
     extent = [float(true.x[0]), float(true.x[-1]), float(true.y[0]), float(true.y[-1])]
-    axes[0, 0].imshow(_magnitude(true), origin="lower", extent=extent, vmin=0, vmax=vmax)
+    im = axes[0, 0].imshow(true_mag, origin="lower", extent=extent, vmin=0, vmax=vmax)
     axes[0, 0].set_title("truth: |u| (mm)", fontsize=9)
     axes[1, 0].axis("off")
-    for col, (name, ds) in enumerate(results.items(), start=1):
-        est = ds["displacement_grid"].sel(time=time, method="nearest")
-        est = (
-            est.interp(z=true.z, y=true.y, x=true.x)
-            if est.sizes["x"] != true.sizes["x"]
-            else est.sel(z=zsel, method="nearest")
-        )
-        mag = _magnitude(est)
-        im = axes[0, col].imshow(mag, origin="lower", extent=extent, vmin=0, vmax=vmax)
+    im2 = None
+    for col, name in enumerate(results, start=1):
+        axes[0, col].imshow(mags[name], origin="lower", extent=extent, vmin=0, vmax=vmax)
         axes[0, col].set_title(f"{name}: |u| (mm)", fontsize=9)
-        err = _magnitude(est - true.values)
+        err = errors[name]
         im2 = axes[1, col].imshow(
-            err, origin="lower", extent=extent, vmin=0, vmax=2.0, cmap="magma"
+            err, origin="lower", extent=extent, vmin=0, vmax=emax, cmap="magma"
         )
-        axes[1, col].set_title(
-            f"{name}: error (mm)\nslice mean {float(np.nanmean(err)):.2f}", fontsize=9
-        )
-    fig.colorbar(im, ax=axes[0, :].tolist(), shrink=0.8)
-    fig.colorbar(im2, ax=axes[1, 1:].tolist(), shrink=0.8)
-    fig.suptitle(f"t = {float(true.time):.0f} ms, z = {zsel:.1f} mm")
+        e = np.asarray(err, dtype=np.float64)
+        e = e[np.isfinite(e)]
+        summary = f"slice mean {e.mean():.2f}, max {e.max():.2f}" if e.size else "no value"
+        axes[1, col].set_title(f"{name}: error (mm)\n{summary}", fontsize=9)
+    fig.colorbar(im, ax=axes[0, :].tolist(), shrink=0.8, label="|u| (mm)")
+    if im2 is not None:
+        fig.colorbar(im2, ax=axes[1, 1:].tolist(), shrink=0.8, label="|u − u_true| (mm)")
+    notes = [n for n in (t_note, z_note) if n]
+    fig.suptitle(
+        "\n".join([f"t = {_number(shown_t)} ms, z = {_number(zsel)} mm", *notes]), fontsize=11
+    )
     if path is not None:
         fig.savefig(path, dpi=110)
     return fig
+
+
+def _top(maps: Sequence[xr.DataArray]) -> float:
+    """The largest finite value over ``maps`` (a colour limit; 1 when there is none)."""
+    finite = [float(np.nanmax(m)) for m in maps if np.isfinite(np.asarray(m)).any()]
+    return max(finite) if finite and max(finite) > 0.0 else 1.0
+
+
+def _on_slice(grid: xr.DataArray, true: xr.DataArray, name: str) -> xr.DataArray:
+    """The displacement ``grid`` of result ``name`` at the frame and on the slice of the
+    truth's slice ``true``: the same frame (else ValueError), the truth's slice and pixels
+    (interpolated when the result's grid is another)."""
+    t = float(true.time)
+    times = np.asarray(grid["time"].values, dtype=np.float64)
+    step = float(np.median(np.diff(np.sort(times)))) if times.size > 1 else 1.0
+    tol = _FRAME_TOLERANCE * max(step, 1e-9)
+    hit = np.flatnonzero(np.abs(times - t) <= tol)
+    if not hit.size:
+        raise ValueError(
+            f"displacement_maps: results[{name!r}] has no frame at time = {_number(t)} ms "
+            f"(its frames are at {', '.join(_number(v) for v in times)} ms); pass a time "
+            "that every result and the truth share"
+        )
+    est = grid.isel(time=int(hit[0]))
+    same = all(
+        est.sizes[d] == true.sizes[d] and np.allclose(est[d].values, true[d].values)
+        for d in ("y", "x")
+    )
+    zs = np.asarray(est["z"].values, dtype=np.float64)
+    exact = np.flatnonzero(np.isclose(zs, float(true.z), rtol=0.0, atol=1e-6))
+    if same and exact.size:
+        return est.isel(z=int(exact[0]))
+    return est.interp(z=float(true.z), y=true.y, x=true.x)
 
 
 def run_seconds(result: xr.Dataset) -> float:

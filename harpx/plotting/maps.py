@@ -165,17 +165,20 @@ def displacement_map(
     Parameters
     ----------
     component : {"x", "y", "z"}, optional
-        Component to show; default the magnitude.
+        Component to show, on a diverging colour map with limits symmetric about 0;
+        default the magnitude.
     """
     plot = "displacement_map (ds.harp.plot.displacement)"
     _require(ds, "tracked", ["displacement_grid"], plot)
     da, notes = _slice(ds["displacement_grid"], time, z, plot)
     title = _where(da, notes)
-    da = _magnitude(da) if component is None else da.sel(axis=component)
+    if component is None:
+        return _slice_map(_magnitude(da), title, ax, cmap="viridis", label="u (mm)")
+    da = da.sel(axis=component)
+    # a signed component: limits symmetric about 0, the diverging map's centre
+    values = np.abs(np.asarray(da.values, dtype=np.float64))
+    bound = float(values[np.isfinite(values)].max()) if np.isfinite(values).any() else 0.0
+    bound = bound or 1.0
     return _slice_map(
-        da,
-        title,
-        ax,
-        cmap="viridis" if component is None else "RdBu_r",
-        label=f"u{'' if component is None else '_' + component} (mm)",
+        da, title, ax, cmap="RdBu_r", label=f"u_{component} (mm)", vmin=-bound, vmax=bound
     )

@@ -212,7 +212,13 @@ def strain_on_slice(
     }  # fmt: skip
 
 
-@_map_doc("tracked", "green_strain", "points", "cells")
+@_map_doc(
+    "tracked",
+    "green_strain",
+    "points",
+    "cells",
+    value_errors=", the component is unknown, or ``vmax`` is not a positive number",
+)
 def strain_map(
     ds: xr.Dataset,
     *,
@@ -250,18 +256,26 @@ def strain_map(
         Slice position, mm (default the middle of the mesh); the nearest slice of the
         image grid is shown when the dataset has one (its ``z`` coordinate).
     vmax : float, optional
-        Colour limit in % (the map spans ``-vmax`` to ``vmax``); default the largest
-        absolute value on the slice.
+        Colour limit in %, positive (the map spans ``-vmax`` to ``vmax``); default the
+        largest absolute value on the slice. Cells without a value (NaN) are blank and
+        counted in the title.
     i, j : int, optional
         The Cartesian component as indices (0 = x, 1 = y, 2 = z), instead of
         ``component``.
     """
     plot = "strain_map (ds.harp.plot.strain)"
+    if vmax is not None and not (np.isfinite(vmax) and vmax > 0.0):
+        raise ValueError(
+            f"{plot}: vmax must be a positive number of % (the map spans -vmax to vmax); "
+            f"got vmax={vmax!r}; leave it None to span the slice's values"
+        )
     name = _component(ds, component, i, j)
     cut = strain_on_slice(ds, name, time=time, z=z, plot=plot)
     values = 100.0 * cut["values"]
     finite = values[np.isfinite(values)]
-    bound = vmax if vmax is not None else (float(np.abs(finite).max()) if finite.size else 1.0)
+    bound = (
+        float(vmax) if vmax is not None else (float(np.abs(finite).max()) if finite.size else 0.0)
+    )
     norm = matplotlib.colors.Normalize(-(bound or 1.0), bound or 1.0)
     ax = _axes(ax, (5.0, 4.4))
     cells = PolyCollection(cut["polygons"], array=values, cmap="RdBu_r", norm=norm,
@@ -285,6 +299,9 @@ def strain_map(
         quantity = f"strain {symbol}"
     when = f"t = {_number(cut['time'])} ms, " if np.isfinite(cut["time"]) else ""
     lines = [quantity, f"{when}z = {_number(cut['z'])} mm", *cut["notes"]]
+    blank = int(values.size - finite.size)
+    if blank and finite.size:  # all blank warns below
+        lines.append(f"{blank} of {values.size} cells without a value (blank)")
     inferred = source.size > 0 and all(s in _HATCH for s in source)
     if inferred:
         lines.append("inferred by the model: the tags do not see it")
