@@ -345,6 +345,8 @@ def _dicom(args: argparse.Namespace) -> int:
             ) from None
         vector = [float(v) for v in direction.split(",")] if "," in direction else direction
         directions.setdefault(series, []).append((label, vector))
+    # without --time-tolerance, read_tagged's own default applies
+    tolerance = {} if args.time_tolerance is None else {"time_tolerance": args.time_tolerance}
     try:
         ds = read_tagged(
             args.input,
@@ -352,6 +354,7 @@ def _dicom(args: argparse.Namespace) -> int:
             tag_directions=directions,
             sequence=args.sequence,
             spacing=args.spacing,
+            **tolerance,
         )
     except HarpxError as err:
         first = (str(err).strip().splitlines() or [""])[0]
@@ -565,6 +568,14 @@ def _add_dicom(sub: Any, fmt: type[argparse.HelpFormatter]) -> None:
     )
     dcm.add_argument(
         "--spacing", type=float, help="isotropic output voxel size, mm (default: in-plane)"
+    )
+    dcm.add_argument(
+        "--time-tolerance",
+        type=float,
+        metavar="MS",
+        help="largest disagreement of one frame's trigger times across slices and series, "
+        "ms; images of one slice closer than this are duplicates (default: that of "
+        "harpx.io.dicom.read_tagged)",
     )
     dcm.set_defaults(func=_dicom)
 

@@ -274,7 +274,7 @@ def read_tagged(
         when they mention CSPAMM or SPAMM; otherwise required.
     time_tolerance : float, default 1.0
         Largest disagreement in ms between the trigger times of one frame across slices and
-        series.
+        series. Two images of one slice at most this far apart are duplicates (an error).
 
     Returns
     -------
@@ -290,14 +290,19 @@ def read_tagged(
         normal is tilted off its ``slice_axis`` (by more than
         :data:`harpx.imaging.stacks.ALIGNMENT_TOL`) gets no slice positions and NaN
         thickness, as does the thickness of a series without ``SliceThickness``: nothing
-        is guessed. Attributes ``sequence``, ``source="DICOM"`` and ``dicom_series`` (tag
-        label: SeriesInstanceUID).
+        is guessed. Attributes ``sequence``, ``source="DICOM"``, ``dicom_series`` (tag
+        label: SeriesInstanceUID) and ``dicom_caveats`` (the doubts about the times that
+        were warned about, ``"; "``-separated; empty when none).
 
     Raises
     ------
     HarpxError
         No DICOM images found (names the folder); an unreadable or truncated file (names it);
-        a missing geometry or timing attribute (names it and the file); slices of a series
+        a missing geometry or timing attribute (names it and the file); a ``RescaleSlope`` or
+        ``RescaleIntercept`` that is not a number, a zero ``RescaleSlope``, or one present
+        in some images of a series only; ``SliceThickness`` that differs within a series; a
+        multi-frame file where only some frames have ``NominalCardiacTriggerDelayTime``;
+        two images of one slice within ``time_tolerance``; slices of a series
         that are not parallel or shifted in plane; different frame counts or trigger times
         across slices or series; a series selector that matches no or several series; a
         missing ``tag_period``, ``tag_directions`` or ``sequence``; a ``spacing`` or
@@ -310,6 +315,15 @@ def read_tagged(
         limit: choose a finer ``spacing``).
     ImportError
         If pydicom is not installed (``pip install harpx[dicom]``).
+
+    Warns
+    -----
+    HarpxWarning
+        When the frame times are doubtful (each also noted in ``dicom_caveats``): frame
+        intervals that are irregular (missing frames, or interleaved acquisitions), a mean
+        frame interval under 1 ms (``TriggerTime`` in seconds?), or times taken from
+        ``FrameAcquisitionDateTime`` because no frame of a multi-frame file has a trigger
+        delay. Also for an output above 2 GiB.
 
     Notes
     -----
@@ -421,5 +435,6 @@ def read_tagged(
             "dicom_series": "; ".join(
                 f"{label}: {s.uid}" for label, s in zip(labels, tag_stacks, strict=True)
             ),
+            "dicom_caveats": "; ".join(c for s in stacks for c in s.caveats),
         },
     )

@@ -77,6 +77,10 @@ class _Image:
     intercept: float
     time_name: str = "TriggerTime"
     sop_uid: str = ""
+    #: whether the header has (RescaleSlope, RescaleIntercept); 1.0 and 0.0 stand in if not
+    rescale: tuple[bool, bool] = (False, False)
+    #: why the image cannot be used (raised as a HarpxError when a stack uses it)
+    problem: str | None = None
     #: raw header values that are present but not numbers (name -> value)
     unreadable: dict[str, Any] = field(default_factory=dict)
 
@@ -127,6 +131,34 @@ def _float(value: Any) -> float | None:
     return out if math.isfinite(out) else None
 
 
+def _rescale(slope: Any, intercept: Any, where: str) -> dict[str, Any]:
+    """``slope``, ``intercept``, ``rescale`` (which of the two the header has) and
+    ``problem`` (a value that is not a number, or a zero slope; naming ``where``) of an
+    image; 1.0 and 0.0 stand in for absent or unreadable values."""
+    present = (slope is not None and slope != "", intercept is not None and intercept != "")
+    out: dict[str, Any] = {"slope": 1.0, "intercept": 0.0, "rescale": present, "problem": None}
+    for name, keyword, raw, given in (
+        ("slope", "RescaleSlope", slope, present[0]),
+        ("intercept", "RescaleIntercept", intercept, present[1]),
+    ):
+        value = _float(raw) if given else out[name]
+        if value is None:
+            out["problem"] = (
+                f"DICOM attribute {keyword!r} of {where} is {str(raw)!r}, which is not a "
+                "finite number; harpx needs it to turn stored values into pixel values (fix "
+                "the export or drop the file)"
+            )
+        else:
+            out[name] = value
+    if out["problem"] is None and out["slope"] == 0:
+        out["problem"] = (
+            f"DICOM attribute 'RescaleSlope' of {where} is {str(slope)!r}: a zero slope maps "
+            f"every stored value to the intercept {out['intercept']:g}, so the image would "
+            "be blank (fix the export or drop the file)"
+        )
+    return out
+
+
 def _group_value(header: Any, per_frame: Any, sequence: str, keyword: str) -> Any:
     """Value of ``keyword`` from a functional group: per-frame, then shared, then top level."""
     shared = header.get("SharedFunctionalGroupsSequence")
@@ -138,8 +170,10 @@ def _group_value(header: Any, per_frame: Any, sequence: str, keyword: str) -> An
     return header.get(keyword)
 
 
-def _images_of(header: Any, path: Path) -> list[_Image]:
-    """Split a DICOM header into per-image records (one per frame of a multi-frame file)."""
+def _images_of(header: Any, path: Path, geometry_only: bool = False) -> list[_Image]:
+    """Split a DICOM header into per-image records (one per frame of a multi-frame file).
+
+    Multi-frame times are resolved (:func:`_frame_times`) unless ``geometry_only``."""
     common: dict[str, Any] = {
         "path": path,
         "series_uid": str(header.get("SeriesInstanceUID", "")),
@@ -161,8 +195,7 @@ def _images_of(header: Any, path: Path) -> list[_Image]:
             pixel_spacing=_floats(header.get("PixelSpacing"), 2),
             thickness=_float(header.get("SliceThickness")),
             time=_float(header.get("TriggerTime")),
-            slope=_float(header.get("RescaleSlope")) or 1.0,
-            intercept=_float(header.get("RescaleIntercept")) or 0.0,
+            **_rescale(header.get("RescaleSlope"), header.get("RescaleIntercept"), str(path)),
             **common,
         )
         for name, keyword in (
@@ -177,12 +210,12 @@ def _images_of(header: Any, path: Path) -> list[_Image]:
         return [image]
     images = []
     stamps: list[datetime | None] = []
+    delay_name = "NominalCardiacTriggerDelayTime (CardiacSynchronizationSequence)"
     for index, item in enumerate(per_frame):
 
         def value(sequence: str, keyword: str, item: Any = item) -> Any:
             return _group_value(header, item, sequence, keyword)
 
-        time = _float(value("CardiacSynchronizationSequence", "NominalCardiacTriggerDelayTime"))
         stamp = value("FrameContentSequence", "FrameAcquisitionDateTime")
         stamps.append(_datetime(stamp) if stamp else None)
         images.append(
@@ -194,20 +227,54 @@ def _images_of(header: Any, path: Path) -> list[_Image]:
                 ),
                 pixel_spacing=_floats(value("PixelMeasuresSequence", "PixelSpacing"), 2),
                 thickness=_float(value("PixelMeasuresSequence", "SliceThickness")),
-                time=time if time is not None else _float(header.get("TriggerTime")),
-                slope=_float(value("PixelValueTransformationSequence", "RescaleSlope")) or 1.0,
-                intercept=_float(value("PixelValueTransformationSequence", "RescaleIntercept"))
-                or 0.0,
-                time_name="NominalCardiacTriggerDelayTime (CardiacSynchronizationSequence)",
+                time=_float(
+                    value("CardiacSynchronizationSequence", "NominalCardiacTriggerDelayTime")
+                ),
+                **_rescale(
+                    value("PixelValueTransformationSequence", "RescaleSlope"),
+                    value("PixelValueTransformationSequence", "RescaleIntercept"),
+                    f"{path} (frame {index + 1})",
+                ),
+                time_name=delay_name,
                 **common,
             )
         )
-    if any(im.time is None for im in images) and all(s is not None for s in stamps):
-        # No trigger delays: time since the first acquired frame of the file.
+    if not geometry_only:
+        _frame_times(images, stamps, header)
+    return images
+
+
+def _frame_times(images: list[_Image], stamps: list[datetime | None], header: Any) -> None:
+    """Times of the frames of a multi-frame file: every frame's trigger delay; when no frame
+    has one, the time since the file's first acquired frame (``time_name`` ``_STAMP_TIME``:
+    the stack warns), else the file's TriggerTime. HarpxError naming the frame when only
+    some frames have a delay (their ``problem``)."""
+    lacking = [im for im in images if im.time is None]
+    if not lacking:
+        return
+    if len(lacking) < len(images):
+        for im in lacking:
+            im.problem = (
+                f"{im.where()} has no readable NominalCardiacTriggerDelayTime but other frames "
+                f"of the file have one ({len(lacking)} of {len(images)} frames lack it); "
+                "harpx will not mix trigger delays with another clock: fix the export or drop "
+                "the file"
+            )
+        return
+    if all(s is not None for s in stamps):
         first = min(s for s in stamps if s is not None)
         for im, s in zip(images, stamps, strict=True):
             im.time = (s - first) / timedelta(milliseconds=1) if s is not None else None
-    return images
+            im.time_name = _STAMP_TIME
+        return
+    trigger = _float(header.get("TriggerTime"))
+    for im in images:
+        im.time = trigger
+        im.time_name = "TriggerTime" if trigger is not None else im.time_name
+
+
+#: ``_Image.time_name`` of frame times taken from FrameAcquisitionDateTime.
+_STAMP_TIME = "FrameAcquisitionDateTime (FrameContentSequence)"
 
 
 def _datetime(value: Any) -> datetime | None:
@@ -299,7 +366,8 @@ def voxel_positions(images: Any) -> FloatArray:
             )
     records: list[_Image] = []
     for header in headers:
-        records.extend(_images_of(header, Path(str(getattr(header, "filename", "<dataset>")))))
+        where = Path(str(getattr(header, "filename", "<dataset>")))
+        records.extend(_images_of(header, where, geometry_only=True))
     out = [
         _pixel_positions(
             im.require("position"),

@@ -11,7 +11,7 @@ by trigger time; every slice needs the same frames. Positions and directions are
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from harpx._typing import FloatArray
 from harpx.errors import HarpxError, HarpxWarning, user_stacklevel
 from harpx.imaging.stacks import SliceStack
-from harpx.io.dicom_headers import _Image, _pydicom
+from harpx.io.dicom_headers import _STAMP_TIME, _Image, _pydicom
 
 __all__ = ["GAP_ERROR", "INPLANE_TOL", "ORIENTATION_TOL", "SLICE_TOL", "UNIT_TOL"]
 
@@ -31,7 +31,13 @@ ORIENTATION_TOL = 1e-3
 SLICE_TOL = 1e-2
 #: In-plane offset between slices of a stack tolerated, as a fraction of a pixel.
 INPLANE_TOL = 1e-2
-_TIME_DUPLICATE = 1e-3  # ms: two frames of one slice closer than this are duplicates
+_TIME_DUPLICATE = 1e-3  # ms: two frames of one slice closer than this are always duplicates
+#: A mean frame interval below this (ms) is faster than any cine MRI: times in seconds?
+_MIN_FRAME_INTERVAL = 1.0
+#: Frame intervals further than this fraction from their median are irregular (warning).
+_INTERVAL_TOL = 0.25
+#: SliceThickness values of one series further apart than this (mm) disagree.
+_THICKNESS_TOL = 1e-3
 
 
 @dataclass
@@ -52,6 +58,7 @@ class _Stack:
     times: FloatArray  # (T,) frame times, ms
     images: list[list[_Image]]  # [slice][frame]
     thickness: float | None = None  # SliceThickness, mm (None: absent or not positive)
+    caveats: list[str] = field(default_factory=list)  # doubts warned about, for the result
 
     @property
     def geometry(self) -> SliceStack:
@@ -97,9 +104,13 @@ def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
             f"against {images[base].where()}); a stack needs its slice positions to differ "
             "only along the slice normal"
         )
-    frames = [_cine(sorted((images[k] for k in members), key=lambda im: im.require("time")), label)
-              for members in slices]  # fmt: skip
+    by_slice = [sorted((images[k] for k in members), key=lambda im: im.time) for members in slices]
+    caveats, seconds = _time_caveats(by_slice, label)
+    # times in seconds: frames are far closer than time_tolerance, only equal ones are copies
+    duplicate = _TIME_DUPLICATE if seconds else max(time_tolerance, _TIME_DUPLICATE)
+    frames = [_cine(ims, label, duplicate, time_tolerance) for ims in by_slice]
     times = _frame_times(frames, time_tolerance, label)
+    caveats += _check_intervals(times, frames, label)
     offsets = local[[s[0] for s in slices], 2] - local[base, 2]
     _check_gaps(offsets, [images[s[0]] for s in slices], label)
     below, above = _slab_margins(first, offsets, label)
@@ -119,6 +130,7 @@ def _build_stack(images: list[_Image], time_tolerance: float) -> _Stack:
         times=times,
         images=frames,
         thickness=thickness,
+        caveats=caveats,
     )
 
 
@@ -129,6 +141,8 @@ def _check_alike(
     matrix size and pixel spacing; else HarpxError naming the two images."""
     first = images[0]
     for im in images:
+        if im.problem is not None:
+            raise HarpxError(im.problem)
         im.require("position")
         im.require("time")
         im_orientation = im.require("orientation")
@@ -148,13 +162,55 @@ def _check_alike(
                 f"{im.rows}x{im.columns} at {im_spacing.tolist()} mm, {first.where()} "
                 f"{first.rows}x{first.columns} at {spacing.tolist()} mm"
             )
+    _check_rescale(images, label)
+    _check_thickness(images, label)
 
 
-def _cine(ims: list[_Image], label: str) -> list[_Image]:
-    """One slice's images in time order; HarpxError for two at the same TriggerTime (a copy
-    of one file, or repeated acquisitions in one series)."""
+def _check_rescale(images: list[_Image], label: str) -> None:
+    """Every image of a series has RescaleSlope/RescaleIntercept, or none has (else harpx
+    would scale some images and not others)."""
+    keywords = ("RescaleSlope", "RescaleIntercept")
+    for k, keyword in enumerate(keywords):
+        given = np.array([im.rescale[k] for im in images])
+        if given.any() and not given.all():
+            has, lacks = images[int(np.argmax(given))], images[int(np.argmin(given))]
+            raise HarpxError(
+                f"DICOM attribute {keyword!r} is missing in {lacks.where()} but present in "
+                f"{has.where()} (and {int(given.sum())} of the {given.size} images of "
+                f"{label}); the pixel values of the images would not be on one scale: fix "
+                "the export or drop the images without it"
+            )
+
+
+def _check_thickness(images: list[_Image], label: str) -> None:
+    """Every image of a series has the same SliceThickness (within ``_THICKNESS_TOL`` mm),
+    or none has one."""
+    values = np.array([np.nan if im.thickness is None else im.thickness for im in images])
+    known = np.isfinite(values)
+    if not known.any():
+        return
+    if not known.all():
+        has, lacks = images[int(np.argmax(known))], images[int(np.argmin(known))]
+        raise HarpxError(
+            f"DICOM attribute 'SliceThickness' is missing or unreadable in {lacks.where()} "
+            f"but is {has.thickness:g} mm in {has.where()} ({label}); harpx uses it for the "
+            "slab and the blur model: fix the export or drop the images without it"
+        )
+    low, high = int(np.argmin(values)), int(np.argmax(values))
+    if values[high] - values[low] > _THICKNESS_TOL:
+        raise HarpxError(
+            f"SliceThickness differs within {label}: {values[low]:g} mm in "
+            f"{images[low].where()} but {values[high]:g} mm in {images[high].where()}; a "
+            "stack needs one slice thickness (fix the export or select the files of one "
+            "acquisition)"
+        )
+
+
+def _cine(ims: list[_Image], label: str, duplicate: float, time_tolerance: float) -> list[_Image]:
+    """One slice's images in time order; HarpxError for two at most ``duplicate`` ms apart
+    (a copy of one file, or repeated acquisitions in one series)."""
     gaps = np.diff([im.time for im in ims])
-    if gaps.size and gaps.min() < _TIME_DUPLICATE:
+    if gaps.size and gaps.min() <= duplicate:
         k = int(np.argmin(gaps))
         a, b = ims[k], ims[k + 1]
         if a.sop_uid and a.sop_uid == b.sop_uid and a.frame == b.frame:
@@ -163,11 +219,80 @@ def _cine(ims: list[_Image], label: str) -> list[_Image]:
                 f"{a.sop_uid!r}): one is a copy of the other; remove the copy"
             )
         raise HarpxError(
-            f"{label} has two images at the same slice position and TriggerTime "
-            f"{ims[k].time} ms: {ims[k].where()} and {ims[k + 1].where()}; put repeated "
-            "acquisitions (e.g. CSPAMM A and B) in separate series or select the files"
+            f"{label} has two images at the same slice position {gaps[k]:.3g} ms apart "
+            f"(TriggerTime {a.time:g} and {b.time:g} ms, within time_tolerance="
+            f"{time_tolerance:g} ms): {a.where()} and {b.where()}; put repeated acquisitions "
+            "(e.g. CSPAMM A and B) in separate series or select the files (if they are "
+            "distinct frames, lower time_tolerance)"
         )
     return ims
+
+
+def _time_caveats(by_slice: list[list[_Image]], label: str) -> tuple[list[str], bool]:
+    """Warn (and return the caveats) when a series' times are not trigger delays in ms:
+    times from FrameAcquisitionDateTime, or a mean frame interval below
+    ``_MIN_FRAME_INTERVAL`` (times in seconds? then also True). HarpxError for a series
+    whose images mix FrameAcquisitionDateTime with trigger times."""
+    caveats = []
+    flat = [im for ims in by_slice for im in ims]
+    stamped = [im for im in flat if im.time_name == _STAMP_TIME]
+    if stamped and len(stamped) < len(flat):
+        other = next(im for im in flat if im.time_name != _STAMP_TIME)
+        raise HarpxError(
+            f"{label} mixes clocks: {stamped[0].path} has no NominalCardiacTriggerDelayTime "
+            f"(its times are FrameAcquisitionDateTime) but {other.where()} has a "
+            f"{other.time_name}; fix the export or drop the files without trigger delays"
+        )
+    if stamped:
+        caveats.append(f"{label}: frame times from FrameAcquisitionDateTime")
+        warnings.warn(
+            f"{stamped[0].path} ({label}) has no NominalCardiacTriggerDelayTime: its frame "
+            "times are FrameAcquisitionDateTime since the file's first frame, which equals "
+            "the delay after the R wave only if the file holds one heartbeat acquired in real "
+            "time (segmented acquisitions span many beats); check the time coordinate (noted "
+            "in the result's attribute 'dicom_caveats')",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
+    times = [np.array([im.require("time") for im in ims]) for ims in by_slice]
+    means = [(t[-1] - t[0]) / (t.size - 1) for t in times if t.size > 1]
+    seconds = bool(means) and float(np.median(means)) < _MIN_FRAME_INTERVAL
+    if seconds:
+        interval = float(np.median(means))
+        caveats.append(f"{label}: mean frame interval {interval:.3g} ms (TriggerTime in s?)")
+        warnings.warn(
+            f"the frames of {label} are {interval:.3g} ms apart on average (TriggerTime "
+            f"{times[0][0]:g} to {times[0][-1]:g}): no cine MRI is that fast, so TriggerTime "
+            "is most likely in seconds, not ms as DICOM defines it; the time coordinate is "
+            "kept as read (multiply it by 1000 if so; noted in the result's attribute "
+            "'dicom_caveats')",
+            HarpxWarning,
+            stacklevel=user_stacklevel(),
+        )
+    return caveats, seconds
+
+
+def _check_intervals(times: FloatArray, frames: list[list[_Image]], label: str) -> list[str]:
+    """Warn (and return the caveat) when the frame intervals of a series are irregular: a
+    missing frame, or two acquisitions interleaved in one series."""
+    if times.size < 3:
+        return []
+    gaps = np.diff(times)
+    median = float(np.median(gaps))
+    deviation = np.abs(gaps - median)
+    k = int(np.argmax(deviation))
+    if deviation[k] <= _INTERVAL_TOL * median:
+        return []
+    warnings.warn(
+        f"the frame intervals of {label} are irregular: {gaps[k]:.4g} ms between frames {k} "
+        f"and {k + 1} ({frames[0][k].where()} and {frames[0][k + 1].where()}) against a "
+        f"median of {median:.4g} ms (intervals {np.round(gaps, 3).tolist()}); frames are "
+        "missing, or repeated acquisitions are interleaved in one series (select the files "
+        "of one acquisition); noted in the result's attribute 'dicom_caveats'",
+        HarpxWarning,
+        stacklevel=user_stacklevel(),
+    )
+    return [f"{label}: irregular frame intervals ({gaps.min():.4g} to {gaps.max():.4g} ms)"]
 
 
 def _frame_times(frames: list[list[_Image]], time_tolerance: float, label: str) -> FloatArray:

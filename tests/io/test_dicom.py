@@ -30,7 +30,7 @@ from pydicom.uid import (  # noqa: E402
     generate_uid,
 )
 
-from harpx.errors import HarpxError  # noqa: E402
+from harpx.errors import HarpxError, HarpxWarning  # noqa: E402
 from harpx.io.dicom import read_tagged, voxel_positions  # noqa: E402
 from harpx.schema import validate  # noqa: E402
 
@@ -423,9 +423,13 @@ def test_enhanced_multiframe_matches_classic(tmp_path: Path, tagged: xr.Dataset)
 
 def test_multiframe_timing_from_frame_acquisition_datetime(tmp_path: Path) -> None:
     write_enhanced(tmp_path, LA, timing="datetime")
-    ds = read_tagged(
-        tmp_path, tag_period=8.0, tag_directions={"LA tagged": ("l", "row")}, sequence="SPAMM"
-    )
+    # Acquisition clock times are not trigger delays (a segmented acquisition spans many
+    # beats): the fallback is warned about and recorded.
+    with pytest.warns(HarpxWarning, match="FrameAcquisitionDateTime since the file's first"):
+        ds = read_tagged(
+            tmp_path, tag_period=8.0, tag_directions={"LA tagged": ("l", "row")}, sequence="SPAMM"
+        )
+    assert "frame times from FrameAcquisitionDateTime" in ds.attrs["dicom_caveats"]
     # Without trigger delays, time counts from the file's first acquired frame.
     np.testing.assert_allclose(ds.time, np.array(LA.times) - LA.times[0], atol=1e-6)
 
