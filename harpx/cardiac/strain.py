@@ -42,9 +42,11 @@ The rotation of a material point is the angle, in the short-axis plane, between 
 reference and current position vectors from the long axis; its sign follows the cardiac
 convention: positive counter-clockwise *seen from the apex* (that is, a negative rotation
 about the apex-to-base axis). Level rotations are volume-weighted means over the basal
-(1–6) and apical (13–16) segments; twist is apical minus basal rotation (degrees) and
-torsion the twist divided by the reference distance between the two levels' centroids
-along the axis (degrees/mm).
+(1–6) and apical (13–16) segments with data; twist is apical minus basal rotation (degrees)
+and torsion the twist divided by the reference distance between the two levels' centroids
+along the axis (degrees/mm). A level whose segments with data fill less than
+``min_coverage`` of its template volume (the segments' rule) has no rotation, and then
+twist and torsion are NaN (:mod:`harpx.cardiac.twist`).
 
 References
 ----------
@@ -76,6 +78,7 @@ from harpx.cardiac.quality import (
     strain_seen_fraction,
     template_segment_volume,
 )
+from harpx.cardiac.twist import _level_rotation, _levels, _warn_levels
 from harpx.cardiac.wall_points import _cell_weights, _grid_strain, _hex8_gauss_points, _observation
 from harpx.conventions import ELEMENT_CORNERS
 from harpx.errors import HarpxWarning, user_stacklevel
@@ -155,14 +158,6 @@ def _local_strain(E: FloatArray, basis: tuple[FloatArray, ...]) -> FloatArray:
     """Normal components (..., n, 3) of strains E (..., n, 3, 3) along (e_r, e_c, e_l)."""
     frame = np.stack(basis, axis=-1)  # (n, 3 axis, 3 component)
     return np.einsum("nia,...nij,nja->...na", frame, E, frame)
-
-
-def _rotation(q0: FloatArray, current: FloatArray, template: Any) -> FloatArray:
-    """Cardiac rotation (degrees, counter-clockwise seen from the apex), (time, n)."""
-    q = np.stack([template.to_local(c) for c in current])  # a few frames
-    cross = q0[None, :, 0] * q[..., 1] - q0[None, :, 1] * q[..., 0]
-    dot = q0[None, :, 0] * q[..., 0] + q0[None, :, 1] * q[..., 1]
-    return -np.rad2deg(np.arctan2(cross, dot))
 
 
 def _ranges(numbers: ArrayLike) -> str:
@@ -277,12 +272,16 @@ def lv_measures(
         :func:`~harpx.cardiac.quality.strain_seen_fraction`; NaN: not recorded);
         ``rotation`` (time, level) in degrees for the ``"base"`` and ``"apex"``
         levels, ``twist`` (time, degrees) and ``torsion`` (time, degrees/mm), each with
-        attributes ``source`` and ``observed_fraction``; coordinates ``segment`` (1..17),
+        attributes ``source`` (``"no data"`` where a level lacks coverage) and
+        ``observed_fraction``; coordinates ``level_coverage`` (level, 0..1: the fraction of
+        the level's template volume in its segments with data; below ``min_coverage`` the
+        level's rotation is NaN, and twist and torsion), ``segment`` (1..17),
         ``segment_name``, ``segment_coverage`` (0..1), ``strain_source`` (segment,
         component: ``"observed"``, ``"partly inferred"``, ``"inferred"``, ``"not
         recorded"`` or ``"no data"``), ``component`` (radial, circumferential,
         longitudinal); attributes ``anterior_deg``, ``anterior_source``,
-        ``segments_without_data`` (int array) and ``strain_inferred`` (summary, empty when
+        ``segments_without_data`` (int array), ``levels_without_data`` (level names,
+        space-separated, empty when none) and ``strain_inferred`` (summary, empty when
         the tags saw everything). Segments without data are NaN throughout.
 
     Raises
@@ -299,8 +298,9 @@ def lv_measures(
     Warns
     -----
     HarpxWarning
-        When the anterior direction is unknown, when segments have no data (named), and when
-        the tags did not observe a component (named with its segments).
+        When the anterior direction is unknown, when segments have no data (named), when a
+        level lacks coverage (twist and torsion NaN), and when the tags did not observe a
+        component (named with its segments).
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     E = np.asarray(green_strain, dtype=np.float64)
@@ -327,12 +327,21 @@ def lv_measures(
     source = source_labels(seg_seen, has[:, None])
     peak_e, peak_t = _peak(seg, times)
     peak_eng, _ = _peak(seg_eng, times)
-    levels = {"base": (segment <= 6) & data, "apex": (segment >= 13) & (segment <= 16) & data}
-    level_rot, distance, twist_seen = _level_rotation(q0, x, template, levels, w, seen)
+    # the levels on their segments with data, and only with enough of it (as a segment)
+    levels, level_cov, level_ok = _levels(
+        segment, data, has, segments.volume, segments.template_volume, min_coverage
+    )
+    level_rot, distance, level_seen = _level_rotation(q0, x, template, levels, w, seen)
     twist = level_rot[:, 1] - level_rot[:, 0]
-    twist_seen = twist_seen if observed is not None else np.nan
-    twist_source = str(source_labels(twist_seen)) if np.isfinite(distance) else "no data"
+    both = level_ok & level_ok.all()  # twist and torsion need both levels
+    seen_at = [float(np.min(level_seen[k])) if observed is not None and k.any() else np.nan
+               for k in (level_ok, both)]  # fmt: skip
+    rot_source, twist_source = (
+        str(source_labels(f)) if k.any() else "no data"
+        for f, k in zip(seen_at, (level_ok, both), strict=True)
+    )
     summary = _warn_quality(coverage, has, source, twist_source, min_coverage)
+    levels_without_data = _warn_levels(level_cov, level_ok, min_coverage)
 
     seg_coords = {
         "segment": ("segment", np.arange(1, 18), {"long_name": "AHA segment", "units": "1"}),
@@ -343,6 +352,8 @@ def lv_measures(
         "strain_source": (("segment", "component"), source, {
             "long_name": "observed by the tags or inferred by the model"}),
         "level": ("level", np.array(list(levels), dtype=str), {"long_name": "short-axis level"}),
+        "level_coverage": ("level", level_cov, {"units": "1", "long_name":
+                           "fraction of the level's template volume in its segments with data"}),
         "time": ("time", times, {"units": "ms", "long_name": "time"}),
     }  # fmt: skip
     out = xr.Dataset(coords=seg_coords)
@@ -382,12 +393,13 @@ def lv_measures(
         "twist per base-apex distance",
     )
     out["torsion"].attrs["level_distance_mm"] = distance
-    for name in ("rotation", "twist", "torsion"):
-        out[name].attrs.update(source=twist_source, observed_fraction=twist_seen)
+    for name, k in (("rotation", 0), ("twist", 1), ("torsion", 1)):
+        out[name].attrs.update(source=(rot_source, twist_source)[k], observed_fraction=seen_at[k])
     out.attrs.update(
         anterior_deg=anterior_deg,
         anterior_source=anterior_source,
         segments_without_data=np.flatnonzero(~has).astype(np.int64) + 1,
+        levels_without_data=levels_without_data,
         strain_inferred=summary,
     )
     return out
@@ -423,32 +435,6 @@ class _Segments:
         filled = np.where(self.data[:, None], values, 0.0)
         means: FloatArray = np.einsum("...nc,ns->...sc", filled, self.weights) / norm[:, None]
         return means
-
-
-def _level_rotation(
-    q0: FloatArray,
-    current: FloatArray,
-    template: Any,
-    levels: dict[str, BoolArray],
-    w: FloatArray,
-    seen: FloatArray,
-) -> tuple[FloatArray, float, float]:
-    """Rotation (time, level) of each short-axis level's points (degrees, volume-weighted),
-    the distance between the levels along the axis (mm), and the smallest fraction of the
-    in-plane directions the tags see at a level."""
-
-    def level_mean(values: FloatArray, m: BoolArray) -> FloatArray:
-        """Volume-weighted mean over the points ``m`` along the last axis (NaN if none)."""
-        if not m.any():
-            return np.full(values.shape[:-1], np.nan)
-        return np.asarray((values[..., m] * w[m]).sum(axis=-1) / w[m].sum())
-
-    rot = _rotation(q0, current, template)
-    level_rot = np.stack([level_mean(rot, m) for m in levels.values()], axis=1)
-    height = [float(level_mean(q0[:, 2], m)) for m in levels.values()]
-    # rotation needs the in-plane motion and which material sits in the plane (longitudinal)
-    level_seen = [level_mean(seen[:, 1:].T, m) for m in levels.values()]
-    return level_rot, height[0] - height[1], float(np.min(level_seen))
 
 
 def _aligned_body(body: xr.DataArray, u: xr.DataArray) -> xr.DataArray:
@@ -545,7 +531,8 @@ def cardiac_strain(
     Warns
     -----
     HarpxWarning
-        Segments without data (NaN), components the tags did not observe, an unknown
+        Segments without data (NaN), a short-axis level without enough data (twist and
+        torsion NaN), components the tags did not observe, an unknown
         anterior direction, a dataset that does not record what its tags observed, or
         settings that under-report radial strain (conventional HARP; a band-pass radius
         or blur-correction passes below what removes the blur across the wall:

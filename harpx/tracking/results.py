@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from typing import Any, cast
 
@@ -9,6 +10,7 @@ import numpy as np
 import xarray as xr
 
 from harpx._typing import FloatArray
+from harpx.errors import HarpxWarning, user_stacklevel
 from harpx.schema import fill_standard_attrs, standard_attrs
 from harpx.tracking.resample import interpolate_displacement
 
@@ -215,9 +217,14 @@ def tracking_error(
         and maximum of the error magnitude ``|u − u_true|`` in mm, plus
         ``coverage``: the fraction of body voxels that the tracked result covers.
         Frames are matched by their time (to 1e-6 relative); frames only one side has
-        are left out. The tracked displacement is relative to its first frame, so the
-        truth must hold that frame with zero displacement there (its reference
-        configuration; below 1e-6 mm plus 1e-4 of the largest true displacement).
+        are left out of every statistic, and so are frames whose tracked displacement
+        is NaN at every body voxel (a failed frame; its per-frame values are NaN).
+        Attributes ``frames_without_estimate`` (ms: the truth's frames after the
+        reference with no tracked frame or a failed one) and ``frames_without_truth``
+        (ms: tracked frames the truth lacks) list them. The tracked displacement is
+        relative to its first frame, so the truth must hold that frame with zero
+        displacement there (its reference configuration; below 1e-6 mm plus 1e-4 of the
+        largest true displacement).
 
     Raises
     ------
@@ -227,6 +234,13 @@ def tracking_error(
         another frame, e.g. a result tracked from a later frame); the reference frame is
         the only common one; or no body voxel after it (within ``where``) has a tracked
         displacement.
+
+    Warns
+    -----
+    HarpxWarning
+        When frames are left out (``frames_without_estimate``, ``frames_without_truth``):
+        the ``*_all`` statistics then cover the other frames only, and do not compare with
+        those of a result that has every frame.
 
     Examples
     --------
@@ -335,7 +349,55 @@ def tracking_error(
         float(covered.values.sum()) / n_body if n_body else np.nan,
         attrs={"units": "1", "long_name": "fraction of body voxels with a tracked displacement"},
     )
+    # frames left out of the statistics: the truth's frames after the reference that have
+    # no tracked frame, or one with no value in the body (failed); tracked frames the
+    # truth lacks
+    failed = body.values.reshape(err.sizes["time"], -1).any(axis=1) & ~ok.any(axis=1)
+    untracked = np.setdiff1d(np.arange(t_true.size), nearest_true[match])
+    untracked = t_true[untracked[t_true[untracked] > t_est[0]]]
+    failed_t = np.asarray(true.time.values, dtype=np.float64)[failed]
+    out.attrs["frames_without_estimate"] = np.sort(np.concatenate([untracked, failed_t]))
+    out.attrs["frames_without_truth"] = t_est[~match]
+    scored = int(ok[1:].any(axis=1).sum())
+    _warn_left_out(failed_t, untracked, t_est[~match], scored)
     return out
+
+
+def _warn_left_out(
+    failed: FloatArray, untracked: FloatArray, no_truth: FloatArray, scored: int
+) -> None:
+    """Warn when :func:`tracking_error` left frames out of its statistics (times in ms)."""
+    parts = []
+    if failed.size:
+        parts.append(
+            f"the tracked displacement is NaN at every body voxel (a failed frame) at "
+            f"t = {_times(failed)} ms"
+        )
+    if untracked.size:
+        parts.append(f"the truth's frames at t = {_times(untracked)} ms were not tracked")
+    if parts:
+        parts[-1] += " (attrs['frames_without_estimate'])"
+    if no_truth.size:
+        parts.append(
+            f"the truth has no frame at tracked t = {_times(no_truth)} ms "
+            "(attrs['frames_without_truth'])"
+        )
+    if not parts:
+        return
+    warnings.warn(
+        f"tracking_error left frames out: {'; '.join(parts)}. mean_all, p95_all and the "
+        f"other *_all values cover only the {scored} frame(s) after the reference with a "
+        "tracked and a true displacement, so they do not compare with a result scored on "
+        "every frame; track every frame of the truth (or pass the truth of the same frames) "
+        "to compare",
+        HarpxWarning,
+        stacklevel=user_stacklevel(),
+    )
+
+
+def _times(values: FloatArray) -> str:
+    """``"60, 240"`` for frame times in ms."""
+    return ", ".join(f"{float(t):g}" for t in values)
 
 
 #: Largest |displacement_true| at the reference frame, relative to the largest over all
