@@ -264,14 +264,13 @@ def background_fraction(
     Parameters
     ----------
     phase : xarray.Dataset
-        ``phase/1`` dataset: coordinates ``z``, ``y``, ``x`` (mm), optional ``mask``.
+        As for :func:`check_coverage`.
     points : array_like, shape (n, 3)
-        Reference positions (x, y, z) of the constraint points, mm.
+        As for :func:`check_coverage`.
     volume : array_like, shape (n,)
-        Reference volume of each point, mm³.
+        As for :func:`check_coverage`.
     valid : array_like of bool, shape (n, ntag)
-        Which tags have data at each point in the reference frame
-        (``PhaseConstraint.reference_valid``).
+        As for :func:`check_coverage`.
 
     Returns
     -------
