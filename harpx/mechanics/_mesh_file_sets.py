@@ -64,108 +64,151 @@ def read_named_sets(
     (``mesh.facets.T``); ``region_names`` the names of the ``region`` labels (default:
     ``field_data`` ``region:<name>``). Warns (HarpxWarning) about names it cannot map.
     """
-    blocks = [i for i, c in enumerate(m.cells) if c.type == kind and len(c.data)]
-    cells = np.concatenate([np.asarray(m.cells[i].data, dtype=np.int64) for i in blocks])
-    starts = np.cumsum([0] + [len(m.cells[i].data) for i in blocks])
-    offset = dict(zip(blocks, starts[:-1].tolist(), strict=True))
-    base = "hexahedron" if kind.startswith("hexahedron") else "tetra"
-    nface = 4 if base == "hexahedron" else 3
-    faces = [i for i, c in enumerate(m.cells) if c.type in _FACE_TYPES[base] and len(c.data)]
-    facet_key = _Facets(np.asarray(facets, dtype=np.int64), np.asarray(vertex_of), source)
-    regions: dict[str, IntArray] = {}
-    boundaries: dict[str, IntArray] = {}
-    ignored: list[str] = []
+    reader = _SetReader(m, kind, vertex_of, facets, source)
+    named = reader.cell_sets()
+    if "gmsh:physical" in m.cell_data and not named:
+        reader.gmsh_groups()
+    if "region" in m.cell_data:
+        reader.region_labels(region_names)
+    reader.skfem_data()
+    reader.warn_ignored()
+    return reader.regions, reader.boundaries
 
-    def add_boundary(name: str, rows: IntArray) -> None:
-        ids = facet_key.ids(rows)
+
+class _SetReader:
+    """The named sets of one meshio mesh, read source by source into regions and
+    boundaries; what cannot be mapped is collected in ``ignored``."""
+
+    def __init__(
+        self, m: meshio.Mesh, kind: str, vertex_of: IntArray, facets: IntArray, source: str
+    ) -> None:
+        self.m, self.kind, self.source = m, kind, source
+        self.blocks = [i for i, c in enumerate(m.cells) if c.type == kind and len(c.data)]
+        self.cells = np.concatenate(
+            [np.asarray(m.cells[i].data, dtype=np.int64) for i in self.blocks]
+        )
+        starts = np.cumsum([0] + [len(m.cells[i].data) for i in self.blocks])
+        self.offset = dict(zip(self.blocks, starts[:-1].tolist(), strict=True))
+        self.base = "hexahedron" if kind.startswith("hexahedron") else "tetra"
+        self.nface = 4 if self.base == "hexahedron" else 3
+        self.faces = [
+            i for i, c in enumerate(m.cells) if c.type in _FACE_TYPES[self.base] and len(c.data)
+        ]
+        self.facet_key = _Facets(np.asarray(facets, dtype=np.int64), np.asarray(vertex_of), source)
+        self.regions: dict[str, IntArray] = {}
+        self.boundaries: dict[str, IntArray] = {}
+        self.ignored: list[str] = []
+
+    def add_boundary(self, name: str, rows: IntArray) -> None:
+        """Boundary ``name`` from faces given by their corner nodes (file node ids)."""
+        ids = self.facet_key.ids(rows)
         if np.any(ids < 0):
-            ignored.append(
+            self.ignored.append(
                 f"{np.count_nonzero(ids < 0)} faces of boundary {name!r} that are not faces "
-                f"of the {kind!r} cells"
+                f"of the {self.kind!r} cells"
             )
         if np.any(ids >= 0):
-            boundaries[name] = np.unique(ids[ids >= 0])
+            self.boundaries[name] = np.unique(ids[ids >= 0])
 
-    def merged(name: str) -> np.ndarray:
-        return np.concatenate([np.asarray(m.cell_data[name][i]) for i in blocks])
+    def merged(self, name: str) -> np.ndarray:
+        """Cell data ``name`` of the body's cells, blocks merged."""
+        return np.concatenate([np.asarray(self.m.cell_data[name][i]) for i in self.blocks])
 
-    named_sets = [k for k in m.cell_sets if not k.startswith("gmsh:")]
-    for name in named_sets:  # loop over the few named sets
-        cell_ids: list[IntArray] = []
-        face_parts: list[IntArray] = []
-        other: dict[str, int] = {}
-        for i, members in enumerate(m.cell_sets[name][: len(m.cells)]):
-            if members is None or not len(members):
-                continue
-            ids = np.asarray(members, dtype=np.int64).ravel()
-            block = m.cells[i]
-            if ids.min() < 0 or ids.max() >= len(block.data):
-                raise ValueError(
-                    f"{source}: cell set {name!r} names cell {int(ids.max())} of cell block "
-                    f"{i} ({block.type!r}), which has {len(block.data)} cells; the file's sets "
-                    "and cells do not belong together"
-                )
-            if i in offset:
-                cell_ids.append(offset[i] + ids)
-            elif i in faces:
-                face_parts.append(np.asarray(block.data, dtype=np.int64)[ids, :nface])
-            else:
-                other[block.type] = other.get(block.type, 0) + ids.size
-        if cell_ids:
-            regions[name] = np.unique(np.concatenate(cell_ids))
-        if face_parts:
-            add_boundary(name, np.concatenate(face_parts))
-        if other:
-            ignored.append(f"cell set {name!r} on cells {other!r}")
-    if "gmsh:physical" in m.cell_data and not named_sets:
-        tags = merged("gmsh:physical").astype(np.int64).ravel()
-        physical, face_rows, unnamed = _gmsh_physical(m, tags, faces, nface)
-        regions.update(physical)
+    def cell_sets(self) -> list[str]:
+        """Regions and boundaries from meshio cell sets (not gmsh's); their names."""
+        m = self.m
+        named_sets = [k for k in m.cell_sets if not k.startswith("gmsh:")]
+        for name in named_sets:  # loop over the few named sets
+            cell_ids: list[IntArray] = []
+            face_parts: list[IntArray] = []
+            other: dict[str, int] = {}
+            for i, members in enumerate(m.cell_sets[name][: len(m.cells)]):
+                if members is None or not len(members):
+                    continue
+                ids = np.asarray(members, dtype=np.int64).ravel()
+                block = m.cells[i]
+                if ids.min() < 0 or ids.max() >= len(block.data):
+                    raise ValueError(
+                        f"{self.source}: cell set {name!r} names cell {int(ids.max())} of cell "
+                        f"block {i} ({block.type!r}), which has {len(block.data)} cells; the "
+                        "file's sets and cells do not belong together"
+                    )
+                if i in self.offset:
+                    cell_ids.append(self.offset[i] + ids)
+                elif i in self.faces:
+                    face_parts.append(np.asarray(block.data, dtype=np.int64)[ids, : self.nface])
+                else:
+                    other[block.type] = other.get(block.type, 0) + ids.size
+            if cell_ids:
+                self.regions[name] = np.unique(np.concatenate(cell_ids))
+            if face_parts:
+                self.add_boundary(name, np.concatenate(face_parts))
+            if other:
+                self.ignored.append(f"cell set {name!r} on cells {other!r}")
+        return named_sets
+
+    def gmsh_groups(self) -> None:
+        """Regions and boundaries from gmsh physical groups named in ``field_data``."""
+        tags = self.merged("gmsh:physical").astype(np.int64).ravel()
+        physical, face_rows, unnamed = _gmsh_physical(self.m, tags, self.faces, self.nface)
+        self.regions.update(physical)
         for name, rows in face_rows.items():  # loop over the few named groups
-            add_boundary(name, rows)
+            self.add_boundary(name, rows)
         if unnamed:
-            ignored.append(f"gmsh:physical tags {unnamed} with no name in field_data")
-    if "region" in m.cell_data:
+            self.ignored.append(f"gmsh:physical tags {unnamed} with no name in field_data")
+
+    def region_labels(self, region_names: Mapping[str, int] | None) -> None:
+        """Regions from the ``region`` labels of a tracked export."""
         if region_names is None:
             region_names = {
                 key[len(REGION_FIELD) :]: int(np.ravel(value)[0])
-                for key, value in m.field_data.items()
+                for key, value in self.m.field_data.items()
                 if key.startswith(REGION_FIELD)
             }
         by_code = {code: name for name, code in region_names.items()}
-        label = merged("region").astype(np.int64).ravel()
+        label = self.merged("region").astype(np.int64).ravel()
         for code in np.unique(label[label >= 0]):  # loop over the few region labels
-            regions[by_code.get(int(code), f"region{int(code)}")] = np.flatnonzero(label == code)
-    refdom = RefHex if base == "hexahedron" else RefTet
-    local = np.asarray(refdom.facets, dtype=np.int64)  # (nlocal, nface) skfem local vertices
-    t_skfem = cells[:, INV_HEX_MAPPING[:8]] if base == "hexahedron" else cells[:, :4]
-    unknown = []
-    for name in m.cell_data:  # loop over the few cell data fields
-        parts = name.split(":", 2)
-        if len(parts) == 3 and parts[0] == "skfem" and parts[1] == "s":
-            regions[parts[2]] = np.flatnonzero(merged(name).ravel())
-        elif len(parts) == 3 and parts[0] == "skfem" and parts[1] == "b":
-            bits = merged(name).astype(np.int64).ravel()
-            if np.any(bits >> len(local)):
-                ignored.append(f"face bits beyond the {len(local)} faces of a cell in {name!r}")
-            cell, face = np.nonzero((bits[:, None] >> np.arange(len(local))) & 1)
-            add_boundary(parts[2], t_skfem[cell[:, None], local[face]])
-        elif name not in _KNOWN_DATA and any(
-            np.issubdtype(np.asarray(v).dtype, np.integer) for v in m.cell_data[name]
-        ):
-            unknown.append(name)
-    if unknown:
-        ignored.append(f"integer cell data {unknown!r} (labels without names)")
-    if ignored:
-        warnings.warn(
-            f"{source}: named regions or boundaries were ignored: {'; '.join(ignored)}. "
-            "harpx reads regions and boundaries from cell sets, named gmsh physical groups, "
-            "'region' labels and skfem:s:/skfem:b: cell data; name the missing ones with "
-            "Body(..., regions=..., boundaries=...)",
-            HarpxWarning,
-            stacklevel=user_stacklevel(),
-        )
-    return regions, boundaries
+            name = by_code.get(int(code), f"region{int(code)}")
+            self.regions[name] = np.flatnonzero(label == code)
+
+    def skfem_data(self) -> None:
+        """Regions and boundaries from scikit-fem's ``skfem:s:``/``skfem:b:`` cell data;
+        other integer cell data is noted as ignored."""
+        refdom = RefHex if self.base == "hexahedron" else RefTet
+        local = np.asarray(refdom.facets, dtype=np.int64)  # (nlocal, nface) local vertices
+        cells = self.cells
+        t_skfem = cells[:, INV_HEX_MAPPING[:8]] if self.base == "hexahedron" else cells[:, :4]
+        unknown = []
+        for name in self.m.cell_data:  # loop over the few cell data fields
+            parts = name.split(":", 2)
+            if len(parts) == 3 and parts[0] == "skfem" and parts[1] == "s":
+                self.regions[parts[2]] = np.flatnonzero(self.merged(name).ravel())
+            elif len(parts) == 3 and parts[0] == "skfem" and parts[1] == "b":
+                bits = self.merged(name).astype(np.int64).ravel()
+                if np.any(bits >> len(local)):
+                    self.ignored.append(
+                        f"face bits beyond the {len(local)} faces of a cell in {name!r}"
+                    )
+                cell, face = np.nonzero((bits[:, None] >> np.arange(len(local))) & 1)
+                self.add_boundary(parts[2], t_skfem[cell[:, None], local[face]])
+            elif name not in _KNOWN_DATA and any(
+                np.issubdtype(np.asarray(v).dtype, np.integer) for v in self.m.cell_data[name]
+            ):
+                unknown.append(name)
+        if unknown:
+            self.ignored.append(f"integer cell data {unknown!r} (labels without names)")
+
+    def warn_ignored(self) -> None:
+        """One HarpxWarning naming everything that could not be mapped."""
+        if self.ignored:
+            warnings.warn(
+                f"{self.source}: named regions or boundaries were ignored: "
+                f"{'; '.join(self.ignored)}. harpx reads regions and boundaries from cell "
+                "sets, named gmsh physical groups, 'region' labels and skfem:s:/skfem:b: cell "
+                "data; name the missing ones with Body(..., regions=..., boundaries=...)",
+                HarpxWarning,
+                stacklevel=user_stacklevel(),
+            )
 
 
 def _gmsh_physical(
