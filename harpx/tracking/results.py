@@ -9,7 +9,7 @@ from typing import Any, cast
 import numpy as np
 import xarray as xr
 
-from harpx._typing import FloatArray
+from harpx._typing import BoolArray, FloatArray, IntArray
 from harpx.errors import HarpxWarning, user_stacklevel
 from harpx.schema import fill_standard_attrs, standard_attrs
 from harpx.tracking.resample import interpolate_displacement
@@ -272,32 +272,10 @@ def tracking_error(
         raise ValueError("tracked has no 'displacement_grid'; track with harpx.tracking.track")
     true = truth["displacement_true"]
     est = tracked["displacement_grid"]
-    same = all(
-        est.sizes[d] == true.sizes[d] and np.allclose(est[d].values, true[d].values)
-        for d in ("z", "y", "x")
-    )
-    if same:
-        # rebuilt sub-voxel means differ from the acquired coordinates by rounding only
-        est = est.assign_coords(z=true.z, y=true.y, x=true.x)
-    else:
-        # linear interpolation from the (finer) tracked grid; where a neighbour lies outside
-        # the mesh (faces of the body), fall back to the nearest tracked voxel centre
-        linear = est.interp(z=true.z, y=true.y, x=true.x)
-        nearest = est.interp(z=true.z, y=true.y, x=true.x, method="nearest")
-        est = linear.fillna(nearest)
-    # compare frames by their time (ms), never by position: frames of either side that
-    # the other lacks are left out, and no common frame at all is an error
+    est = _on_grid_of(est, true)
     t_est = np.asarray(est.time.values, dtype=np.float64)
     t_true = np.asarray(true.time.values, dtype=np.float64)
-    tol = 1e-6 * max(1.0, float(np.abs(np.concatenate([t_est, t_true])).max(initial=0.0)))
-    nearest_true = np.abs(t_est[:, None] - t_true[None, :]).argmin(axis=1)
-    match = np.abs(t_true[nearest_true] - t_est) <= tol
-    if not match.any():
-        raise ValueError(
-            f"tracked and truth share no frame time: tracked has time {t_est.tolist()} ms, "
-            f"truth {t_true.tolist()} ms; pass the truth of the same acquisition (or select "
-            "matching frames with .sel(time=...))"
-        )
+    nearest_true, match = _frame_match(t_est, t_true)
     _check_reference(true, t_est, t_true, nearest_true, match)
     est = est.isel(time=np.flatnonzero(match))
     true = true.isel(time=nearest_true[match])
@@ -361,6 +339,38 @@ def tracking_error(
     scored = int(ok[1:].any(axis=1).sum())
     _warn_left_out(failed_t, untracked, t_est[~match], scored)
     return out
+
+
+def _on_grid_of(est: xr.DataArray, true: xr.DataArray) -> xr.DataArray:
+    """The tracked grid displacement on the truth's voxel centres."""
+    same = all(
+        est.sizes[d] == true.sizes[d] and np.allclose(est[d].values, true[d].values)
+        for d in ("z", "y", "x")
+    )
+    if same:
+        # rebuilt sub-voxel means differ from the acquired coordinates by rounding only
+        return est.assign_coords(z=true.z, y=true.y, x=true.x)
+    # linear interpolation from the (finer) tracked grid; where a neighbour lies outside
+    # the mesh (faces of the body), fall back to the nearest tracked voxel centre
+    linear = est.interp(z=true.z, y=true.y, x=true.x)
+    nearest = est.interp(z=true.z, y=true.y, x=true.x, method="nearest")
+    return linear.fillna(nearest)
+
+
+def _frame_match(t_est: FloatArray, t_true: FloatArray) -> tuple[IntArray, BoolArray]:
+    """For each tracked frame time (ms), the nearest truth frame and whether it is the same
+    time; frames are compared by time, never by position. Raises ValueError when no time
+    is shared."""
+    tol = 1e-6 * max(1.0, float(np.abs(np.concatenate([t_est, t_true])).max(initial=0.0)))
+    nearest_true = np.abs(t_est[:, None] - t_true[None, :]).argmin(axis=1)
+    match = np.abs(t_true[nearest_true] - t_est) <= tol
+    if not match.any():
+        raise ValueError(
+            f"tracked and truth share no frame time: tracked has time {t_est.tolist()} ms, "
+            f"truth {t_true.tolist()} ms; pass the truth of the same acquisition (or select "
+            "matching frames with .sel(time=...))"
+        )
+    return nearest_true, match
 
 
 def _warn_left_out(
