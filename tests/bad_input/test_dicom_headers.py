@@ -11,21 +11,16 @@ pytest.importorskip("pydicom")
 
 from harpx.errors import HarpxError, HarpxWarning  # noqa: E402
 from harpx.io.dicom import read_tagged  # noqa: E402
-from tests.io.test_dicom import READ, SA, StackSpec, write_classic  # noqa: E402
+from tests.io.test_dicom import (  # noqa: E402
+    READ,
+    SA,
+    StackSpec,
+    edit_attribute,
+    write_classic,
+)
 
 SA_ONLY = {**READ, "tag_directions": {"SA tagged": ("x", "row")}}
 FIVE = StackSpec(**{**SA.__dict__, "offsets": (0.0, 5.0, 10.0, 15.0, 20.0)})
-
-
-def _edit(name: str, value: object, where=lambda k, t: True):
-    def edit(ds, k: int, t: int) -> None:
-        if where(k, t):
-            if value is None:
-                delattr(ds, name)
-            else:
-                setattr(ds, name, value)
-
-    return edit
 
 
 @pytest.mark.parametrize(
@@ -55,7 +50,7 @@ def _edit(name: str, value: object, where=lambda k, t: True):
     ],
 )
 def test_degenerate_geometry_is_named(tmp_path: Path, name: str, value: object, match: str) -> None:
-    write_classic(tmp_path, SA, edit=_edit(name, value))
+    write_classic(tmp_path, SA, edit=edit_attribute(name, value))
     with pytest.raises(HarpxError, match=match):
         read_tagged(tmp_path, **SA_ONLY)
 
@@ -101,7 +96,7 @@ def test_two_different_images_at_one_position_are_still_a_pair_message(tmp_path:
 
 
 def test_missing_series_uid_is_named(tmp_path: Path) -> None:
-    write_classic(tmp_path, SA, edit=_edit("SeriesInstanceUID", None))
+    write_classic(tmp_path, SA, edit=edit_attribute("SeriesInstanceUID", None))
     with pytest.raises(HarpxError, match=r"9 DICOM images have no SeriesInstanceUID.*add it"):
         read_tagged(tmp_path, **SA_ONLY)
 

@@ -137,6 +137,20 @@ def _save(ds: FileDataset, path: Path) -> None:
     ds.save_as(path, enforce_file_format=True)
 
 
+def edit_attribute(name: str, value: object, where=lambda k, t: True):
+    """An ``edit`` for :func:`write_classic`: set DICOM attribute ``name`` to ``value`` (or
+    delete it for None) in the files of slice ``k``, frame ``t`` where ``where(k, t)``."""
+
+    def edit(ds, k: int, t: int) -> None:
+        if where(k, t):
+            if value is None:
+                delattr(ds, name)
+            else:
+                setattr(ds, name, value)
+
+    return edit
+
+
 def write_classic(
     folder: Path,
     spec: StackSpec,

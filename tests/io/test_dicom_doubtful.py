@@ -25,6 +25,7 @@ from tests.io.test_dicom import (  # noqa: E402
     SLOPE,
     StackSpec,
     ds_str,
+    edit_attribute,
     write_classic,
     write_enhanced,
 )
@@ -108,14 +109,8 @@ def test_files_mixing_delays_and_acquisition_times_are_refused(tmp_path: Path) -
 
 
 def _edit_one(keyword: str, value: str | None):
-    def edit(ds, k, t):
-        if (k, t) == (1, 2):
-            if value is None:
-                delattr(ds, keyword)
-            else:
-                setattr(ds, keyword, value)
-
-    return edit
+    """Set (or delete, for None) ``keyword`` in the file of slice 1, frame 2 only."""
+    return edit_attribute(keyword, value, where=lambda k, t: (k, t) == (1, 2))
 
 
 @pytest.mark.parametrize(
