@@ -15,6 +15,7 @@ import pkgutil
 import re
 import textwrap
 import tomllib
+import types
 from pathlib import Path
 
 import nbformat
@@ -56,17 +57,24 @@ def test_no_docstring_cites_documents_outside_the_repository():
     assert re.findall(r"(?:DESIGN|REFERENCES)(?: §| section)", SOURCE) == []
 
 
-def _public_functions() -> list[tuple[str, object]]:
-    """(dotted name, function) of every function a public harpx module lists in ``__all__``."""
+def _public_names() -> list[tuple[types.ModuleType, str]]:
+    """(module, name) of every name a public harpx module lists in ``__all__``."""
     found = []
     for info in pkgutil.walk_packages(harpx.__path__, "harpx."):
         if any(part.startswith("_") for part in info.name.split(".")[1:]):
             continue
         module = importlib.import_module(info.name)
-        for name in getattr(module, "__all__", []):
-            obj = getattr(module, name)
-            if inspect.isfunction(obj) and obj.__module__ == info.name:
-                found.append((f"{info.name}.{name}", obj))
+        found += [(module, name) for name in getattr(module, "__all__", [])]
+    return found
+
+
+def _public_functions() -> list[tuple[str, object]]:
+    """(dotted name, function) of every function a public harpx module lists in ``__all__``."""
+    found = []
+    for module, name in _public_names():
+        obj = getattr(module, name)
+        if inspect.isfunction(obj) and obj.__module__ == module.__name__:
+            found.append((f"{module.__name__}.{name}", obj))
     return found
 
 
@@ -74,26 +82,22 @@ def _public_methods() -> list[tuple[str, object, str | None]]:
     """(name, method, docstring) of the public methods of the public classes; a
     constructor's contract is its class's docstring. Protocols are never constructed."""
     found = []
-    for info in pkgutil.walk_packages(harpx.__path__, "harpx."):
-        if any(part.startswith("_") for part in info.name.split(".")[1:]):
+    for module, name in _public_names():
+        cls = getattr(module, name)
+        if not inspect.isclass(cls) or cls.__module__ != module.__name__:
             continue
-        module = importlib.import_module(info.name)
-        for name in getattr(module, "__all__", []):
-            cls = getattr(module, name)
-            if not inspect.isclass(cls) or cls.__module__ != info.name:
+        if getattr(cls, "_is_protocol", False):
+            continue
+        for attr, member in vars(cls).items():
+            constructor = attr in ("__init__", "__post_init__")
+            if attr.startswith("_") and not constructor:
                 continue
-            if getattr(cls, "_is_protocol", False):
-                continue
-            for attr, member in vars(cls).items():
-                constructor = attr in ("__init__", "__post_init__")
-                if attr.startswith("_") and not constructor:
-                    continue
-                method = getattr(member, "__func__", getattr(member, "fget", member))
-                # a dataclass's generated __init__ has no source (its checks are in
-                # __post_init__)
-                if inspect.isfunction(method) and method.__code__.co_filename != "<string>":
-                    doc = inspect.getdoc(cls if constructor else method)
-                    found.append((f"{info.name}.{name}.{attr}", method, doc))
+            method = getattr(member, "__func__", getattr(member, "fget", member))
+            # a dataclass's generated __init__ has no source (its checks are in
+            # __post_init__)
+            if inspect.isfunction(method) and method.__code__.co_filename != "<string>":
+                doc = inspect.getdoc(cls if constructor else method)
+                found.append((f"{module.__name__}.{name}.{attr}", method, doc))
     return found
 
 
